@@ -1,0 +1,268 @@
+//! The body pose from the feet (paper section 4.2, conventions.md).
+//!
+//! The feet stay planted while the body moves. At the home stance the six feet,
+//! reported in the body frame R by forward kinematics, fix the ground frame G.
+//! At every pose the feet are reported again, and `ground_from_robot` is the
+//! rigid transform that best maps them back onto their ground coordinates: a
+//! least-squares fit over all six feet (the paper uses feet 1, 3 and 5 only).
+//! The commanded pose is never trusted: the real one differs from it by the
+//! robot's manufacturing and installation errors.
+
+use nalgebra::{Matrix3, Rotation3, SymmetricEigen, Translation3, Vector3};
+
+use super::geometry::Transform;
+
+/// Number of feet of the hexapod.
+pub const FEET: usize = 6;
+
+/// Six feet, foot 1 first, in metres.
+pub type Feet = [Vector3<f64>; FEET];
+
+/// Why feet do not give a pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BodyError {
+    #[error("foot {foot} has a coordinate that is not a finite number")]
+    NotFinite { foot: usize },
+    #[error("the feet are (nearly) collinear, so they do not fix a ground plane")]
+    Degenerate,
+}
+
+/// The ground frame fixed by the home stance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroundFrame {
+    /// The body pose at the home stance.
+    pub ground_from_robot_home: Transform,
+    /// The feet in the ground frame (`y ≈ 0`), foot 1 first.
+    pub feet_ground: Feet,
+}
+
+/// The body pose at one observation, with how well the feet agree with it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodyPose {
+    pub ground_from_robot: Transform,
+    /// Distance from each reported foot, mapped to the ground, to where it was
+    /// planted, metres.
+    pub foot_residuals: [f64; FEET],
+    /// The foot that moved since the home stance, if one did (1-based), with
+    /// how far it is from where the other five put it, metres.
+    pub slipped_foot: Option<(usize, f64)>,
+}
+
+fn check_finite(feet: &Feet) -> Result<(), BodyError> {
+    for (i, f) in feet.iter().enumerate() {
+        if !f.iter().all(|v| v.is_finite()) {
+            return Err(BodyError::NotFinite { foot: i + 1 });
+        }
+    }
+    Ok(())
+}
+
+fn centroid(points: &[Vector3<f64>]) -> Vector3<f64> {
+    points.iter().sum::<Vector3<f64>>() / points.len() as f64
+}
+
+impl GroundFrame {
+    /// The ground frame of conventions.md: the least-squares plane through the
+    /// home feet, Y up (towards the body), origin below the body origin, X the
+    /// projection of the body's X.
+    pub fn from_home_feet(feet_robot: &Feet) -> Result<Self, BodyError> {
+        check_finite(feet_robot)?;
+        let c = centroid(feet_robot);
+        let scatter: Matrix3<f64> = feet_robot
+            .iter()
+            .map(|f| (f - c) * (f - c).transpose())
+            .sum();
+        let eigen = SymmetricEigen::new(scatter);
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
+        // The feet must span a plane: the middle eigenvalue well above zero.
+        if eigen.eigenvalues[order[1]] < 1e-8 {
+            return Err(BodyError::Degenerate);
+        }
+        let mut up: Vector3<f64> = eigen.eigenvectors.column(order[0]).into_owned();
+        // Up points from the feet towards the body origin.
+        if up.dot(&(-c)) < 0.0 {
+            up = -up;
+        }
+        let forward = Vector3::x() - up * up.x;
+        let forward = if forward.norm() > 1e-6 {
+            forward.normalize()
+        } else {
+            // The body's X is vertical: fall back on its Z for the heading.
+            (Vector3::z() - up * up.z).normalize().cross(&up)
+        };
+        let right = forward.cross(&up);
+        // Rows of ground_R_robot are the ground axes in body coordinates.
+        let rotation =
+            Matrix3::from_rows(&[forward.transpose(), up.transpose(), right.transpose()]);
+        // The point of the plane below R's origin.
+        let origin_robot = up * up.dot(&c);
+        let translation = -(rotation * origin_robot);
+        let ground_from_robot_home = Transform::from_parts(
+            Translation3::from(translation),
+            Rotation3::from_matrix_unchecked(rotation),
+        );
+        let feet_ground = feet_robot
+            .map(|f| ground_from_robot_home * nalgebra::Point3::from(f))
+            .map(|p| p.coords);
+        Ok(Self {
+            ground_from_robot_home,
+            feet_ground,
+        })
+    }
+
+    /// The body pose from the feet reported at one pose.
+    ///
+    /// A foot is flagged as slipped when, fitted without it, it lies more than
+    /// `slip_threshold` (metres) from where the other five put it; the worst such
+    /// foot is named.
+    pub fn body_pose(&self, feet_robot: &Feet, slip_threshold: f64) -> Result<BodyPose, BodyError> {
+        check_finite(feet_robot)?;
+        let all: Vec<usize> = (0..FEET).collect();
+        let ground_from_robot = rigid_fit(feet_robot, &self.feet_ground, &all)?;
+        let foot_residuals = std::array::from_fn(|i| {
+            ((ground_from_robot * nalgebra::Point3::from(feet_robot[i])).coords
+                - self.feet_ground[i])
+                .norm()
+        });
+        let mut slipped_foot: Option<(usize, f64)> = None;
+        for out in 0..FEET {
+            let others: Vec<usize> = (0..FEET).filter(|&i| i != out).collect();
+            let fit = rigid_fit(feet_robot, &self.feet_ground, &others)?;
+            let miss = ((fit * nalgebra::Point3::from(feet_robot[out])).coords
+                - self.feet_ground[out])
+                .norm();
+            if miss > slip_threshold && slipped_foot.is_none_or(|(_, worst)| miss > worst) {
+                slipped_foot = Some((out + 1, miss));
+            }
+        }
+        Ok(BodyPose {
+            ground_from_robot,
+            foot_residuals,
+            slipped_foot,
+        })
+    }
+}
+
+/// Least-squares rigid transform `to_from_from` mapping `from[i]` onto `to[i]` for
+/// the chosen indices (Kabsch / Umeyama without scale).
+fn rigid_fit(from: &Feet, to: &Feet, indices: &[usize]) -> Result<Transform, BodyError> {
+    let a: Vec<Vector3<f64>> = indices.iter().map(|&i| from[i]).collect();
+    let b: Vec<Vector3<f64>> = indices.iter().map(|&i| to[i]).collect();
+    let ca = centroid(&a);
+    let cb = centroid(&b);
+    let h: Matrix3<f64> = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (q - cb) * (p - ca).transpose())
+        .sum();
+    let svd = h.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Err(BodyError::Degenerate);
+    };
+    let mut sorted = svd.singular_values.as_slice().to_vec();
+    sorted.sort_by(f64::total_cmp);
+    if sorted[1] < 1e-10 {
+        return Err(BodyError::Degenerate);
+    }
+    let sign = (u * v_t).determinant().signum();
+    let rotation = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, sign)) * v_t;
+    let translation = cb - rotation * ca;
+    Ok(Transform::from_parts(
+        Translation3::from(translation),
+        Rotation3::from_matrix_unchecked(rotation),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::geometry::PoseParams;
+    use approx::assert_abs_diff_eq;
+
+    /// The sample's home stance: a hexagon 600 mm below the body.
+    fn home_feet() -> Feet {
+        [
+            Vector3::new(0.693, -0.600, 0.400),
+            Vector3::new(0.000, -0.600, 0.800),
+            Vector3::new(-0.693, -0.600, 0.400),
+            Vector3::new(-0.693, -0.600, -0.400),
+            Vector3::new(0.000, -0.600, -0.800),
+            Vector3::new(0.693, -0.600, -0.400),
+        ]
+    }
+
+    #[test]
+    fn level_home_stance_gives_a_pure_height() {
+        let frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
+        let t = frame.ground_from_robot_home;
+        assert_abs_diff_eq!(*t.rotation.matrix(), Matrix3::identity(), epsilon = 1e-12);
+        assert_abs_diff_eq!(
+            t.translation.vector,
+            Vector3::new(0.0, 0.6, 0.0),
+            epsilon = 1e-12
+        );
+        assert!(frame.feet_ground.iter().all(|f| f.y.abs() < 1e-12));
+    }
+
+    #[test]
+    fn a_tilted_home_stance_is_levelled() {
+        let tilt = PoseParams::new(0.0, 0.05, -0.03, Vector3::new(0.0, 0.0, 0.0)).to_transform();
+        let feet = home_feet().map(|f| (tilt * nalgebra::Point3::from(f)).coords);
+        let frame = GroundFrame::from_home_feet(&feet).unwrap();
+        assert!(frame.feet_ground.iter().all(|f| f.y.abs() < 1e-12));
+        // The body origin is 600 mm above the ground.
+        assert_abs_diff_eq!(
+            frame.ground_from_robot_home.translation.vector.y,
+            0.6,
+            epsilon = 1e-9
+        );
+    }
+
+    #[test]
+    fn recovers_the_real_body_pose_from_the_feet() {
+        let frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
+        let truth =
+            PoseParams::new(0.01, 0.2, 0.3, Vector3::new(0.002, 0.65, -0.001)).to_transform();
+        let feet = frame
+            .feet_ground
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords);
+        let pose = frame.body_pose(&feet, 0.005).unwrap();
+        assert_abs_diff_eq!(
+            pose.ground_from_robot.to_homogeneous(),
+            truth.to_homogeneous(),
+            epsilon = 1e-12
+        );
+        assert!(pose.slipped_foot.is_none());
+        assert!(pose.foot_residuals.iter().all(|r| *r < 1e-12));
+    }
+
+    #[test]
+    fn a_slipped_foot_is_named() {
+        let frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
+        let truth = PoseParams::new(0.0, -0.1, 0.2, Vector3::new(0.0, 0.7, 0.0)).to_transform();
+        let mut feet = frame
+            .feet_ground
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords);
+        feet[2] += Vector3::new(0.03, 0.0, 0.01);
+        let pose = frame.body_pose(&feet, 0.005).unwrap();
+        let (foot, miss) = pose.slipped_foot.unwrap();
+        assert_eq!(foot, 3);
+        assert!((miss - 0.0316).abs() < 0.002, "{miss}");
+    }
+
+    #[test]
+    fn collinear_or_broken_feet_are_errors() {
+        let line = std::array::from_fn(|i| Vector3::new(i as f64, -0.6, 0.0));
+        assert_eq!(
+            GroundFrame::from_home_feet(&line),
+            Err(BodyError::Degenerate)
+        );
+        let mut feet = home_feet();
+        feet[4].y = f64::NAN;
+        assert_eq!(
+            GroundFrame::from_home_feet(&feet),
+            Err(BodyError::NotFinite { foot: 5 })
+        );
+    }
+}

@@ -1,0 +1,403 @@
+//! The depth camera's sensor model: raw values to depth, pixels to points.
+//!
+//! Two raw-to-depth models for the Kinect v1's 11-bit values are in use
+//! (conventions.md): libfreenect's `zero-plane` model and the `inverse-linear`
+//! fit. Metric images (millimetres, TUM's 5000 per metre) convert by a scale.
+//! Points come out in the sensor frame V (X along the optical axis, Y up, Z right).
+
+use serde::{Deserialize, Serialize};
+
+/// The raw value the Kinect reports for "no reading".
+pub const RAW_NO_READING: u16 = 2047;
+
+/// How raw 11-bit Kinect values map to depth (conventions.md).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum DepthModel {
+    /// libfreenect's model (`src/registration.c`) from the device's factory constants.
+    ZeroPlane {
+        reference_distance_mm: f64,
+        reference_pixel_size_mm: f64,
+        emitter_distance_cm: f64,
+        const_shift: f64,
+    },
+    /// `z_m = 1 / (a + b·raw)`.
+    InverseLinear { a: f64, b: f64 },
+}
+
+impl Default for DepthModel {
+    fn default() -> Self {
+        DepthModel::ZeroPlane {
+            reference_distance_mm: 120.0,
+            reference_pixel_size_mm: 0.1052,
+            emitter_distance_cm: 7.5,
+            const_shift: 200.0,
+        }
+    }
+}
+
+impl DepthModel {
+    /// The usual inverse-linear constants.
+    pub fn inverse_linear_default() -> Self {
+        DepthModel::InverseLinear {
+            a: 3.3309495161,
+            b: -0.0030711016,
+        }
+    }
+
+    /// Depth along the optical axis in metres, or `None` for "no reading" and for
+    /// values the model maps to no positive finite depth.
+    pub fn depth_m(&self, raw: u16) -> Option<f64> {
+        if raw >= RAW_NO_READING {
+            return None;
+        }
+        let raw = f64::from(raw);
+        let z = match *self {
+            DepthModel::ZeroPlane {
+                reference_distance_mm: r,
+                reference_pixel_size_mm: p,
+                emitter_distance_cm: e,
+                const_shift: c,
+            } => {
+                let s = ((raw - 4.0 * c) / 4.0 - 0.375) * p;
+                0.01 * (s * r / (e - s) + r)
+            }
+            DepthModel::InverseLinear { a, b } => 1.0 / (a + b * raw),
+        };
+        (z.is_finite() && z > 0.0).then_some(z)
+    }
+
+    /// Whether the model's constants are usable numbers.
+    pub fn validate(&self) -> Result<(), String> {
+        let values: Vec<f64> = match *self {
+            DepthModel::ZeroPlane {
+                reference_distance_mm,
+                reference_pixel_size_mm,
+                emitter_distance_cm,
+                const_shift,
+            } => vec![
+                reference_distance_mm,
+                reference_pixel_size_mm,
+                emitter_distance_cm,
+                const_shift,
+            ],
+            DepthModel::InverseLinear { a, b } => vec![a, b],
+        };
+        if values.iter().any(|v| !v.is_finite()) {
+            return Err("the depth model's constants must be finite numbers".into());
+        }
+        if let DepthModel::ZeroPlane {
+            reference_distance_mm,
+            reference_pixel_size_mm,
+            ..
+        } = *self
+        {
+            if reference_distance_mm <= 0.0 || reference_pixel_size_mm <= 0.0 {
+                return Err(
+                    "reference_distance_mm and reference_pixel_size_mm must be positive".into(),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The focal length libfreenect derives from the model, `R / (2·P)` pixels,
+    /// or the Kinect's usual value for models that do not carry it.
+    pub fn default_focal_px(&self) -> f64 {
+        match *self {
+            DepthModel::ZeroPlane {
+                reference_distance_mm,
+                reference_pixel_size_mm,
+                ..
+            } => reference_distance_mm / (2.0 * reference_pixel_size_mm),
+            DepthModel::InverseLinear { .. } => 120.0 / (2.0 * 0.1052),
+        }
+    }
+}
+
+/// Pinhole intrinsics of the depth image.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Intrinsics {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    #[serde(default = "default_width")]
+    pub width: usize,
+    #[serde(default = "default_height")]
+    pub height: usize,
+}
+
+fn default_width() -> usize {
+    640
+}
+
+fn default_height() -> usize {
+    480
+}
+
+impl Default for Intrinsics {
+    /// libfreenect's `freenect_camera_to_world` defaults.
+    fn default() -> Self {
+        let f = DepthModel::default().default_focal_px();
+        Self {
+            fx: f,
+            fy: f,
+            cx: 320.0,
+            cy: 240.0,
+            width: 640,
+            height: 480,
+        }
+    }
+}
+
+impl Intrinsics {
+    /// Whether the intrinsics describe a usable camera.
+    pub fn validate(&self) -> Result<(), String> {
+        if ![self.fx, self.fy, self.cx, self.cy]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            return Err("intrinsics must be finite numbers".into());
+        }
+        if self.fx <= 0.0 || self.fy <= 0.0 {
+            return Err(format!(
+                "focal lengths must be positive (fx = {}, fy = {})",
+                self.fx, self.fy
+            ));
+        }
+        if self.width == 0 || self.height == 0 || self.width > 4096 || self.height > 4096 {
+            return Err(format!(
+                "image size {}×{} is out of range",
+                self.width, self.height
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What the 16-bit values of an image mean, with the model that converts them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepthEncoding {
+    /// Raw 11-bit Kinect values through a depth model.
+    Raw11(DepthModel),
+    /// Metric depth: `value × metres_per_unit`, 0 = no reading.
+    Metric { metres_per_unit: f64 },
+}
+
+/// The range of depths that are trusted (conventions.md: 0.5–5 m).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthRange {
+    pub min_m: f64,
+    pub max_m: f64,
+}
+
+impl Default for DepthRange {
+    fn default() -> Self {
+        Self {
+            min_m: 0.5,
+            max_m: 5.0,
+        }
+    }
+}
+
+/// Expected standard deviation of one depth reading at depth `z` metres.
+///
+/// The Kinect's random error grows as `1.4·10⁻³·z²` (conventions.md); a floor of
+/// 1 mm covers quantisation and metric images at short range.
+pub fn depth_sigma_m(z: f64) -> f64 {
+    let quadratic = 1.4e-3 * z * z;
+    (1.0e-6 + quadratic * quadratic).sqrt()
+}
+
+/// A converter from depth images to points, with its per-value table built once.
+#[derive(Debug, Clone)]
+pub struct DepthCamera {
+    intrinsics: Intrinsics,
+    range: DepthRange,
+    /// Depth in metres for each possible 16-bit value; 0 = no reading or out of range.
+    depth_of_value: Vec<f32>,
+    /// `(u - cx) / fx` per column.
+    ray_right: Vec<f32>,
+    /// `-(v - cy) / fy` per row (sensor Y is up, image rows go down).
+    ray_up: Vec<f32>,
+}
+
+/// Points in the sensor frame V, stored as separate coordinate arrays so that the
+/// per-point loops of the plane fit vectorise.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointCloud {
+    /// Along the optical axis (the depth), metres.
+    pub x: Vec<f32>,
+    /// Up in the image, metres.
+    pub y: Vec<f32>,
+    /// Right in the image, metres.
+    pub z: Vec<f32>,
+}
+
+impl PointCloud {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// Whether there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Point `i` in double precision.
+    pub fn point(&self, i: usize) -> nalgebra::Vector3<f64> {
+        nalgebra::Vector3::new(
+            f64::from(self.x[i]),
+            f64::from(self.y[i]),
+            f64::from(self.z[i]),
+        )
+    }
+
+    /// Appends a point.
+    pub fn push(&mut self, p: nalgebra::Vector3<f64>) {
+        self.x.push(p.x as f32);
+        self.y.push(p.y as f32);
+        self.z.push(p.z as f32);
+    }
+}
+
+impl DepthCamera {
+    /// A converter for images of the given encoding and intrinsics.
+    pub fn new(encoding: DepthEncoding, intrinsics: Intrinsics, range: DepthRange) -> Self {
+        let table_len = match encoding {
+            DepthEncoding::Raw11(_) => usize::from(RAW_NO_READING) + 1,
+            DepthEncoding::Metric { .. } => usize::from(u16::MAX) + 1,
+        };
+        let depth_of_value = (0..table_len)
+            .map(|value| {
+                let z = match encoding {
+                    DepthEncoding::Raw11(model) => model.depth_m(value as u16),
+                    DepthEncoding::Metric { metres_per_unit } => {
+                        (value > 0).then_some(value as f64 * metres_per_unit)
+                    }
+                };
+                match z {
+                    Some(z) if z >= range.min_m && z <= range.max_m => z as f32,
+                    _ => 0.0,
+                }
+            })
+            .collect();
+        let ray_right = (0..intrinsics.width)
+            .map(|u| ((u as f64 - intrinsics.cx) / intrinsics.fx) as f32)
+            .collect();
+        let ray_up = (0..intrinsics.height)
+            .map(|v| (-(v as f64 - intrinsics.cy) / intrinsics.fy) as f32)
+            .collect();
+        Self {
+            intrinsics,
+            range,
+            depth_of_value,
+            ray_right,
+            ray_up,
+        }
+    }
+
+    /// The camera's intrinsics.
+    pub fn intrinsics(&self) -> &Intrinsics {
+        &self.intrinsics
+    }
+
+    /// The trusted depth range.
+    pub fn range(&self) -> DepthRange {
+        self.range
+    }
+
+    /// Converts an image (row-major, `width × height` values) to points in the
+    /// sensor frame, appending to `cloud`. Returns the number of points added.
+    ///
+    /// An image of another size than the intrinsics' is refused by the caller;
+    /// here the shorter of the two is used, so nothing panics.
+    pub fn append_points(&self, pixels: &[u16], cloud: &mut PointCloud) -> usize {
+        let before = cloud.len();
+        let width = self.intrinsics.width;
+        for (row, up) in pixels.chunks_exact(width).zip(&self.ray_up) {
+            for (&value, &right) in row.iter().zip(&self.ray_right) {
+                let z = self
+                    .depth_of_value
+                    .get(usize::from(value))
+                    .copied()
+                    .unwrap_or(0.0);
+                if z > 0.0 {
+                    cloud.x.push(z);
+                    cloud.y.push(up * z);
+                    cloud.z.push(right * z);
+                }
+            }
+        }
+        cloud.len() - before
+    }
+
+    /// Converts an image to a new point cloud.
+    pub fn points(&self, pixels: &[u16]) -> PointCloud {
+        let mut cloud = PointCloud::default();
+        let capacity = pixels.len();
+        cloud.x.reserve(capacity);
+        cloud.y.reserve(capacity);
+        cloud.z.reserve(capacity);
+        self.append_points(pixels, &mut cloud);
+        cloud
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_plane_check_values_of_conventions() {
+        let model = DepthModel::default();
+        for (raw, mm) in [(400u16, 498.4), (700, 885.0), (800, 1193.7), (1000, 3948.3)] {
+            let z = model.depth_m(raw).unwrap() * 1000.0;
+            assert!((z - mm).abs() < 0.05, "raw {raw}: {z} mm, expected {mm}");
+        }
+        assert_eq!(model.depth_m(RAW_NO_READING), None);
+    }
+
+    #[test]
+    fn inverse_linear_matches_formula() {
+        let model = DepthModel::inverse_linear_default();
+        let z = model.depth_m(800).unwrap();
+        assert!((z - 1.0 / (3.3309495161 - 0.0030711016 * 800.0)).abs() < 1e-12);
+        // Values past the model's pole give no depth rather than a negative one.
+        assert_eq!(model.depth_m(1100), None);
+    }
+
+    #[test]
+    fn default_focal_length_is_libfreenects() {
+        assert!((Intrinsics::default().fx - 570.34).abs() < 0.01);
+    }
+
+    #[test]
+    fn pixels_become_sensor_frame_points() {
+        let intrinsics = Intrinsics {
+            fx: 500.0,
+            fy: 500.0,
+            cx: 1.0,
+            cy: 1.0,
+            width: 3,
+            height: 2,
+        };
+        let camera = DepthCamera::new(
+            DepthEncoding::Metric {
+                metres_per_unit: 0.001,
+            },
+            intrinsics,
+            DepthRange::default(),
+        );
+        // Row 0: 1000 mm at u = 0, 0 (no reading), 6000 mm (out of range); row 1: 2000 mm at u = 2.
+        let cloud = camera.points(&[1000, 0, 6000, 0, 0, 2000]);
+        assert_eq!(cloud.len(), 2);
+        // u = 0, v = 0: left of and above the centre → Z negative, Y positive.
+        assert_eq!((cloud.x[0], cloud.y[0], cloud.z[0]), (1.0, 0.002, -0.002));
+        assert_eq!((cloud.x[1], cloud.y[1], cloud.z[1]), (2.0, 0.0, 0.004));
+    }
+}

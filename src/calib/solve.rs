@@ -1,0 +1,807 @@
+//! Identification of `robot_from_sensor` (paper section 4.3).
+//!
+//! Each observation pairs the real body pose `ground_from_robot` (from the feet)
+//! with the ground measured in the sensor frame. The result predicts that plane
+//! as row 1 of `ground_from_robot · robot_from_sensor` (paper eq. 28); the paper
+//! minimises the squared differences (eq. 31) by Levenberg-Marquardt.
+//!
+//! The steps here:
+//! 1. a closed-form start that needs no guess: the rotation from the normals by
+//!    SVD (Wahba's problem), the translation by linear least squares;
+//! 2. observations that disagree with all the others (leave-one-out prediction
+//!    far beyond the rest) are set aside with their reason, one at a time;
+//! 3. Levenberg-Marquardt on the paper's residual, each observation whitened by
+//!    its plane covariance plus a noise floor;
+//! 4. covariance of the six parameters, with the noise level estimated from
+//!    the residuals; observability from the Jacobian's singular values.
+//!
+//! The normal's residual depends on the rotation only and the offset's on the
+//! translation only (eq. 31), so the two blocks have separate variance factors.
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{
+    storage::Owned, DMatrix, DVector, Dyn, Matrix2, Matrix3, Matrix4, Matrix6, OMatrix,
+    SymmetricEigen, Vector3, Vector6, U6,
+};
+
+use super::geometry::{
+    angle_between, d_rot_x, d_rot_y, d_rot_z, ground_in_sensor, rot_x, rot_y, rot_z, Plane,
+    PoseParams, Transform,
+};
+use super::quality::{self, Gates, Summary};
+
+/// One pose's evidence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// The pose's number in the schedule (1-based).
+    pub index: u32,
+    /// The real body pose, from the feet.
+    pub ground_from_robot: Transform,
+    /// The ground measured in the sensor frame.
+    pub plane: Plane,
+    /// Covariance of `(a, b, c, d)` from the plane fit, if known.
+    pub plane_covariance: Option<Matrix4<f64>>,
+    /// Points that supported the plane, if known.
+    pub inliers: Option<usize>,
+    /// Set aside before solving (a slipped foot, a failed fit), with why.
+    pub set_aside: Option<String>,
+}
+
+impl Observation {
+    /// An observation with no covariance and nothing set aside.
+    pub fn new(index: u32, ground_from_robot: Transform, plane: Plane) -> Self {
+        Self {
+            index,
+            ground_from_robot,
+            plane,
+            plane_covariance: None,
+            inliers: None,
+            set_aside: None,
+        }
+    }
+
+    /// The ground's normal in the robot frame: row 1 of `ground_from_robot`'s
+    /// rotation. The sensor sees `robot_from_sensorᵀ` of it.
+    fn up_in_robot(&self) -> Vector3<f64> {
+        let r = self.ground_from_robot.rotation.matrix();
+        Vector3::new(r[(1, 0)], r[(1, 1)], r[(1, 2)])
+    }
+
+    /// The body's height term `a24` of eq. 28.
+    fn body_height(&self) -> f64 {
+        self.ground_from_robot.translation.vector.y
+    }
+}
+
+/// Tuning of the solve. Angles in radians, lengths in metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveSettings {
+    /// Noise floor of a measured normal, per tangent direction: what a plane fit
+    /// cannot see (depth model, body pose from the feet, unevenness).
+    pub normal_sigma_floor: f64,
+    /// Noise floor of a measured offset `d`.
+    pub offset_sigma_floor: f64,
+    /// An observation whose leave-one-out error exceeds `k` robust scales of the
+    /// others' (and the floors below) is set aside.
+    pub outlier_k: f64,
+    pub outlier_angle_floor: f64,
+    pub outlier_offset_floor: f64,
+    /// At most this fraction of the observations is set aside as outliers.
+    pub max_outlier_fraction: f64,
+    /// A direction whose normalised singular value is below this is unobservable
+    /// (about the sine of the RMS spread of the tilts in that direction).
+    pub min_spread: f64,
+    /// Acceptance thresholds.
+    pub gates: Gates,
+}
+
+impl Default for SolveSettings {
+    fn default() -> Self {
+        Self {
+            normal_sigma_floor: 0.05f64.to_radians(),
+            offset_sigma_floor: 0.0005,
+            outlier_k: 6.0,
+            outlier_angle_floor: 1.0f64.to_radians(),
+            outlier_offset_floor: 0.015,
+            max_outlier_fraction: 0.3,
+            min_spread: 1.0f64.to_radians().sin(),
+            gates: Gates::default(),
+        }
+    }
+}
+
+/// Verdict of a calibration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    Accepted,
+    Rejected,
+}
+
+/// What happened to one observation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseOutcome {
+    pub index: u32,
+    pub used: bool,
+    pub reason: Option<String>,
+    /// The ground as measured, in the sensor frame.
+    pub measured: Plane,
+    /// The ground as the result predicts it.
+    pub predicted: Plane,
+    /// Angle between measured and predicted normals (paper's θ), radians.
+    pub theta: f64,
+    /// `|d_T - d_M|` (paper's e_d), metres.
+    pub e_d: f64,
+    pub inliers: Option<usize>,
+}
+
+/// How well the schedule pins down each direction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observability {
+    /// Singular values of the rotation block of the Jacobian per observation
+    /// (unit noise), largest first: the RMS spread of the ground normals seen
+    /// from each rotation axis.
+    pub rotation_singular_values: [f64; 3],
+    /// The same for the translation block.
+    pub translation_singular_values: [f64; 3],
+    /// Operator-readable descriptions of unobservable directions.
+    pub problems: Vec<String>,
+}
+
+/// The result of a calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    pub verdict: Verdict,
+    pub reasons: Vec<String>,
+    pub robot_from_sensor: PoseParams,
+    /// Covariance of `[α, β, γ, px, py, pz]` (radians, metres).
+    pub covariance: Matrix6<f64>,
+    pub poses: Vec<PoseOutcome>,
+    pub summary: Summary,
+    pub observability: Observability,
+    /// Estimated noise relative to the assumed one: normals, offsets.
+    pub variance_factors: (f64, f64),
+    /// Levenberg-Marquardt's evaluations and termination.
+    pub iterations: usize,
+}
+
+impl Calibration {
+    /// One standard deviation of each parameter (radians, metres).
+    pub fn sigma(&self) -> Vector6<f64> {
+        Vector6::from_fn(|i, _| self.covariance[(i, i)].max(0.0).sqrt())
+    }
+
+    /// Correlation coefficients of the parameters.
+    pub fn correlations(&self) -> Matrix6<f64> {
+        let s = self.sigma();
+        Matrix6::from_fn(|i, j| {
+            if s[i] > 0.0 && s[j] > 0.0 {
+                self.covariance[(i, j)] / (s[i] * s[j])
+            } else if i == j {
+                1.0
+            } else {
+                0.0
+            }
+        })
+    }
+}
+
+/// Why there is no result at all.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolveError {
+    #[error("only {usable} usable poses, at least 3 are needed to solve (and many more to trust the result)")]
+    TooFewObservations {
+        usable: usize,
+        outcomes: Vec<PoseOutcome>,
+    },
+}
+
+/// Whitening of one observation's residuals.
+#[derive(Debug, Clone, Copy)]
+struct Weights {
+    /// Orthonormal basis of the measured normal's tangent plane (columns).
+    tangent: nalgebra::Matrix3x2<f64>,
+    /// Inverse Cholesky factor of the tangent covariance.
+    normal_whitener: Matrix2<f64>,
+    /// 1/σ of the offset.
+    offset_whitener: f64,
+}
+
+impl Weights {
+    fn of(obs: &Observation, settings: &SolveSettings) -> Self {
+        let n = obs.plane.normal;
+        let helper = if n.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
+        let e1 = n.cross(&helper).normalize();
+        let e2 = n.cross(&e1);
+        let tangent = nalgebra::Matrix3x2::from_columns(&[e1, e2]);
+        let floor_n = settings.normal_sigma_floor.powi(2);
+        let floor_d = settings.offset_sigma_floor.powi(2);
+        let (cov_t, var_d) = match obs.plane_covariance {
+            Some(c) => {
+                let cn = c.fixed_view::<3, 3>(0, 0).into_owned();
+                (
+                    tangent.transpose() * cn * tangent + Matrix2::identity() * floor_n,
+                    c[(3, 3)] + floor_d,
+                )
+            }
+            None => (Matrix2::identity() * floor_n, floor_d),
+        };
+        let normal_whitener = cov_t
+            .cholesky()
+            .and_then(|ch| ch.l().try_inverse())
+            .unwrap_or_else(|| Matrix2::identity() / settings.normal_sigma_floor);
+        Self {
+            tangent,
+            normal_whitener,
+            offset_whitener: 1.0 / var_d.sqrt(),
+        }
+    }
+
+    /// A scalar weight for the closed form (mean inverse variance of the normal).
+    fn normal_weight(&self) -> f64 {
+        self.normal_whitener.norm_squared() / 2.0
+    }
+}
+
+/// The ground the parameters predict for an observation.
+pub fn predict(robot_from_sensor: &PoseParams, ground_from_robot: &Transform) -> Plane {
+    ground_in_sensor(&(ground_from_robot * robot_from_sensor.to_transform()))
+}
+
+/// The least-squares problem of eq. 31, whitened, for the `levenberg-marquardt` crate.
+struct IdentificationProblem<'a> {
+    observations: Vec<&'a Observation>,
+    weights: Vec<Weights>,
+    params: Vector6<f64>,
+}
+
+impl IdentificationProblem<'_> {
+    fn residual_count(&self) -> usize {
+        3 * self.observations.len()
+    }
+
+    fn residual_vector(&self) -> DVector<f64> {
+        let pose = PoseParams::from_vector(&self.params);
+        let rotation = pose.rotation_matrix();
+        let mut r = DVector::zeros(self.residual_count());
+        for (k, (obs, w)) in self.observations.iter().zip(&self.weights).enumerate() {
+            let up = obs.up_in_robot();
+            let predicted_normal = rotation.transpose() * up;
+            let diff =
+                w.normal_whitener * (w.tangent.transpose() * (predicted_normal - obs.plane.normal));
+            let predicted_d = up.dot(&pose.translation) + obs.body_height();
+            r[3 * k] = diff[0];
+            r[3 * k + 1] = diff[1];
+            r[3 * k + 2] = (predicted_d - obs.plane.d) * w.offset_whitener;
+        }
+        r
+    }
+
+    fn jacobian_matrix(&self) -> DMatrix<f64> {
+        let p = &self.params;
+        let (ry, rz, rx) = (rot_y(p[0]), rot_z(p[1]), rot_x(p[2]));
+        let d_rotation = [
+            d_rot_y(p[0]) * rz * rx,
+            ry * d_rot_z(p[1]) * rx,
+            ry * rz * d_rot_x(p[2]),
+        ];
+        let mut j = DMatrix::zeros(self.residual_count(), 6);
+        for (k, (obs, w)) in self.observations.iter().zip(&self.weights).enumerate() {
+            let up = obs.up_in_robot();
+            for (col, dr) in d_rotation.iter().enumerate() {
+                let d_normal = dr.transpose() * up;
+                let d = w.normal_whitener * (w.tangent.transpose() * d_normal);
+                j[(3 * k, col)] = d[0];
+                j[(3 * k + 1, col)] = d[1];
+            }
+            for axis in 0..3 {
+                j[(3 * k + 2, 3 + axis)] = up[axis] * w.offset_whitener;
+            }
+        }
+        j
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, U6> for IdentificationProblem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, U6>;
+    type ParameterStorage = Owned<f64, U6>;
+
+    fn set_params(&mut self, x: &Vector6<f64>) {
+        self.params = *x;
+    }
+
+    fn params(&self) -> Vector6<f64> {
+        self.params
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        Some(self.residual_vector())
+    }
+
+    fn jacobian(&self) -> Option<OMatrix<f64, Dyn, U6>> {
+        let j = self.jacobian_matrix();
+        Some(OMatrix::<f64, Dyn, U6>::from_fn(j.nrows(), |r, c| {
+            j[(r, c)]
+        }))
+    }
+}
+
+/// The closed-form estimate from the chosen observations: rotation by SVD of
+/// the normals' correlation (Wahba), translation by least squares on `d`.
+pub fn closed_form(observations: &[&Observation], settings: &SolveSettings) -> PoseParams {
+    let mut correlation = Matrix3::zeros();
+    let mut normal_eq = Matrix3::zeros();
+    let mut rhs = Vector3::zeros();
+    for obs in observations {
+        let w = Weights::of(obs, settings);
+        let up = obs.up_in_robot();
+        // up ≈ R · n_sensor for R = robot_from_sensor's rotation.
+        correlation += up * obs.plane.normal.transpose() * w.normal_weight();
+        let wd = w.offset_whitener.powi(2);
+        normal_eq += up * up.transpose() * wd;
+        rhs += up * ((obs.plane.d - obs.body_height()) * wd);
+    }
+    let svd = correlation.svd(true, true);
+    let rotation = match (svd.u, svd.v_t) {
+        (Some(u), Some(v_t)) => {
+            let sign = (u * v_t).determinant().signum();
+            u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, sign)) * v_t
+        }
+        _ => Matrix3::identity(),
+    };
+    // A pseudo-inverse keeps an unobservable direction at zero instead of failing.
+    let translation = normal_eq
+        .svd(true, true)
+        .solve(&rhs, 1e-9 * normal_eq.norm().max(1e-300))
+        .unwrap_or_default();
+    PoseParams::from_rotation_translation(&rotation, translation)
+}
+
+/// θ and e_d of an observation under a result.
+fn errors(robot_from_sensor: &PoseParams, obs: &Observation) -> (Plane, f64, f64) {
+    let predicted = predict(robot_from_sensor, &obs.ground_from_robot);
+    let theta = angle_between(&predicted.normal, &obs.plane.normal);
+    (predicted, theta, (predicted.d - obs.plane.d).abs())
+}
+
+/// RMS of in-sample errors with `params` parameters fitted from `values`.
+fn rms_scale(values: &[f64], dof_per_value: f64, params: f64) -> f64 {
+    let dof = (values.len() as f64 * dof_per_value - params).max(1.0);
+    (values.iter().map(|v| v * v).sum::<f64>() * dof_per_value / dof).sqrt()
+}
+
+/// Finds the observation that disagrees most with all the others, if any is
+/// beyond the thresholds, with a reason in words.
+///
+/// For each candidate, the others are solved without it (closed form); the
+/// candidate's prediction error is compared with the spread of the others'
+/// own residuals. A bad observation stands out only once it is left out, so a
+/// single outlier among few poses cannot hide by spoiling every fit it is in.
+fn worst_outlier(used: &[&Observation], settings: &SolveSettings) -> Option<(u32, String)> {
+    if used.len() < 5 {
+        return None;
+    }
+    struct Candidate {
+        position: usize,
+        theta: f64,
+        e_d: f64,
+        theta_limit: f64,
+        offset_limit: f64,
+    }
+    let candidates = (0..used.len()).map(|i| {
+        let others: Vec<&Observation> = used
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, o)| *o)
+            .collect();
+        let estimate = closed_form(&others, settings);
+        let (thetas, offsets): (Vec<f64>, Vec<f64>) = others
+            .iter()
+            .map(|o| {
+                let (_, theta, e_d) = errors(&estimate, o);
+                (theta, e_d)
+            })
+            .unzip();
+        let (_, theta, e_d) = errors(&estimate, used[i]);
+        Candidate {
+            position: i,
+            theta,
+            e_d,
+            // Normals carry two degrees of freedom per pose, offsets one; the
+            // rotation and the translation take three each.
+            theta_limit: (settings.outlier_k * rms_scale(&thetas, 2.0, 3.0))
+                .max(settings.outlier_angle_floor),
+            offset_limit: (settings.outlier_k * rms_scale(&offsets, 1.0, 3.0))
+                .max(settings.outlier_offset_floor),
+        }
+    });
+    let ratio = |c: &Candidate| (c.theta / c.theta_limit).max(c.e_d / c.offset_limit);
+    let worst = candidates.max_by(|a, b| ratio(a).total_cmp(&ratio(b)))?;
+    if ratio(&worst) <= 1.0 {
+        return None;
+    }
+    let reason = if worst.theta / worst.theta_limit >= worst.e_d / worst.offset_limit {
+        format!(
+            "inconsistent with the other poses: its ground is tilted {:.2}° from where they put it (limit {:.2}°): a misfit plane, a slipped foot or a wrong pose",
+            worst.theta.to_degrees(),
+            worst.theta_limit.to_degrees()
+        )
+    } else {
+        format!(
+            "inconsistent with the other poses: its ground is {:.1} mm from where they put it (limit {:.1} mm): a misfit plane, a slipped foot or a wrong pose",
+            worst.e_d * 1e3,
+            worst.offset_limit * 1e3
+        )
+    };
+    Some((used[worst.position].index, reason))
+}
+
+/// Identifies `robot_from_sensor` from the observations.
+pub fn solve(
+    observations: &[Observation],
+    settings: &SolveSettings,
+) -> Result<Calibration, SolveError> {
+    let mut set_aside: Vec<Option<String>> =
+        observations.iter().map(|o| o.set_aside.clone()).collect();
+    let candidates = set_aside.iter().filter(|s| s.is_none()).count();
+    let max_outliers = (settings.max_outlier_fraction * candidates as f64).floor() as usize;
+    let mut outliers = 0;
+    while outliers < max_outliers {
+        let used: Vec<(usize, &Observation)> = observations
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| set_aside[*k].is_none())
+            .collect();
+        let used_refs: Vec<&Observation> = used.iter().map(|(_, o)| *o).collect();
+        let Some((index, reason)) = worst_outlier(&used_refs, settings) else {
+            break;
+        };
+        let Some((k, _)) = used.iter().find(|(_, o)| o.index == index) else {
+            break;
+        };
+        set_aside[*k] = Some(reason);
+        outliers += 1;
+    }
+
+    let used: Vec<&Observation> = observations
+        .iter()
+        .zip(&set_aside)
+        .filter(|(_, s)| s.is_none())
+        .map(|(o, _)| o)
+        .collect();
+    if used.len() < 3 {
+        let start = PoseParams::identity();
+        let outcomes = outcomes(observations, &set_aside, &start);
+        return Err(SolveError::TooFewObservations {
+            usable: used.len(),
+            outcomes,
+        });
+    }
+
+    let start = closed_form(&used, settings);
+    let weights: Vec<Weights> = used.iter().map(|o| Weights::of(o, settings)).collect();
+    let problem = IdentificationProblem {
+        observations: used.clone(),
+        weights,
+        params: start.to_vector(),
+    };
+    let (problem, report) = LevenbergMarquardt::new().with_tol(1e-12).minimize(problem);
+    let refined = if report.termination.was_successful()
+        && problem.params.iter().all(|v| v.is_finite())
+    {
+        PoseParams::from_vector(&problem.params)
+    } else {
+        tracing::warn!(termination = ?report.termination, "Levenberg-Marquardt did not converge; keeping the closed form");
+        start
+    };
+    // Wrap the angles into (-π, π] through the matrix round trip.
+    let robot_from_sensor = PoseParams::from_transform(&refined.to_transform());
+    let problem = IdentificationProblem {
+        params: robot_from_sensor.to_vector(),
+        ..problem
+    };
+
+    // Variance factors of the two independent blocks, from the residuals.
+    let residuals = problem.residual_vector();
+    let n = used.len() as f64;
+    let chi2_normals: f64 = (0..used.len())
+        .map(|k| residuals[3 * k].powi(2) + residuals[3 * k + 1].powi(2))
+        .sum();
+    let chi2_offsets: f64 = (0..used.len()).map(|k| residuals[3 * k + 2].powi(2)).sum();
+    let with_fit_covariance = used.iter().all(|o| o.plane_covariance.is_some());
+    let factor = |chi2: f64, dof: f64| {
+        if dof <= 0.0 {
+            1.0
+        } else if with_fit_covariance {
+            // The fit's covariance is a lower bound on the noise: never claim better.
+            (chi2 / dof).max(1.0)
+        } else {
+            // Without it the floors only set the relative weights: the level is estimated.
+            (chi2 / dof).max(1e-12)
+        }
+    };
+    let variance_factors = (
+        factor(chi2_normals, 2.0 * n - 3.0),
+        factor(chi2_offsets, n - 3.0),
+    );
+
+    let jacobian = problem.jacobian_matrix();
+    let information = jacobian.transpose() * &jacobian;
+    let mut covariance = Matrix6::zeros();
+    for (block, factor) in [(0usize, variance_factors.0), (3, variance_factors.1)] {
+        let h = information.view((block, block), (3, 3)).into_owned();
+        let h3 = Matrix3::from_fn(|i, j| h[(i, j)]);
+        let inverse = h3
+            .try_inverse()
+            .unwrap_or_else(|| Matrix3::from_diagonal_element(f64::INFINITY));
+        covariance
+            .fixed_view_mut::<3, 3>(block, block)
+            .copy_from(&(inverse * factor));
+    }
+
+    let observability = observability(&used, settings);
+    let outcomes = outcomes(observations, &set_aside, &robot_from_sensor);
+    let summary = quality::summarise(&outcomes);
+    let sigma = Vector6::from_fn(|i, _| covariance[(i, i)].max(0.0).sqrt());
+    let reasons = quality::judge(&settings.gates, &summary, &outcomes, &sigma, &observability);
+    Ok(Calibration {
+        verdict: if reasons.is_empty() {
+            Verdict::Accepted
+        } else {
+            Verdict::Rejected
+        },
+        reasons,
+        robot_from_sensor,
+        covariance,
+        poses: outcomes,
+        summary,
+        observability,
+        variance_factors,
+        iterations: report.number_of_evaluations,
+    })
+}
+
+fn outcomes(
+    observations: &[Observation],
+    set_aside: &[Option<String>],
+    result: &PoseParams,
+) -> Vec<PoseOutcome> {
+    observations
+        .iter()
+        .zip(set_aside)
+        .map(|(obs, aside)| {
+            let (predicted, theta, e_d) = errors(result, obs);
+            PoseOutcome {
+                index: obs.index,
+                used: aside.is_none(),
+                reason: aside.clone(),
+                measured: obs.plane,
+                predicted,
+                theta,
+                e_d,
+                inliers: obs.inliers,
+            }
+        })
+        .collect()
+}
+
+/// Names a direction of the robot frame in an operator's words.
+fn axis_words(axis: usize) -> (&'static str, &'static str) {
+    match axis {
+        0 => ("forward", "X"),
+        1 => ("vertical", "Y"),
+        _ => ("sideways", "Z"),
+    }
+}
+
+/// Singular values of the per-observation Jacobian blocks and the words for
+/// every direction the schedule cannot observe.
+///
+/// With unit noise, the rotation block of observation i is `[up_i]×` (how the
+/// normal moves as the sensor turns), and the translation block is `up_iᵀ`.
+/// Their Gram matrices, divided by the number of observations, are
+/// `mean(I - up·upᵀ)` and `mean(up·upᵀ)`.
+pub fn observability(used: &[&Observation], settings: &SolveSettings) -> Observability {
+    let n = used.len().max(1) as f64;
+    let ups: Vec<Vector3<f64>> = used.iter().map(|o| o.up_in_robot()).collect();
+    let rotation_gram: Matrix3<f64> = ups
+        .iter()
+        .map(|u| Matrix3::identity() - u * u.transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let translation_gram: Matrix3<f64> =
+        ups.iter().map(|u| u * u.transpose()).sum::<Matrix3<f64>>() / n;
+    let spectrum = |gram: Matrix3<f64>| {
+        let eigen = SymmetricEigen::new(gram);
+        let mut pairs: Vec<(f64, Vector3<f64>)> = (0..3)
+            .map(|k| {
+                (
+                    eigen.eigenvalues[k].max(0.0).sqrt(),
+                    eigen.eigenvectors.column(k).into_owned(),
+                )
+            })
+            .collect();
+        pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
+        pairs
+    };
+    let rotation = spectrum(rotation_gram);
+    let translation = spectrum(translation_gram);
+
+    let mean_up = ups.iter().sum::<Vector3<f64>>().normalize();
+    let max_tilt_spread = ups
+        .iter()
+        .map(|u| angle_between(u, &mean_up))
+        .fold(0.0, f64::max);
+    let never_tilts = max_tilt_spread < 1f64.to_radians();
+
+    let mut problems = Vec::new();
+    let weak_rotations: Vec<&Vector3<f64>> = rotation
+        .iter()
+        .filter(|(s, _)| *s < settings.min_spread)
+        .map(|(_, v)| v)
+        .collect();
+    if !weak_rotations.is_empty() {
+        problems.push(if never_tilts {
+            "rotation of the sensor about the ground normal (α) is not observable: the schedule never tilts the body".to_string()
+        } else {
+            let v = weak_rotations[0];
+            format!(
+                "rotation of the sensor about the axis ({:.2}, {:.2}, {:.2}) of the body is not observable: the body's tilts barely change the ground's direction; use larger tilts",
+                v.x, v.y, v.z
+            )
+        });
+    }
+    let weak_translations: Vec<&Vector3<f64>> = translation
+        .iter()
+        .filter(|(s, _)| *s < settings.min_spread)
+        .map(|(_, v)| v)
+        .collect();
+    if !weak_translations.is_empty() {
+        // Which body axes lie in the unobservable subspace.
+        let mut axes: Vec<(usize, f64)> = (0..3)
+            .map(|a| {
+                (
+                    a,
+                    weak_translations
+                        .iter()
+                        .map(|v| v[a].powi(2))
+                        .sum::<f64>()
+                        .sqrt(),
+                )
+            })
+            .collect();
+        axes.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let named: Vec<usize> = axes
+            .iter()
+            .take(weak_translations.len())
+            .map(|(a, _)| *a)
+            .collect();
+        let position_words: Vec<String> = named
+            .iter()
+            .map(|&a| format!("{} (p_{})", axis_words(a).0, ["x", "y", "z"][a]))
+            .collect();
+        let what = format!("the sensor's {} position", position_words.join(" and "));
+        let why = if never_tilts {
+            "the schedule never tilts the body".to_string()
+        } else if named == [2] {
+            "the schedule only pitches the body (turns it about its sideways Z axis, β′); add poses that roll it (γ′)".to_string()
+        } else if named == [0] {
+            "the schedule only rolls the body (turns it about its forward X axis, γ′); add poses that pitch it (β′)".to_string()
+        } else {
+            "the body's tilts all share one axis; add poses that tilt it about another".to_string()
+        };
+        problems.push(format!(
+            "{what} {} not observable: {why}",
+            if named.len() > 1 { "are" } else { "is" }
+        ));
+    }
+    Observability {
+        rotation_singular_values: [rotation[0].0, rotation[1].0, rotation[2].0],
+        translation_singular_values: [translation[0].0, translation[1].0, translation[2].0],
+        problems,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use levenberg_marquardt::differentiate_numerically;
+
+    fn schedule() -> Vec<PoseParams> {
+        let mut poses = Vec::new();
+        for (beta, gamma, py) in [
+            (2.0, 20.0, 615.0),
+            (15.0, 12.0, 631.0),
+            (19.0, 4.0, 647.0),
+            (-11.0, -16.0, 625.0),
+            (-19.0, -8.0, 641.0),
+            (3.0, 19.0, 690.0),
+            (17.0, 7.0, 686.0),
+            (-12.0, -15.0, 700.0),
+            (-18.0, -3.0, 676.0),
+            (9.0, 9.0, 738.0),
+            (-9.0, -9.0, 740.0),
+            (-12.0, -3.0, 750.0),
+        ] {
+            poses.push(PoseParams::new(
+                0.0,
+                f64::to_radians(beta),
+                f64::to_radians(gamma),
+                Vector3::new(0.0, py / 1e3, 0.0),
+            ));
+        }
+        poses
+    }
+
+    fn exact_observations(truth: &PoseParams) -> Vec<Observation> {
+        schedule()
+            .iter()
+            .enumerate()
+            .map(|(i, pose)| {
+                let g = pose.to_transform();
+                Observation::new(i as u32 + 1, g, predict(truth, &g))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn analytic_jacobian_matches_numerical() {
+        let truth = PoseParams::new(0.1, -0.6, 0.05, Vector3::new(0.5, 0.36, -0.03));
+        let obs = exact_observations(&truth);
+        let settings = SolveSettings::default();
+        let mut problem = IdentificationProblem {
+            observations: obs.iter().collect(),
+            weights: obs.iter().map(|o| Weights::of(o, &settings)).collect(),
+            params: Vector6::new(0.2, -0.5, -0.1, 0.4, 0.3, 0.01),
+        };
+        let numerical = differentiate_numerically(&mut problem).unwrap();
+        let analytic = problem.jacobian().unwrap();
+        let scale = analytic.amax();
+        assert!(
+            (numerical - analytic).amax() < 1e-6 * scale,
+            "Jacobian mismatch"
+        );
+    }
+
+    #[test]
+    fn exact_planes_give_the_exact_mount_from_no_guess() {
+        let truth = PoseParams::new(
+            -0.0077,
+            -0.6529,
+            -0.0532,
+            Vector3::new(0.5279, 0.3648, -0.0334),
+        );
+        let result = solve(&exact_observations(&truth), &SolveSettings::default()).unwrap();
+        assert!((result.robot_from_sensor.to_vector() - truth.to_vector()).amax() < 1e-9);
+        assert!(result
+            .poses
+            .iter()
+            .all(|p| p.used && p.theta < 1e-9 && p.e_d < 1e-9));
+    }
+
+    #[test]
+    fn a_schedule_that_never_tilts_is_rejected_in_words() {
+        let truth = PoseParams::new(0.0, -0.6, 0.0, Vector3::new(0.5, 0.36, 0.0));
+        let obs: Vec<Observation> = (0..10)
+            .map(|i| {
+                let g =
+                    PoseParams::new(0.0, 0.0, 0.0, Vector3::new(0.0, 0.6 + 0.01 * i as f64, 0.0))
+                        .to_transform();
+                Observation::new(i + 1, g, predict(&truth, &g))
+            })
+            .collect();
+        let result = solve(&obs, &SolveSettings::default()).unwrap();
+        assert_eq!(result.verdict, Verdict::Rejected);
+        let text = result.reasons.join("\n");
+        assert!(text.contains("rotation of the sensor about the ground normal (α) is not observable: the schedule never tilts the body"), "{text}");
+        assert!(
+            text.contains("forward (p_x)") && text.contains("sideways (p_z)"),
+            "{text}"
+        );
+    }
+}

@@ -1,0 +1,53 @@
+//! The `groundcal` subcommands, as library functions that return an exit status.
+//!
+//! `main.rs` only parses arguments and sets up logging; everything a command
+//! does lives here so that tests can call it directly.
+
+pub mod plane;
+pub mod solve;
+
+/// Exit statuses of `shared/spec/cli.md`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitStatus {
+    /// Done; for a calibration, accepted.
+    Success = 0,
+    /// Failed at run time: hardware, link, disk.
+    RuntimeFailure = 1,
+    /// Bad input or usage; the message names the file, line or flag.
+    BadInput = 2,
+    /// Solved but rejected; the output says why.
+    Rejected = 3,
+}
+
+impl ExitStatus {
+    pub fn code(self) -> i32 {
+        self as i32
+    }
+}
+
+/// Parses `X,Y,Z`-style lists of numbers from a flag.
+pub fn parse_numbers<const N: usize>(flag: &str, text: &str) -> Result<[f64; N], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != N {
+        return Err(format!(
+            "{flag} takes {N} comma-separated numbers, got \"{text}\""
+        ));
+    }
+    let mut out = [0.0; N];
+    for (slot, part) in out.iter_mut().zip(&parts) {
+        *slot = part
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("{flag}: \"{part}\" is not a finite number"))?;
+    }
+    Ok(out)
+}
+
+/// Prints a JSON document on stdout (and nothing else there).
+pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| format!("cannot encode the result: {e}"))?;
+    println!("{text}");
+    Ok(())
+}

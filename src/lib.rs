@@ -1,0 +1,17 @@
+//! groundcal: calibrates where a depth camera sits on a legged robot, using
+//! nothing but the ground (Chai et al., "A Novel Identification Methodology for
+//! the Coordinate Relationship between a 3D Vision System and a Legged Robot").
+//!
+//! Layout:
+//! - [`calib`]: the math (ground plane fit, body pose from the feet, the solve,
+//!   accuracy and verdict), pure and synchronous;
+//! - [`depth_image`]: depth images from files (fakenect dumps, PNG, TIFF, PGM);
+//! - [`recording`]: the input files of `shared/spec/recording.md`;
+//! - [`output`]: the result JSON of `shared/spec/cli.md`;
+//! - [`cli`]: the `groundcal` command's subcommands.
+
+pub mod calib;
+pub mod cli;
+pub mod depth_image;
+pub mod output;
+pub mod recording;

@@ -1,0 +1,121 @@
+//! The `groundcal` command: parses arguments, sets up logging, and calls into
+//! the library (`groundcal::cli`). See `shared/spec/cli.md` for the contract.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use groundcal::calib::solve::SolveSettings;
+use groundcal::cli::{self, plane::PlaneOptions, ExitStatus};
+use groundcal::depth_image::DepthUnits;
+use nalgebra::Vector3;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "groundcal",
+    version,
+    about = "Calibrates where a depth camera sits on a legged robot, using the ground"
+)]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Solve robot_from_sensor from plane observations (groundcal-planes).
+    Solve {
+        file: PathBuf,
+        /// One JSON document on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Fit the ground in one depth image.
+    Plane {
+        file: PathBuf,
+        #[arg(long)]
+        json: bool,
+        /// raw11 (fakenect .pgm), mm, or tum (5000 per metre).
+        #[arg(long)]
+        units: Option<String>,
+        /// zero-plane or inverse-linear:A,B (raw11 only).
+        #[arg(long, default_value = "zero-plane")]
+        model: String,
+        #[arg(long)]
+        fx: Option<f64>,
+        #[arg(long)]
+        fy: Option<f64>,
+        #[arg(long)]
+        cx: Option<f64>,
+        #[arg(long)]
+        cy: Option<f64>,
+        /// Expected up direction in the optical frame.
+        #[arg(long, default_value = "0,-1,0", allow_hyphen_values = true)]
+        up: String,
+        /// Largest angle between the ground's normal and --up, degrees.
+        #[arg(long, default_value_t = 60.0)]
+        up_tolerance: f64,
+    },
+}
+
+fn usage_error(message: String) -> ExitStatus {
+    eprintln!("groundcal: {message}");
+    ExitStatus::BadInput
+}
+
+fn run(args: Args) -> ExitStatus {
+    match args.command {
+        Command::Solve { file, json } => cli::solve::run(&file, json, &SolveSettings::default()),
+        Command::Plane {
+            file,
+            json,
+            units,
+            model,
+            fx,
+            fy,
+            cx,
+            cy,
+            up,
+            up_tolerance,
+        } => {
+            let units = match units.as_deref().map(|u| DepthUnits::parse(u).ok_or(u)) {
+                None => None,
+                Some(Ok(u)) => Some(u),
+                Some(Err(u)) => {
+                    return usage_error(format!("--units: \"{u}\" is not raw11, mm or tum"))
+                }
+            };
+            let model = match cli::plane::parse_model(&model) {
+                Ok(m) => m,
+                Err(e) => return usage_error(e),
+            };
+            let up = match cli::parse_numbers::<3>("--up", &up) {
+                Ok([x, y, z]) => Vector3::new(x, y, z),
+                Err(e) => return usage_error(e),
+            };
+            let options = PlaneOptions {
+                units,
+                model,
+                fx,
+                fy,
+                cx,
+                cy,
+                up_optical: up,
+                up_tolerance_deg: up_tolerance,
+            };
+            cli::plane::run(&file, json, &options)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("GROUNDCAL_LOG")
+                .unwrap_or_else(|_| "warn".into()),
+        )
+        .init();
+    let args = Args::parse();
+    ExitCode::from(run(args).code() as u8)
+}

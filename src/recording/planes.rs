@@ -1,0 +1,147 @@
+//! The planes-only input (`groundcal-planes`, recording.md): observations of the
+//! ground in the sensor frame with the real body pose of each, e.g. the paper's
+//! tables. Solved by `groundcal solve`.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use super::{read_bounded, InputError};
+use crate::calib::geometry::{Plane, PoseDegMm};
+use crate::calib::solve::Observation;
+
+#[derive(Debug, Deserialize)]
+struct PlanesFile {
+    format: String,
+    version: u32,
+    observations: Vec<ObservationRecord>,
+}
+
+#[derive(Debug, Deserialize)]
+struct ObservationRecord {
+    index: u32,
+    robot_pose: PoseDegMm,
+    plane: PlaneRecord,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlaneRecord {
+    a: f64,
+    b: f64,
+    c: f64,
+    d_m: f64,
+}
+
+/// Parses a planes file's text into observations (the plane normalised and
+/// oriented to `d > 0`).
+pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputError> {
+    let file: PlanesFile = serde_json::from_str(text).map_err(|e| {
+        let line = (e.line() > 0).then_some(e.line());
+        InputError::new(path, line, format!("not a groundcal-planes document: {e}"))
+    })?;
+    if file.format != "groundcal-planes" {
+        return Err(InputError::new(
+            path,
+            None,
+            format!(
+                "\"format\" is \"{}\", expected \"groundcal-planes\"",
+                file.format
+            ),
+        ));
+    }
+    if file.version != 1 {
+        return Err(InputError::new(
+            path,
+            None,
+            format!(
+                "version {} is not supported (this groundcal reads version 1)",
+                file.version
+            ),
+        ));
+    }
+    if file.observations.is_empty() {
+        return Err(InputError::new(path, None, "\"observations\" is empty"));
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    file.observations
+        .iter()
+        .enumerate()
+        .map(|(k, record)| {
+            let at = |what: &str| {
+                InputError::new(
+                    path,
+                    None,
+                    format!("observations[{k}] (index {}): {what}", record.index),
+                )
+            };
+            if !seen.insert(record.index) {
+                return Err(at("the index appears twice"));
+            }
+            if !record.robot_pose.is_finite() {
+                return Err(at("robot_pose has a value that is not a finite number"));
+            }
+            let p = &record.plane;
+            let plane = Plane::from_coefficients(p.a, p.b, p.c, p.d_m)
+                .map_err(|e| at(&format!("plane: {e}")))?;
+            Ok(Observation::new(
+                record.index,
+                record.robot_pose.to_params().to_transform(),
+                plane,
+            ))
+        })
+        .collect()
+}
+
+/// Reads a planes file.
+pub fn read_planes(path: &Path) -> Result<Vec<Observation>, InputError> {
+    let bytes = read_bounded(path, 64 << 20)?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| InputError::new(path, None, format!("not UTF-8 text: {e}")))?;
+    parse_planes(path, text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Vec<Observation>, InputError> {
+        parse_planes(Path::new("t.json"), text)
+    }
+
+    const ONE: &str = r#"{"format": "groundcal-planes", "version": 1, "observations": [
+        {"index": 1, "robot_pose": {"alpha_deg": 0, "beta_deg": 2, "gamma_deg": 20, "px_mm": 0, "py_mm": 615, "pz_mm": 0},
+         "plane": {"a": 0.5515, "b": -0.7802, "c": 0.2952, "d_m": -0.9916}}]}"#;
+
+    #[test]
+    fn reads_and_orients_planes() {
+        let obs = parse(ONE).unwrap();
+        assert_eq!(obs.len(), 1);
+        assert!(obs[0].plane.d > 0.0 && obs[0].plane.normal.y > 0.0);
+        assert!((obs[0].plane.normal.norm() - 1.0).abs() < 1e-12);
+        assert!((obs[0].ground_from_robot.translation.vector.y - 0.615).abs() < 1e-12);
+    }
+
+    #[test]
+    fn defects_are_named() {
+        let e = parse("{").unwrap_err();
+        assert!(e.to_string().starts_with("t.json:1:"), "{e}");
+        let e = parse(&ONE.replace("groundcal-planes", "other")).unwrap_err();
+        assert!(e.message.contains("expected \"groundcal-planes\""));
+        let e = parse(&ONE.replace("\"version\": 1", "\"version\": 2")).unwrap_err();
+        assert!(e.message.contains("version 2"));
+        let e = parse(&ONE.replace(
+            "\"a\": 0.5515, \"b\": -0.7802, \"c\": 0.2952",
+            "\"a\": 0, \"b\": 0, \"c\": 0",
+        ))
+        .unwrap_err();
+        assert!(
+            e.message.contains("observations[0] (index 1): plane"),
+            "{e}"
+        );
+        let e = parse(&ONE.replace("\"py_mm\": 615", "\"py_mm\": 1e999")).unwrap_err();
+        assert!(e.to_string().contains("t.json"), "{e}");
+        let e = parse(&ONE.replace("\"d_m\"", "\"d\"")).unwrap_err();
+        assert!(e.message.contains("d_m"), "{e}");
+    }
+}
