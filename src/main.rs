@@ -31,6 +31,7 @@ enum Command {
         json: bool,
     },
     /// Fit the ground in one depth image.
+    #[command(allow_negative_numbers = true)]
     Plane {
         file: PathBuf,
         #[arg(long)]

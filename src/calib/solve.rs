@@ -255,6 +255,8 @@ pub fn predict(robot_from_sensor: &PoseParams, ground_from_robot: &Transform) ->
 struct IdentificationProblem<'a> {
     observations: Vec<&'a Observation>,
     weights: Vec<Weights>,
+    /// Robust (Cauchy) weights of each observation's normal and offset.
+    robust: Vec<(f64, f64)>,
     params: Vector6<f64>,
 }
 
@@ -268,14 +270,15 @@ impl IdentificationProblem<'_> {
         let rotation = pose.rotation_matrix();
         let mut r = DVector::zeros(self.residual_count());
         for (k, (obs, w)) in self.observations.iter().zip(&self.weights).enumerate() {
+            let (rn, rd) = self.robust[k];
             let up = obs.up_in_robot();
             let predicted_normal = rotation.transpose() * up;
             let diff =
                 w.normal_whitener * (w.tangent.transpose() * (predicted_normal - obs.plane.normal));
             let predicted_d = up.dot(&pose.translation) + obs.body_height();
-            r[3 * k] = diff[0];
-            r[3 * k + 1] = diff[1];
-            r[3 * k + 2] = (predicted_d - obs.plane.d) * w.offset_whitener;
+            r[3 * k] = diff[0] * rn.sqrt();
+            r[3 * k + 1] = diff[1] * rn.sqrt();
+            r[3 * k + 2] = (predicted_d - obs.plane.d) * w.offset_whitener * rd.sqrt();
         }
         r
     }
@@ -290,15 +293,16 @@ impl IdentificationProblem<'_> {
         ];
         let mut j = DMatrix::zeros(self.residual_count(), 6);
         for (k, (obs, w)) in self.observations.iter().zip(&self.weights).enumerate() {
+            let (rn, rd) = self.robust[k];
             let up = obs.up_in_robot();
             for (col, dr) in d_rotation.iter().enumerate() {
                 let d_normal = dr.transpose() * up;
-                let d = w.normal_whitener * (w.tangent.transpose() * d_normal);
+                let d = w.normal_whitener * (w.tangent.transpose() * d_normal) * rn.sqrt();
                 j[(3 * k, col)] = d[0];
                 j[(3 * k + 1, col)] = d[1];
             }
             for axis in 0..3 {
-                j[(3 * k + 2, 3 + axis)] = up[axis] * w.offset_whitener;
+                j[(3 * k + 2, 3 + axis)] = up[axis] * w.offset_whitener * rd.sqrt();
             }
         }
         j
@@ -368,19 +372,66 @@ fn errors(robot_from_sensor: &PoseParams, obs: &Observation) -> (Plane, f64, f64
     (predicted, theta, (predicted.d - obs.plane.d).abs())
 }
 
-/// RMS of in-sample errors with `params` parameters fitted from `values`.
-fn rms_scale(values: &[f64], dof_per_value: f64, params: f64) -> f64 {
-    let dof = (values.len() as f64 * dof_per_value - params).max(1.0);
-    (values.iter().map(|v| v * v).sum::<f64>() * dof_per_value / dof).sqrt()
+/// The spread of a leave-one-out prediction: the noise of the left-out
+/// observation plus what the others leave unknown (its leverage).
+struct Prediction {
+    /// Standard deviation of each tangent component of the normal, radians.
+    normal_sigma: f64,
+    /// Standard deviation of the offset, metres.
+    offset_sigma: f64,
+}
+
+/// How well `others` predict `target`, with the noise level estimated from
+/// the others' own residuals under `estimate`.
+fn prediction_spread(
+    others: &[&Observation],
+    estimate: &PoseParams,
+    target: &Observation,
+    settings: &SolveSettings,
+) -> Prediction {
+    let mut rotation_info = Matrix3::zeros();
+    let mut translation_info = Matrix3::zeros();
+    let (mut chi2_n, mut chi2_d) = (0.0, 0.0);
+    for o in others {
+        let w = Weights::of(o, settings);
+        let (wn, wd) = (w.normal_weight(), w.offset_whitener.powi(2));
+        let up = o.up_in_robot();
+        rotation_info += (Matrix3::identity() - up * up.transpose()) * wn;
+        translation_info += up * up.transpose() * wd;
+        let (_, theta, e_d) = errors(estimate, o);
+        chi2_n += wn * theta * theta;
+        chi2_d += wd * e_d * e_d;
+    }
+    let n = others.len() as f64;
+    // Two tangent components per normal, one offset; three parameters each.
+    let s2_n = chi2_n / (2.0 * n - 3.0).max(1.0);
+    let s2_d = chi2_d / (n - 3.0).max(1.0);
+    let w = Weights::of(target, settings);
+    let up = target.up_in_robot();
+    let cross = up.cross_matrix();
+    let leverage_n = rotation_info
+        .try_inverse()
+        .map(|h| (cross * h * cross.transpose()).trace() / 2.0)
+        .unwrap_or(f64::INFINITY);
+    let leverage_d = translation_info
+        .try_inverse()
+        .map(|h| (up.transpose() * h * up)[(0, 0)])
+        .unwrap_or(f64::INFINITY);
+    Prediction {
+        normal_sigma: (s2_n * (1.0 / w.normal_weight() + leverage_n)).sqrt(),
+        offset_sigma: (s2_d * (1.0 / w.offset_whitener.powi(2) + leverage_d)).sqrt(),
+    }
 }
 
 /// Finds the observation that disagrees most with all the others, if any is
 /// beyond the thresholds, with a reason in words.
 ///
-/// For each candidate, the others are solved without it (closed form); the
-/// candidate's prediction error is compared with the spread of the others'
-/// own residuals. A bad observation stands out only once it is left out, so a
-/// single outlier among few poses cannot hide by spoiling every fit it is in.
+/// For each candidate, the others are solved without it (closed form) and its
+/// prediction error is compared with the prediction's spread: the others' own
+/// residual level and the candidate's leverage. A bad observation stands out
+/// only once it is left out, so a single outlier among few poses cannot hide
+/// by spoiling every fit it is in, and a pose that alone pins a direction down
+/// is not blamed for the others' uncertainty there.
 fn worst_outlier(used: &[&Observation], settings: &SolveSettings) -> Option<(u32, String)> {
     if used.len() < 5 {
         return None;
@@ -400,23 +451,16 @@ fn worst_outlier(used: &[&Observation], settings: &SolveSettings) -> Option<(u32
             .map(|(_, o)| *o)
             .collect();
         let estimate = closed_form(&others, settings);
-        let (thetas, offsets): (Vec<f64>, Vec<f64>) = others
-            .iter()
-            .map(|o| {
-                let (_, theta, e_d) = errors(&estimate, o);
-                (theta, e_d)
-            })
-            .unzip();
+        let spread = prediction_spread(&others, &estimate, used[i], settings);
         let (_, theta, e_d) = errors(&estimate, used[i]);
         Candidate {
             position: i,
             theta,
             e_d,
-            // Normals carry two degrees of freedom per pose, offsets one; the
-            // rotation and the translation take three each.
-            theta_limit: (settings.outlier_k * rms_scale(&thetas, 2.0, 3.0))
+            // θ of a 2-D error: its RMS is √2 per-component σ.
+            theta_limit: (settings.outlier_k * std::f64::consts::SQRT_2 * spread.normal_sigma)
                 .max(settings.outlier_angle_floor),
-            offset_limit: (settings.outlier_k * rms_scale(&offsets, 1.0, 3.0))
+            offset_limit: (settings.outlier_k * spread.offset_sigma)
                 .max(settings.outlier_offset_floor),
         }
     });
@@ -484,35 +528,17 @@ pub fn solve(
     }
 
     let start = closed_form(&used, settings);
-    let weights: Vec<Weights> = used.iter().map(|o| Weights::of(o, settings)).collect();
-    let problem = IdentificationProblem {
-        observations: used.clone(),
-        weights,
-        params: start.to_vector(),
-    };
-    let (problem, report) = LevenbergMarquardt::new().with_tol(1e-12).minimize(problem);
-    let refined = if report.termination.was_successful()
-        && problem.params.iter().all(|v| v.is_finite())
-    {
-        PoseParams::from_vector(&problem.params)
-    } else {
-        tracing::warn!(termination = ?report.termination, "Levenberg-Marquardt did not converge; keeping the closed form");
-        start
-    };
-    // Wrap the angles into (-π, π] through the matrix round trip.
-    let robot_from_sensor = PoseParams::from_transform(&refined.to_transform());
-    let problem = IdentificationProblem {
-        params: robot_from_sensor.to_vector(),
-        ..problem
-    };
+    let (robot_from_sensor, problem, evaluations) = refine(&used, start, settings);
 
-    // Variance factors of the two independent blocks, from the residuals.
+    // Variance factors of the two independent blocks, from the residuals
+    // (robustly weighted; with unit weights these are χ²/dof).
     let residuals = problem.residual_vector();
-    let n = used.len() as f64;
     let chi2_normals: f64 = (0..used.len())
         .map(|k| residuals[3 * k].powi(2) + residuals[3 * k + 1].powi(2))
         .sum();
     let chi2_offsets: f64 = (0..used.len()).map(|k| residuals[3 * k + 2].powi(2)).sum();
+    let weight_normals: f64 = problem.robust.iter().map(|w| w.0).sum();
+    let weight_offsets: f64 = problem.robust.iter().map(|w| w.1).sum();
     let with_fit_covariance = used.iter().all(|o| o.plane_covariance.is_some());
     let factor = |chi2: f64, dof: f64| {
         if dof <= 0.0 {
@@ -526,8 +552,8 @@ pub fn solve(
         }
     };
     let variance_factors = (
-        factor(chi2_normals, 2.0 * n - 3.0),
-        factor(chi2_offsets, n - 3.0),
+        factor(chi2_normals, 2.0 * weight_normals - 3.0),
+        factor(chi2_offsets, weight_offsets - 3.0),
     );
 
     let jacobian = problem.jacobian_matrix();
@@ -562,8 +588,91 @@ pub fn solve(
         summary,
         observability,
         variance_factors,
-        iterations: report.number_of_evaluations,
+        iterations: evaluations,
     })
+}
+
+/// Levenberg-Marquardt from the closed form, inside iteratively reweighted
+/// least squares with Cauchy weights: observations far from the rest lose
+/// influence smoothly, so a few noisy poses cannot drag the result. The scale
+/// is 2.385 robust standard deviations of the whitened residuals (95 %
+/// efficiency on Gaussian noise), never less than the assumed noise.
+fn refine<'a>(
+    used: &[&'a Observation],
+    start: PoseParams,
+    settings: &SolveSettings,
+) -> (PoseParams, IdentificationProblem<'a>, usize) {
+    const CAUCHY: f64 = 2.385;
+    const ROUNDS: usize = 50;
+    let weights: Vec<Weights> = used.iter().map(|o| Weights::of(o, settings)).collect();
+    let mut problem = IdentificationProblem {
+        observations: used.to_vec(),
+        weights,
+        robust: vec![(1.0, 1.0); used.len()],
+        params: start.to_vector(),
+    };
+    let mut evaluations = 0;
+    for _ in 0..ROUNDS {
+        let before = problem.params;
+        let (solved, report) = LevenbergMarquardt::new().with_tol(1e-12).minimize(problem);
+        problem = solved;
+        evaluations += report.number_of_evaluations;
+        if !(report.termination.was_successful() && problem.params.iter().all(|v| v.is_finite())) {
+            tracing::warn!(termination = ?report.termination, "Levenberg-Marquardt did not converge; keeping the previous estimate");
+            problem.params = before;
+            break;
+        }
+        // Unweighted whitened residual sizes per observation.
+        let saved = std::mem::replace(&mut problem.robust, vec![(1.0, 1.0); used.len()]);
+        let r = problem.residual_vector();
+        problem.robust = saved;
+        let normal_sizes: Vec<f64> = (0..used.len())
+            .map(|k| r[3 * k].hypot(r[3 * k + 1]))
+            .collect();
+        let offset_sizes: Vec<f64> = (0..used.len()).map(|k| r[3 * k + 2].abs()).collect();
+        // Median of a 2-D Gaussian's length is 1.1774 σ; of a 1-D's magnitude 0.6745 σ.
+        let c_n = CAUCHY * (median(&normal_sizes) / 1.1774).max(1.0);
+        let c_d = CAUCHY * (median(&offset_sizes) / 0.6745).max(1.0);
+        let robust: Vec<(f64, f64)> = normal_sizes
+            .iter()
+            .zip(&offset_sizes)
+            .map(|(n, d)| {
+                (
+                    1.0 / (1.0 + (n / c_n).powi(2)),
+                    1.0 / (1.0 + (d / c_d).powi(2)),
+                )
+            })
+            .collect();
+        let change = robust
+            .iter()
+            .zip(&problem.robust)
+            .map(|(a, b)| (a.0 - b.0).abs().max((a.1 - b.1).abs()))
+            .fold(0.0, f64::max);
+        tracing::debug!(?robust, c_n, c_d, params = ?problem.params, termination = ?report.termination, "robust round");
+        problem.robust = robust;
+        if change < 1e-9 {
+            break;
+        }
+    }
+    // Wrap the angles into (-π, π] through the matrix round trip.
+    let robot_from_sensor =
+        PoseParams::from_transform(&PoseParams::from_vector(&problem.params).to_transform());
+    problem.params = robot_from_sensor.to_vector();
+    (robot_from_sensor, problem, evaluations)
+}
+
+fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    let mid = v.len() / 2;
+    if v.len() % 2 == 0 {
+        0.5 * (v[mid - 1] + v[mid])
+    } else {
+        v[mid]
+    }
 }
 
 fn outcomes(
@@ -757,6 +866,7 @@ mod tests {
         let mut problem = IdentificationProblem {
             observations: obs.iter().collect(),
             weights: obs.iter().map(|o| Weights::of(o, &settings)).collect(),
+            robust: vec![(1.0, 0.5); obs.len()],
             params: Vector6::new(0.2, -0.5, -0.1, 0.4, 0.3, 0.01),
         };
         let numerical = differentiate_numerically(&mut problem).unwrap();

@@ -1,0 +1,124 @@
+//! Bad input to the command line: a clear message naming the file, line or
+//! flag, exit status 2, and never a panic.
+
+mod common;
+
+use std::io::Write;
+
+use common::groundcal;
+
+fn temp_file(contents: &[u8]) -> tempfile_path::TempPath {
+    tempfile_path::TempPath::new(contents)
+}
+
+/// A minimal temporary file that removes itself.
+mod tempfile_path {
+    use std::path::PathBuf;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    pub struct TempPath(pub PathBuf);
+
+    impl TempPath {
+        pub fn new(contents: &[u8]) -> Self {
+            static COUNTER: AtomicUsize = AtomicUsize::new(0);
+            let path = std::env::temp_dir().join(format!(
+                "groundcal-test-{}-{}",
+                std::process::id(),
+                COUNTER.fetch_add(1, Ordering::Relaxed)
+            ));
+            std::fs::write(&path, contents).unwrap();
+            Self(path)
+        }
+
+        pub fn as_str(&self) -> &str {
+            self.0.to_str().unwrap()
+        }
+    }
+
+    impl Drop for TempPath {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+}
+
+fn assert_bad_input(args: &[&str], must_mention: &[&str]) {
+    let (code, stdout, stderr) = groundcal(args);
+    assert_eq!(code, 2, "args {args:?}: stderr {stderr}");
+    assert!(stdout.is_empty(), "nothing on stdout on error: {stdout}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for word in must_mention {
+        assert!(
+            stderr.contains(word),
+            "stderr does not mention {word:?}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn solve_names_a_missing_file() {
+    assert_bad_input(
+        &["solve", "/nonexistent/planes.json", "--json"],
+        &["/nonexistent/planes.json", "cannot open"],
+    );
+}
+
+#[test]
+fn solve_names_the_line_of_broken_json() {
+    let f = temp_file(
+        b"{\"format\": \"groundcal-planes\",\n \"version\": 1,\n \"observations\": [ oops ]}",
+    );
+    assert_bad_input(&["solve", f.as_str()], &[&format!("{}:3:", f.as_str())]);
+}
+
+#[test]
+fn solve_refuses_a_wrong_version_and_non_finite_numbers() {
+    let f = temp_file(br#"{"format": "groundcal-planes", "version": 7, "observations": []}"#);
+    assert_bad_input(&["solve", f.as_str()], &["version 7"]);
+    let f = temp_file(
+        br#"{"format": "groundcal-planes", "version": 1, "observations": [{"index": 1,
+        "robot_pose": {"alpha_deg": 0, "beta_deg": 0, "gamma_deg": 0, "px_mm": 0, "py_mm": 600, "pz_mm": 0},
+        "plane": {"a": 0, "b": 0, "c": 0, "d_m": 1}}]}"#,
+    );
+    assert_bad_input(&["solve", f.as_str()], &["observations[0]", "normal"]);
+}
+
+#[test]
+fn solve_survives_arbitrary_bytes() {
+    let mut bytes = Vec::new();
+    for i in 0..4096u32 {
+        bytes
+            .write_all(&(i.wrapping_mul(2654435761)).to_le_bytes())
+            .unwrap();
+    }
+    let f = temp_file(&bytes);
+    assert_bad_input(&["solve", f.as_str()], &[f.as_str()]);
+}
+
+#[test]
+fn plane_names_bad_flags_and_files() {
+    let tiff =
+        common::shared().join("data/real/pcl_floor_tilted_frame_20121214T142255.814212_depth.tiff");
+    let tiff = tiff.to_str().unwrap();
+    assert_bad_input(
+        &["plane", tiff, "--units", "inches"],
+        &["--units", "inches"],
+    );
+    assert_bad_input(&["plane", tiff, "--model", "cubic"], &["--model", "cubic"]);
+    assert_bad_input(&["plane", tiff, "--up", "0,1"], &["--up"]);
+    assert_bad_input(&["plane", tiff, "--fx", "-5"], &["focal"]);
+    assert_bad_input(
+        &["plane", tiff, "--up-tolerance", "120"],
+        &["--up-tolerance"],
+    );
+    let f = temp_file(b"P5 640 480 65535\n\x01\x02");
+    assert_bad_input(&["plane", f.as_str()], &[f.as_str(), "614400"]);
+}
+
+#[test]
+fn unknown_commands_and_flags_are_usage_errors() {
+    let (code, _, stderr) = groundcal(&["solve"]);
+    assert_eq!(code, 2, "{stderr}");
+    let (code, _, _) = groundcal(&["frobnicate"]);
+    assert_eq!(code, 2);
+}
