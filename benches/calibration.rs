@@ -1,1 +1,163 @@
-fn main() {}
+//! Criterion benchmarks of the two hot paths: the ground fit of one 640×480
+//! raw frame (pixels to plane, including the conversion to points) and the
+//! 52-pose solve. Figures are recorded in docs/performance.md.
+
+use std::path::PathBuf;
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use groundcal::calib::geometry::{sensor_from_optical, PoseParams};
+use groundcal::calib::plane::{fit_ground, GroundPrior, PlaneFitSettings};
+use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
+use groundcal::calib::solve::{predict, solve, Observation, SolveSettings};
+use groundcal::depth_image::{read_depth_image, DepthUnits};
+use nalgebra::Vector3;
+use rand::{Rng, SeedableRng};
+
+/// The first depth frame of the shared sample recording (inverse-linear model).
+fn sample_frame() -> (Vec<u16>, DepthCamera) {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/sample-12/kinect/d-1700000000.001000-2001000.pgm");
+    let (image, _) = read_depth_image(&path, Some(DepthUnits::Raw11))
+        .expect("the shared sample recording is beside the project");
+    let f = 575.8157389635317;
+    let intrinsics = Intrinsics {
+        fx: f,
+        fy: f,
+        cx: 320.0,
+        cy: 240.0,
+        width: 640,
+        height: 480,
+    };
+    let camera = DepthCamera::new(
+        DepthEncoding::Raw11(DepthModel::inverse_linear_default()),
+        intrinsics,
+        DepthRange::default(),
+    );
+    (image.pixels, camera)
+}
+
+fn ground_fit(c: &mut Criterion) {
+    let (pixels, camera) = sample_frame();
+    let prior = GroundPrior::up_only(
+        sensor_from_optical() * Vector3::new(0.0, -1.0, 0.0),
+        60f64.to_radians(),
+    );
+    let settings = PlaneFitSettings::default();
+    // As in a streaming capture, the point buffers are reused from frame to frame.
+    let mut cloud = camera.points(&pixels);
+    c.bench_function("ground fit, one 640x480 raw frame (pixels to plane)", |b| {
+        b.iter(|| {
+            camera.points_into(black_box(&pixels), &mut cloud);
+            fit_ground(&[&cloud], &prior, &settings).unwrap()
+        })
+    });
+    c.bench_function("raw frame to points only", |b| {
+        b.iter(|| camera.points_into(black_box(&pixels), &mut cloud))
+    });
+    let cloud = camera.points(&pixels);
+    c.bench_function("ground fit only (points to plane)", |b| {
+        b.iter(|| fit_ground(&[black_box(&cloud)], &prior, &settings).unwrap())
+    });
+}
+
+/// The paper's Table A1 (52 poses) with noisy planes.
+fn table_a1_observations() -> Vec<Observation> {
+    const A1: [(f64, f64, f64); 52] = [
+        (2., 20., 615.),
+        (8., 18., 619.),
+        (11., 16., 623.),
+        (13., 14., 627.),
+        (15., 12., 631.),
+        (17., 10., 635.),
+        (19., 8., 639.),
+        (19., 6., 643.),
+        (19., 4., 647.),
+        (20., 2., 651.),
+        (-2., -20., 617.),
+        (-8., -18., 621.),
+        (-11., -16., 625.),
+        (-13., -14., 629.),
+        (-15., -12., 633.),
+        (-17., -10., 637.),
+        (-19., -8., 641.),
+        (-19., -6., 645.),
+        (-19., -4., 649.),
+        (-20., -2., 653.),
+        (3., 19., 690.),
+        (9., 17., 694.),
+        (12., 15., 698.),
+        (15., 13., 698.),
+        (17., 11., 694.),
+        (17., 9., 690.),
+        (17., 7., 686.),
+        (18., 5., 682.),
+        (18., 3., 678.),
+        (19., 1., 674.),
+        (-3., -19., 692.),
+        (-9., -17., 696.),
+        (-12., -15., 700.),
+        (-15., -13., 696.),
+        (-17., -11., 692.),
+        (-17., -9., 688.),
+        (-17., -7., 684.),
+        (-18., -5., 680.),
+        (-18., -3., 676.),
+        (-19., -1., 672.),
+        (1., 13., 730.),
+        (7., 11., 734.),
+        (9., 9., 738.),
+        (11., 7., 742.),
+        (11., 5., 746.),
+        (12., 3., 749.),
+        (-1., -13., 732.),
+        (-7., -11., 736.),
+        (-9., -9., 740.),
+        (-11., -7., 744.),
+        (-11., -5., 748.),
+        (-12., -3., 750.),
+    ];
+    let mount = PoseParams::new(
+        -0.4398f64.to_radians(),
+        -37.4072f64.to_radians(),
+        -3.0471f64.to_radians(),
+        Vector3::new(0.5278885, 0.3648007, -0.0334003),
+    );
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(52);
+    A1.iter()
+        .enumerate()
+        .map(|(i, &(beta, gamma, py))| {
+            let g = PoseParams::new(
+                0.0,
+                beta.to_radians(),
+                gamma.to_radians(),
+                Vector3::new(0.0, py / 1e3, 0.0),
+            )
+            .to_transform();
+            let mut plane = predict(&mount, &g);
+            plane.normal = (plane.normal
+                + Vector3::new(
+                    rng.gen_range(-1.0..1.0),
+                    rng.gen_range(-1.0..1.0),
+                    rng.gen_range(-1.0..1.0),
+                ) * 0.003)
+                .normalize();
+            plane.d += rng.gen_range(-0.001..0.001);
+            Observation::new(i as u32 + 1, g, plane)
+        })
+        .collect()
+}
+
+fn solve_52(c: &mut Criterion) {
+    let observations = table_a1_observations();
+    let settings = SolveSettings::default();
+    c.bench_function("solve, 52 poses (Table A1)", |b| {
+        b.iter(|| solve(black_box(&observations), &settings).unwrap())
+    });
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(50).measurement_time(std::time::Duration::from_secs(5));
+    targets = ground_fit, solve_52
+}
+criterion_main!(benches);

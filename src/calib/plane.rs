@@ -24,6 +24,7 @@
 use nalgebra::{Matrix3, Matrix4, SymmetricEigen, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use wide::f32x4;
 
 use super::geometry::{angle_between, Plane};
 use super::sensor::PointCloud;
@@ -98,7 +99,7 @@ impl Default for PlaneFitSettings {
             min_inlier_fraction: 0.1,
             min_points: 500,
             min_lower_support: 0.08,
-            coarse_stride: 4,
+            coarse_stride: 8,
             seed: 0x6772_6f75_6e64,
         }
     }
@@ -138,13 +139,13 @@ pub enum PlaneFitError {
     TooFewInliers { percent: f64, min_percent: f64 },
 }
 
-/// Expected variance of one reading at depth `x` (along the optical axis),
-/// in square millimetres: 1 mm floor plus `1.4·10⁻³·z²` (conventions.md).
-#[inline(always)]
-fn variance_mm2(depth_m: f32) -> f32 {
-    let q = 1.4 * depth_m * depth_m;
-    1.0 + q * q
-}
+/// Moves of the plane below these (20 µrad, 20 µm: a fortieth of the solve's
+/// noise floor per pose) end the rejection iterations.
+const SETTLED_TILT: f64 = 2e-5;
+const SETTLED_SHIFT: f64 = 2e-5;
+
+/// Fewest MSAC hypotheses drawn, however good the first ones look.
+const MIN_HYPOTHESES: usize = 60;
 
 /// A hypothesis of MSAC with its cost and support.
 #[derive(Debug, Clone, Copy)]
@@ -163,20 +164,12 @@ struct Sample {
 impl Sample {
     fn draw(clouds: &[&PointCloud], size: usize) -> Self {
         let total: usize = clouds.iter().map(|c| c.len()).sum();
-        let stride = (total / size.max(1)).max(1);
-        let mut points = Vec::with_capacity(size + 1);
-        let mut k = 0usize;
-        for cloud in clouds {
-            for i in 0..cloud.len() {
-                if k % stride == 0 {
-                    points.push(cloud.point(i));
-                }
-                k += 1;
-            }
-        }
-        let sigma = points
+        let cloud = PointCloud::subsample(clouds, (total / size.max(1)).max(1));
+        let points = (0..cloud.len()).map(|i| cloud.point(i)).collect();
+        let sigma = cloud
+            .weight
             .iter()
-            .map(|p| f64::from(variance_mm2(p.x as f32)).sqrt() * 1e-3)
+            .map(|w| 1e-3 / f64::from(*w).sqrt())
             .collect();
         Self { points, sigma }
     }
@@ -195,7 +188,12 @@ impl Sample {
         }
         let t2 = settings.msac_threshold_sigmas * settings.msac_threshold_sigmas;
         let mut best: Option<Hypothesis> = None;
-        for _ in 0..settings.msac_iterations {
+        // Enough draws to pick three inliers of the best plane so far with
+        // probability 99.9 % (RANSAC's classic bound), within the limits.
+        let mut needed = settings.msac_iterations;
+        let mut drawn = 0;
+        while drawn < needed.min(settings.msac_iterations) {
+            drawn += 1;
             let i = candidates[rng.gen_range(0..candidates.len())];
             let j = candidates[rng.gen_range(0..candidates.len())];
             let k = candidates[rng.gen_range(0..candidates.len())];
@@ -229,6 +227,10 @@ impl Sample {
                     cost,
                     support,
                 });
+                let inlier_ratio = support as f64 / candidates.len() as f64;
+                let all_three = inlier_ratio.powi(3).min(1.0 - 1e-12);
+                let bound = ((1.0 - 0.999f64).ln() / (1.0 - all_three).ln()).ceil();
+                needed = (bound as usize).max(MIN_HYPOTHESES);
             }
         }
         best
@@ -284,41 +286,67 @@ impl Moments {
         self.distance_sq += other.distance_sq;
     }
 
-    /// Accumulates every `stride`-th point of `cloud` whose normalised residual
-    /// to `plane` is below `band`. Partial sums in f32 over short runs keep the
-    /// loop fast; they are added up in f64.
+    /// Accumulates the points of `cloud` whose normalised residual to `plane`
+    /// is below `band`. Four points at a time (SIMD), partial sums in f32 over
+    /// short runs, added up in f64 in a fixed order: the result depends on the
+    /// input alone.
     fn accumulate(
         &mut self,
         cloud: &PointCloud,
         plane: &Plane,
         reference: &Vector3<f64>,
         band: f64,
-        stride: usize,
     ) {
+        const RUN: usize = 1024;
+        let splat = |v: f64| f32x4::splat(v as f32);
         let (nx, ny, nz) = (
-            plane.normal.x as f32,
-            plane.normal.y as f32,
-            plane.normal.z as f32,
+            splat(plane.normal.x),
+            splat(plane.normal.y),
+            splat(plane.normal.z),
         );
-        let offset = plane.signed_distance(reference) as f32;
-        let (rx, ry, rz) = (reference.x as f32, reference.y as f32, reference.z as f32);
-        let band2 = (band * band) as f32;
-        const RUN: usize = 512;
+        let offset = splat(plane.signed_distance(reference));
+        let (rx, ry, rz) = (splat(reference.x), splat(reference.y), splat(reference.z));
+        let band2 = splat(band * band);
+        let million = f32x4::splat(1.0e6);
         let n = cloud.len();
+        let (xs, ys, zs, ws) = (
+            &cloud.x[..n],
+            &cloud.y[..n],
+            &cloud.z[..n],
+            &cloud.weight[..n],
+        );
+        // Lanes past the end load weight 0 and are masked, so they add nothing.
+        let load = |v: &[f32], i: usize| -> f32x4 {
+            match v.get(i..i + 4) {
+                Some(four) => f32x4::new([four[0], four[1], four[2], four[3]]),
+                None => {
+                    let mut lanes = [0f32; 4];
+                    for (l, lane) in lanes.iter_mut().enumerate() {
+                        *lane = v.get(i + l).copied().unwrap_or(0.0);
+                    }
+                    f32x4::new(lanes)
+                }
+            }
+        };
         let mut start = 0;
         while start < n {
-            let end = (start + RUN * stride).min(n);
-            let mut s = [0f32; 13];
+            let end = (start + RUN).min(n);
+            let mut s = [f32x4::ZERO; 13];
             let mut i = start;
             while i < end {
-                let x = cloud.x[i] - rx;
-                let y = cloud.y[i] - ry;
-                let z = cloud.z[i] - rz;
+                let valid = if i + 4 <= end {
+                    f32x4::ONE
+                } else {
+                    f32x4::new(std::array::from_fn(|l| if i + l < end { 1.0 } else { 0.0 }))
+                };
+                let x = load(xs, i) - rx;
+                let y = load(ys, i) - ry;
+                let z = load(zs, i) - rz;
+                let w = load(ws, i);
                 let r = nx * x + ny * y + nz * z + offset;
-                let w = 1.0 / variance_mm2(cloud.x[i]);
-                let r_mm2 = r * r * 1.0e6;
+                let r_mm2 = r * r * million;
                 let zn2 = r_mm2 * w;
-                let m = if zn2 < band2 { 1.0f32 } else { 0.0 };
+                let m = zn2.simd_lt(band2) & valid;
                 let wm = w * m;
                 s[0] += m;
                 s[1] += wm;
@@ -333,9 +361,10 @@ impl Moments {
                 s[10] += wm * z * z;
                 s[11] += m * zn2;
                 s[12] += m * r_mm2;
-                i += stride;
+                i += 4;
             }
-            let d: Vec<f64> = s.iter().map(|&v| f64::from(v)).collect();
+            let d: [f64; 13] =
+                std::array::from_fn(|k| s[k].to_array().iter().map(|&v| f64::from(v)).sum());
             self.count += d[0].round() as usize;
             self.weight += d[1];
             self.first += Vector3::new(d[2], d[3], d[4]);
@@ -371,15 +400,99 @@ fn moments_over(
     plane: &Plane,
     reference: &Vector3<f64>,
     band: f64,
-    stride: usize,
 ) -> Moments {
     let mut total = Moments::default();
     for cloud in clouds {
         let mut m = Moments::default();
-        m.accumulate(cloud, plane, reference, band, stride);
+        m.accumulate(cloud, plane, reference, band);
         total.add(&m);
     }
     total
+}
+
+/// The outcome of the rejection iterations: the plane, the final band, the
+/// moments of the inliers it was fitted to, and how many iterations it took.
+struct Rejection {
+    plane: Plane,
+    band: f64,
+    moments: Moments,
+    iterations: usize,
+}
+
+/// The paper's iteration: fit the eigenvector plane to the points within
+/// `band`, set the band to `k·σ` of the new inliers, repeat until the band and
+/// the plane settle (or the bound on iterations).
+fn reject_iteratively(
+    clouds: &[&PointCloud],
+    mut plane: Plane,
+    mut band: f64,
+    reference: &Vector3<f64>,
+    settings: &PlaneFitSettings,
+) -> Rejection {
+    let mut iterations = 0;
+    let mut moments = Moments::default();
+    for _ in 0..settings.max_iterations.max(1) {
+        iterations += 1;
+        let m = moments_over(clouds, &plane, reference, band);
+        let Some((next, centroid, eigen)) = m.plane(reference) else {
+            break;
+        };
+        // σ: RMS of the signed normalised residuals of the inliers (errata:
+        // not of the absolute distances, which shrinks the set without end).
+        let scale = (m.normalised_sq / m.count.max(1) as f64).sqrt().max(1e-3);
+        let next_band = settings.rejection_k * scale;
+        let tilt = angle_between(&next.normal, &plane.normal);
+        let shift = (next.d - plane.d).abs();
+        let band_change = (next_band - band).abs() / band;
+        // The plane's own uncertainty at this iteration: moves well below it
+        // change nothing that matters.
+        let covariance = plane_covariance(&m, &centroid, &eigen);
+        let sigma_tilt = covariance.fixed_view::<3, 3>(0, 0).trace().sqrt();
+        let sigma_d = covariance[(3, 3)].sqrt();
+        let settled = band_change < 1e-2
+            && tilt <= (0.2 * sigma_tilt).max(SETTLED_TILT)
+            && shift <= (0.2 * sigma_d).max(SETTLED_SHIFT);
+        tracing::trace!(
+            band,
+            next_band,
+            tilt,
+            shift,
+            sigma_tilt,
+            sigma_d,
+            count = m.count,
+            "rejection iteration"
+        );
+        plane = next;
+        band = next_band;
+        moments = m;
+        // Settled: the band within 1 %, the plane within a fifth of its σ or
+        // within 20 µrad and 20 µm, whichever is larger.
+        if settled {
+            break;
+        }
+    }
+    Rejection {
+        plane,
+        band,
+        moments,
+        iterations,
+    }
+}
+
+/// A point near the middle of the ground's sample inliers: the fit's moments
+/// are taken about it, which keeps the f32 sums accurate.
+fn ground_centroid(sample: &Sample, plane: &Plane, settings: &PlaneFitSettings) -> Vector3<f64> {
+    let inliers: Vec<&Vector3<f64>> = sample
+        .points
+        .iter()
+        .zip(&sample.sigma)
+        .filter(|(p, s)| (plane.signed_distance(p) / *s).abs() < settings.msac_threshold_sigmas)
+        .map(|(p, _)| p)
+        .collect();
+    if inliers.is_empty() {
+        return Vector3::zeros();
+    }
+    inliers.iter().copied().sum::<Vector3<f64>>() / inliers.len() as f64
 }
 
 /// Fits the ground to the points of one or more frames of one pose.
@@ -428,53 +541,17 @@ pub fn fit_ground(
         }
     }
 
-    // 2. Iterative eigenvector fit: coarse stride until stable, then every point.
-    let mut plane = ground.plane;
-    let mut band = settings.msac_threshold_sigmas * sample.robust_scale(&plane, settings);
-    let reference = {
-        let m = moments_over(
-            clouds,
-            &plane,
-            &Vector3::zeros(),
-            band,
-            settings.coarse_stride.max(8),
-        );
-        if m.weight > 0.0 {
-            m.first / m.weight
-        } else {
-            Vector3::zeros()
-        }
-    };
-    let mut iterations = 0;
-    for stride in [settings.coarse_stride.max(1), 1] {
-        let mut previous_count = usize::MAX;
-        for _ in 0..settings.max_iterations {
-            iterations += 1;
-            let m = moments_over(clouds, &plane, &reference, band, stride);
-            let Some((next, _, _)) = m.plane(&reference) else {
-                break;
-            };
-            // σ of this iteration: RMS of the signed normalised residuals of the
-            // inliers (errata: not of the absolute distances).
-            let scale = (m.normalised_sq / m.count.max(1) as f64).sqrt().max(1e-3);
-            let moved = angle_between(&next.normal, &plane.normal) + (next.d - plane.d).abs();
-            plane = next;
-            band = settings.rejection_k * scale;
-            if m.count == previous_count && moved < 1e-9 {
-                break;
-            }
-            previous_count = m.count;
-            if stride == 1 && moved < 1e-7 {
-                break;
-            }
-        }
-        if stride == 1 {
-            break;
-        }
-    }
+    // 2. Iterative eigenvector fit: on a subsample until it settles, then on
+    //    every point (which then settles in a few iterations). The start band
+    //    is near the rule's fixed point, about 1.5 robust σ.
+    let band = 1.5 * sample.robust_scale(&ground.plane, settings);
+    let reference = ground_centroid(&sample, &ground.plane, settings);
+    let coarse = PointCloud::subsample(clouds, settings.coarse_stride);
+    let coarse = reject_iteratively(&[&coarse], ground.plane, band, &reference, settings);
+    let fine = reject_iteratively(clouds, coarse.plane, coarse.band, &reference, settings);
 
-    // 3. Final pass against the final plane: inliers, RMS and covariance.
-    let m = moments_over(clouds, &plane, &reference, band, 1);
+    // 3. Inliers, RMS and covariance from the last iteration's moments.
+    let m = &fine.moments;
     let fraction = m.count as f64 / valid_points as f64;
     if fraction < settings.min_inlier_fraction {
         return Err(PlaneFitError::TooFewInliers {
@@ -482,20 +559,27 @@ pub fn fit_ground(
             min_percent: 100.0 * settings.min_inlier_fraction,
         });
     }
-    let (final_plane, centroid, eigen) = m.plane(&reference).ok_or_else(no_ground)?;
-    let plane = if prior.admits(&final_plane) {
-        final_plane
-    } else {
-        plane
-    };
-    let covariance = plane_covariance(&m, &centroid, &eigen);
+    let (plane, centroid, eigen) = m.plane(&reference).ok_or_else(no_ground)?;
+    if !prior.admits(&plane) {
+        // The refinement drifted out of the prior: the MSAC plane was a poor start.
+        return Err(no_ground());
+    }
+    let covariance = plane_covariance(m, &centroid, &eigen);
+    tracing::debug!(
+        coarse = coarse.iterations,
+        fine = fine.iterations,
+        inliers = m.count,
+        valid_points,
+        band = fine.band,
+        "ground fit"
+    );
     Ok(GroundFit {
         plane,
         covariance,
         inliers: m.count,
         valid_points,
         rms_m: (m.distance_sq / m.count.max(1) as f64).sqrt(),
-        iterations,
+        iterations: coarse.iterations + fine.iterations,
     })
 }
 

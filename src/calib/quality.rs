@@ -149,14 +149,15 @@ pub fn judge(
     if observability.problems.is_empty() {
         for k in 0..3 {
             let s = sigma[k].to_degrees();
-            if !(s <= gates.sigma_angle_max_deg) {
+            // NaN (an unobservable direction) fails the gate too.
+            if s.is_nan() || s > gates.sigma_angle_max_deg {
                 reasons.push(format!(
                     "the angle {} is uncertain (σ = {:.3}°, at most {:.3}° allowed): add poses with larger tilts or more frames per pose",
                     ANGLE_NAMES[k], s, gates.sigma_angle_max_deg
                 ));
             }
             let s = sigma[3 + k] * 1e3;
-            if !(s <= gates.sigma_position_max_mm) {
+            if s.is_nan() || s > gates.sigma_position_max_mm {
                 reasons.push(format!(
                     "the position {} is uncertain (σ = {:.2} mm, at most {:.2} mm allowed): add poses with larger tilts or more frames per pose",
                     POSITION_NAMES[k], s, gates.sigma_position_max_mm

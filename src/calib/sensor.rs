@@ -217,8 +217,9 @@ pub fn depth_sigma_m(z: f64) -> f64 {
 pub struct DepthCamera {
     intrinsics: Intrinsics,
     range: DepthRange,
-    /// Depth in metres for each possible 16-bit value; 0 = no reading or out of range.
-    depth_of_value: Vec<f32>,
+    /// Depth in metres and weight for each possible value; depth 0 = no reading
+    /// or out of range.
+    table: Vec<(f32, f32)>,
     /// `(u - cx) / fx` per column.
     ray_right: Vec<f32>,
     /// `-(v - cy) / fy` per row (sensor Y is up, image rows go down).
@@ -226,7 +227,7 @@ pub struct DepthCamera {
 }
 
 /// Points in the sensor frame V, stored as separate coordinate arrays so that the
-/// per-point loops of the plane fit vectorise.
+/// per-point loops of the plane fit vectorise, each with its weight.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PointCloud {
     /// Along the optical axis (the depth), metres.
@@ -235,6 +236,17 @@ pub struct PointCloud {
     pub y: Vec<f32>,
     /// Right in the image, metres.
     pub z: Vec<f32>,
+    /// `1/σ²` of the reading in mm⁻² ([`depth_weight`]), computed once here so
+    /// that the fit's iterations need no division.
+    pub weight: Vec<f32>,
+}
+
+/// Weight `1/σ²` (mm⁻²) of a reading at depth `x` metres: a 1 mm floor plus the
+/// Kinect's `1.4·10⁻³·z²` (conventions.md), as in [`depth_sigma_m`].
+#[inline(always)]
+pub fn depth_weight(depth_m: f32) -> f32 {
+    let q = 1.4 * depth_m * depth_m;
+    1.0 / (1.0 + q * q)
 }
 
 impl PointCloud {
@@ -262,6 +274,50 @@ impl PointCloud {
         self.x.push(p.x as f32);
         self.y.push(p.y as f32);
         self.z.push(p.z as f32);
+        self.weight.push(depth_weight(p.x as f32));
+    }
+
+    fn push_f32(&mut self, x: f32, y: f32, z: f32, weight: f32) {
+        self.x.push(x);
+        self.y.push(y);
+        self.z.push(z);
+        self.weight.push(weight);
+    }
+
+    /// Every `stride`-th point of the clouds, in order, as one cloud.
+    pub fn subsample(clouds: &[&PointCloud], stride: usize) -> PointCloud {
+        let stride = stride.max(1);
+        let total: usize = clouds.iter().map(|c| c.len()).sum();
+        let mut out = PointCloud::with_capacity(total / stride + 1);
+        let mut k = 0usize;
+        for cloud in clouds {
+            // The first index of this cloud that continues the global stride.
+            let mut i = (stride - k % stride) % stride;
+            while i < cloud.len() {
+                out.push_f32(cloud.x[i], cloud.y[i], cloud.z[i], cloud.weight[i]);
+                i += stride;
+            }
+            k += cloud.len();
+        }
+        out
+    }
+
+    /// Removes every point, keeping the memory.
+    pub fn clear(&mut self) {
+        self.x.clear();
+        self.y.clear();
+        self.z.clear();
+        self.weight.clear();
+    }
+
+    /// An empty cloud with room for `n` points.
+    pub fn with_capacity(n: usize) -> Self {
+        Self {
+            x: Vec::with_capacity(n),
+            y: Vec::with_capacity(n),
+            z: Vec::with_capacity(n),
+            weight: Vec::with_capacity(n),
+        }
     }
 }
 
@@ -272,7 +328,7 @@ impl DepthCamera {
             DepthEncoding::Raw11(_) => usize::from(RAW_NO_READING) + 1,
             DepthEncoding::Metric { .. } => usize::from(u16::MAX) + 1,
         };
-        let depth_of_value = (0..table_len)
+        let table = (0..table_len)
             .map(|value| {
                 let z = match encoding {
                     DepthEncoding::Raw11(model) => model.depth_m(value as u16),
@@ -281,8 +337,10 @@ impl DepthCamera {
                     }
                 };
                 match z {
-                    Some(z) if z >= range.min_m && z <= range.max_m => z as f32,
-                    _ => 0.0,
+                    Some(z) if z >= range.min_m && z <= range.max_m => {
+                        (z as f32, depth_weight(z as f32))
+                    }
+                    _ => (0.0, 0.0),
                 }
             })
             .collect();
@@ -295,7 +353,7 @@ impl DepthCamera {
         Self {
             intrinsics,
             range,
-            depth_of_value,
+            table,
             ray_right,
             ray_up,
         }
@@ -319,30 +377,46 @@ impl DepthCamera {
     pub fn append_points(&self, pixels: &[u16], cloud: &mut PointCloud) -> usize {
         let before = cloud.len();
         let width = self.intrinsics.width;
+        let rows = pixels.len() / width.max(1);
+        let room = before + rows.min(self.ray_up.len()) * width;
+        // Written without a branch per pixel: every pixel is stored at the
+        // cursor, which advances only over valid ones; the excess is cut off.
+        cloud.x.resize(room, 0.0);
+        cloud.y.resize(room, 0.0);
+        cloud.z.resize(room, 0.0);
+        cloud.weight.resize(room, 0.0);
+        let mut cursor = before;
         for (row, up) in pixels.chunks_exact(width).zip(&self.ray_up) {
             for (&value, &right) in row.iter().zip(&self.ray_right) {
-                let z = self
-                    .depth_of_value
+                let (z, w) = self
+                    .table
                     .get(usize::from(value))
                     .copied()
-                    .unwrap_or(0.0);
-                if z > 0.0 {
-                    cloud.x.push(z);
-                    cloud.y.push(up * z);
-                    cloud.z.push(right * z);
-                }
+                    .unwrap_or((0.0, 0.0));
+                cloud.x[cursor] = z;
+                cloud.y[cursor] = up * z;
+                cloud.z[cursor] = right * z;
+                cloud.weight[cursor] = w;
+                cursor += usize::from(z > 0.0);
             }
         }
-        cloud.len() - before
+        cloud.x.truncate(cursor);
+        cloud.y.truncate(cursor);
+        cloud.z.truncate(cursor);
+        cloud.weight.truncate(cursor);
+        cursor - before
+    }
+
+    /// Converts an image into `cloud`, reusing its memory (the streaming path:
+    /// no allocation once the buffers have grown to a frame's size).
+    pub fn points_into(&self, pixels: &[u16], cloud: &mut PointCloud) -> usize {
+        cloud.clear();
+        self.append_points(pixels, cloud)
     }
 
     /// Converts an image to a new point cloud.
     pub fn points(&self, pixels: &[u16]) -> PointCloud {
-        let mut cloud = PointCloud::default();
-        let capacity = pixels.len();
-        cloud.x.reserve(capacity);
-        cloud.y.reserve(capacity);
-        cloud.z.reserve(capacity);
+        let mut cloud = PointCloud::with_capacity(pixels.len());
         self.append_points(pixels, &mut cloud);
         cloud
     }

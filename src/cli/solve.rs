@@ -30,7 +30,8 @@ pub fn run(file: &Path, json: bool, settings: &SolveSettings) -> ExitStatus {
     let printed = if json {
         print_json(&result)
     } else {
-        Ok(print!("{}", result.to_table()))
+        print!("{}", result.to_table());
+        Ok(())
     };
     if let Err(e) = printed {
         eprintln!("groundcal solve: {e}");
