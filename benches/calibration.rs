@@ -10,6 +10,7 @@ use groundcal::calib::plane::{fit_ground, GroundPrior, PlaneFitSettings};
 use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use groundcal::calib::solve::{predict, solve, Observation, SolveSettings};
 use groundcal::depth_image::{read_depth_image, DepthUnits};
+use groundcal::schedule::Schedule;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -60,62 +61,10 @@ fn ground_fit(c: &mut Criterion) {
     });
 }
 
-/// The paper's Table A1 (52 poses) with noisy planes.
+/// The paper's Table A1 (config/schedules/octopus-52.toml) with noisy planes.
 fn table_a1_observations() -> Vec<Observation> {
-    const A1: [(f64, f64, f64); 52] = [
-        (2., 20., 615.),
-        (8., 18., 619.),
-        (11., 16., 623.),
-        (13., 14., 627.),
-        (15., 12., 631.),
-        (17., 10., 635.),
-        (19., 8., 639.),
-        (19., 6., 643.),
-        (19., 4., 647.),
-        (20., 2., 651.),
-        (-2., -20., 617.),
-        (-8., -18., 621.),
-        (-11., -16., 625.),
-        (-13., -14., 629.),
-        (-15., -12., 633.),
-        (-17., -10., 637.),
-        (-19., -8., 641.),
-        (-19., -6., 645.),
-        (-19., -4., 649.),
-        (-20., -2., 653.),
-        (3., 19., 690.),
-        (9., 17., 694.),
-        (12., 15., 698.),
-        (15., 13., 698.),
-        (17., 11., 694.),
-        (17., 9., 690.),
-        (17., 7., 686.),
-        (18., 5., 682.),
-        (18., 3., 678.),
-        (19., 1., 674.),
-        (-3., -19., 692.),
-        (-9., -17., 696.),
-        (-12., -15., 700.),
-        (-15., -13., 696.),
-        (-17., -11., 692.),
-        (-17., -9., 688.),
-        (-17., -7., 684.),
-        (-18., -5., 680.),
-        (-18., -3., 676.),
-        (-19., -1., 672.),
-        (1., 13., 730.),
-        (7., 11., 734.),
-        (9., 9., 738.),
-        (11., 7., 742.),
-        (11., 5., 746.),
-        (12., 3., 749.),
-        (-1., -13., 732.),
-        (-7., -11., 736.),
-        (-9., -9., 740.),
-        (-11., -7., 744.),
-        (-11., -5., 748.),
-        (-12., -3., 750.),
-    ];
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/schedules/octopus-52.toml");
+    let schedule = Schedule::read(&path).expect("the shipped schedule reads");
     let mount = PoseParams::new(
         -0.4398f64.to_radians(),
         -37.4072f64.to_radians(),
@@ -123,25 +72,17 @@ fn table_a1_observations() -> Vec<Observation> {
         Vector3::new(0.5278885, 0.3648007, -0.0334003),
     );
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(52);
-    A1.iter()
+    let mut jitter = || rng.gen_range(-1.0..1.0);
+    schedule
+        .poses
+        .iter()
         .enumerate()
-        .map(|(i, &(beta, gamma, py))| {
-            let g = PoseParams::new(
-                0.0,
-                beta.to_radians(),
-                gamma.to_radians(),
-                Vector3::new(0.0, py / 1e3, 0.0),
-            )
-            .to_transform();
+        .map(|(i, pose)| {
+            let g = pose.to_params().to_transform();
             let mut plane = predict(&mount, &g);
-            plane.normal = (plane.normal
-                + Vector3::new(
-                    rng.gen_range(-1.0..1.0),
-                    rng.gen_range(-1.0..1.0),
-                    rng.gen_range(-1.0..1.0),
-                ) * 0.003)
-                .normalize();
-            plane.d += rng.gen_range(-0.001..0.001);
+            plane.normal =
+                (plane.normal + Vector3::new(jitter(), jitter(), jitter()) * 0.003).normalize();
+            plane.d += jitter() * 0.001;
             Observation::new(i as u32 + 1, g, plane)
         })
         .collect()

@@ -8,6 +8,7 @@
 //! - [`depth_image`]: depth images from files (fakenect dumps, PNG, TIFF, PGM);
 //! - [`recording`]: the input files of `shared/spec/recording.md`;
 //! - [`output`]: the result JSON of `shared/spec/cli.md`;
+//! - [`schedule`]: pose schedules and their checks before anything moves;
 //! - [`cli`]: the `groundcal` command's subcommands.
 
 pub mod calib;
@@ -15,3 +16,4 @@ pub mod cli;
 pub mod depth_image;
 pub mod output;
 pub mod recording;
+pub mod schedule;
