@@ -794,7 +794,11 @@ pub fn observability(used: &[&Observation], settings: &SolveSettings) -> Observa
             .iter()
             .map(|&a| format!("{} (p_{})", axis_words(a).0, ["x", "y", "z"][a]))
             .collect();
-        let what = format!("the sensor's {} position", position_words.join(" and "));
+        let what = format!(
+            "the sensor's {} position{}",
+            position_words.join(" and "),
+            if named.len() > 1 { "s" } else { "" }
+        );
         let why = if never_tilts {
             "the schedule never tilts the body".to_string()
         } else if named == [2] {
