@@ -8,12 +8,18 @@
 //! - [`depth_image`]: depth images from files (fakenect dumps, PNG, TIFF, PGM);
 //! - [`recording`]: the input files of `shared/spec/recording.md`;
 //! - [`output`]: the result JSON of `shared/spec/cli.md`;
+//! - [`report`]: the offline calibration report, one self-contained HTML page;
+//! - [`export`]: the result in ROS's frames (URDF, `static_transform_publisher`, JSON);
 //! - [`schedule`]: pose schedules and their checks before anything moves;
 //! - [`cli`]: the `groundcal` command's subcommands.
 
 pub mod calib;
 pub mod cli;
 pub mod depth_image;
+pub mod export;
 pub mod output;
+pub mod pipeline;
 pub mod recording;
+pub mod replay;
+pub mod report;
 pub mod schedule;

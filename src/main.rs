@@ -30,6 +30,29 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Solve a recording (session.json, poses.jsonl, kinect/) offline.
+    Replay {
+        dir: PathBuf,
+        #[arg(long)]
+        json: bool,
+        /// The rough robot_from_sensor (degrees, millimetres) that tells which
+        /// plane is the ground; overrides the recording's.
+        #[arg(long, value_name = "a,b,g,x,y,z", allow_hyphen_values = true)]
+        nominal_mount: Option<String>,
+        /// Write a self-contained HTML report (index.html) into this directory.
+        #[arg(long, value_name = "DIR")]
+        report: Option<PathBuf>,
+        /// Worker threads (default: every core). The result does not depend on it.
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
+    Export {
+        /// A result document (`groundcal solve|replay|calibrate --json`).
+        file: PathBuf,
+        #[arg(long, value_enum)]
+        format: groundcal::export::ExportFormat,
+    },
     /// Fit the ground in one depth image.
     #[command(allow_negative_numbers = true)]
     Plane {
@@ -67,6 +90,28 @@ fn usage_error(message: String) -> ExitStatus {
 fn run(args: Args) -> ExitStatus {
     match args.command {
         Command::Solve { file, json } => cli::solve::run(&file, json, &SolveSettings::default()),
+        Command::Replay {
+            dir,
+            json,
+            nominal_mount,
+            report,
+            threads,
+        } => {
+            let nominal_mount = match nominal_mount
+                .map(|m| cli::parse_numbers::<6>("--nominal-mount", &m))
+            {
+                None => None,
+                Some(Ok(values)) => Some(groundcal::pipeline::nominal_mount_from_values(values)),
+                Some(Err(e)) => return usage_error(e),
+            };
+            let options = groundcal::replay::ReplayOptions {
+                nominal_mount,
+                threads,
+                ..Default::default()
+            };
+            cli::replay::run(&dir, json, report.as_deref(), &options)
+        }
+        Command::Export { file, format } => cli::export::run(&file, format),
         Command::Plane {
             file,
             json,

@@ -80,20 +80,42 @@ impl From<&Plane> for PlaneJson {
     }
 }
 
+/// One pose of the input. A pose that gave no plane (no frames, no ground
+/// found) has `used: false`, its reason, and no plane or errors.
 #[derive(Debug, Clone, Serialize)]
 pub struct PoseJson {
     pub index: u32,
     pub used: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
-    pub theta_deg: f64,
-    pub e_d_mm: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub theta_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub e_d_mm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub inliers: Option<usize>,
     /// The measured ground in the sensor frame.
-    pub plane: PlaneJson,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plane: Option<PlaneJson>,
     /// The ground the result predicts (paper's "theoretical ground", Table 3).
-    pub predicted_plane: PlaneJson,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub predicted_plane: Option<PlaneJson>,
+}
+
+impl PoseJson {
+    /// A pose that gave no plane.
+    pub fn failed(index: u32, reason: String) -> Self {
+        Self {
+            index,
+            used: false,
+            reason: Some(reason),
+            theta_deg: None,
+            e_d_mm: None,
+            inliers: None,
+            plane: None,
+            predicted_plane: None,
+        }
+    }
 }
 
 impl From<&PoseOutcome> for PoseJson {
@@ -102,11 +124,11 @@ impl From<&PoseOutcome> for PoseJson {
             index: p.index,
             used: p.used,
             reason: p.reason.clone(),
-            theta_deg: p.theta.to_degrees(),
-            e_d_mm: p.e_d * 1e3,
+            theta_deg: Some(p.theta.to_degrees()),
+            e_d_mm: Some(p.e_d * 1e3),
             inliers: p.inliers,
-            plane: (&p.measured).into(),
-            predicted_plane: (&p.predicted).into(),
+            plane: Some((&p.measured).into()),
+            predicted_plane: Some((&p.predicted).into()),
         }
     }
 }
@@ -144,6 +166,12 @@ pub struct ResultJson {
     pub summary: Option<SummaryJson>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub observability: Option<ObservabilityJson>,
+    /// The Kinect's motor tilt the calibration holds for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kinect_tilt_deg: Option<f64>,
+    /// Things the operator should know that are not reasons to reject.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 impl ResultJson {
@@ -179,6 +207,8 @@ impl ResultJson {
                 rotation_singular_values: c.observability.rotation_singular_values,
                 translation_singular_values: c.observability.translation_singular_values,
             }),
+            kinect_tilt_deg: None,
+            notes: Vec::new(),
         }
     }
 
@@ -193,7 +223,23 @@ impl ResultJson {
             poses: poses.iter().map(PoseJson::from).collect(),
             summary: None,
             observability: None,
+            kinect_tilt_deg: None,
+            notes: Vec::new(),
         }
+    }
+
+    /// Adds poses that gave no plane, keeping the list in index order.
+    pub fn with_failed_poses(mut self, failed: &[(u32, String)]) -> Self {
+        self.poses.extend(
+            failed
+                .iter()
+                .map(|(index, reason)| PoseJson::failed(*index, reason.clone())),
+        );
+        self.poses.sort_by_key(|p| p.index);
+        if let Some(summary) = &mut self.summary {
+            summary.poses_total = self.poses.len();
+        }
+        self
     }
 
     /// Whether the calibration was accepted.
@@ -208,6 +254,12 @@ impl ResultJson {
         let _ = writeln!(out, "status: {}", self.status.to_uppercase());
         for reason in &self.reasons {
             let _ = writeln!(out, "  - {reason}");
+        }
+        for note in &self.notes {
+            let _ = writeln!(out, "  note: {note}");
+        }
+        if let Some(tilt) = self.kinect_tilt_deg {
+            let _ = writeln!(out, "  for the Kinect tilted {tilt}°");
         }
         if let (Some(m), Some(s)) = (&self.robot_from_sensor, &self.sigma) {
             let _ = writeln!(out, "\nrobot_from_sensor            value        σ");
@@ -224,13 +276,17 @@ impl ResultJson {
         }
         let _ = writeln!(out, "\npose  used   θ (°)   e_d (mm)  note");
         for p in &self.poses {
+            let number = |v: Option<f64>, width: usize, decimals: usize| match v {
+                Some(v) => format!("{v:>width$.decimals$}"),
+                None => format!("{:>width$}", "-"),
+            };
             let _ = writeln!(
                 out,
-                "{:>4}  {:<4} {:>7.3} {:>10.2}  {}",
+                "{:>4}  {:<4} {} {}  {}",
                 p.index,
                 if p.used { "yes" } else { "no" },
-                p.theta_deg,
-                p.e_d_mm,
+                number(p.theta_deg, 7, 3),
+                number(p.e_d_mm, 10, 2),
                 p.reason.as_deref().unwrap_or("")
             );
         }

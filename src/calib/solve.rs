@@ -490,6 +490,16 @@ pub fn solve(
     observations: &[Observation],
     settings: &SolveSettings,
 ) -> Result<Calibration, SolveError> {
+    solve_among(observations, observations.len(), settings)
+}
+
+/// As [`solve`], for observations that are some of `poses_total` poses (the
+/// others gave no plane): the gates count the poses that could not be used.
+pub fn solve_among(
+    observations: &[Observation],
+    poses_total: usize,
+    settings: &SolveSettings,
+) -> Result<Calibration, SolveError> {
     let mut set_aside: Vec<Option<String>> =
         observations.iter().map(|o| o.set_aside.clone()).collect();
     let candidates = set_aside.iter().filter(|s| s.is_none()).count();
@@ -572,7 +582,8 @@ pub fn solve(
 
     let observability = observability(&used, settings);
     let outcomes = outcomes(observations, &set_aside, &robot_from_sensor);
-    let summary = quality::summarise(&outcomes);
+    let mut summary = quality::summarise(&outcomes);
+    summary.poses_total = summary.poses_total.max(poses_total);
     let sigma = Vector6::from_fn(|i, _| covariance[(i, i)].max(0.0).sqrt());
     let reasons = quality::judge(&settings.gates, &summary, &outcomes, &sigma, &observability);
     Ok(Calibration {

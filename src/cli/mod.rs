@@ -3,7 +3,9 @@
 //! `main.rs` only parses arguments and sets up logging; everything a command
 //! does lives here so that tests can call it directly.
 
+pub mod export;
 pub mod plane;
+pub mod replay;
 pub mod solve;
 
 /// Exit statuses of `shared/spec/cli.md`.

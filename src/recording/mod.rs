@@ -3,10 +3,19 @@
 //! Readers are strict: every defect is an [`InputError`] naming the file, the
 //! line where known, and what was expected. Nothing half-read is returned.
 
+pub mod dump;
 pub mod planes;
+pub mod poses;
+pub mod session;
+pub mod writer;
 
 use std::fmt;
 use std::path::{Path, PathBuf};
+
+use crate::depth_image::{parse_fakenect_pgm, DepthImage};
+use dump::{parse_index, DumpEntry, EntryKind};
+use poses::{parse_poses, PoseRecord};
+use session::Session;
 
 /// A defect in an input file.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,7 +52,12 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> 
     use std::io::Read;
     let file = std::fs::File::open(path)
         .map_err(|e| InputError::new(path, None, format!("cannot open: {e}")))?;
-    let mut bytes = Vec::new();
+    // Sized from the file's length, so that a frame is read without regrowing.
+    let expected = file
+        .metadata()
+        .map(|m| m.len().min(max_bytes + 1))
+        .unwrap_or(0);
+    let mut bytes = Vec::with_capacity(expected as usize + 1);
     file.take(max_bytes + 1)
         .read_to_end(&mut bytes)
         .map_err(|e| InputError::new(path, None, format!("cannot read: {e}")))?;
@@ -55,4 +69,144 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> 
         ));
     }
     Ok(bytes)
+}
+
+/// Largest `session.json`, `poses.jsonl` or `INDEX.txt` accepted.
+const MAX_TEXT_BYTES: u64 = 64 << 20;
+
+/// A recording (recording.md), checked when opened: its text files parsed,
+/// every frame a pose names present in `INDEX.txt` and on disk with the size
+/// of a depth frame. Frames themselves are read one pose at a time.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    pub dir: PathBuf,
+    pub session: Session,
+    pub poses: Vec<PoseRecord>,
+    /// `poses.jsonl` ended in a line cut off part-way, which was left out.
+    pub truncated_tail: bool,
+    pub index: Vec<DumpEntry>,
+    /// The raw text files, for the input digest.
+    texts: [Vec<u8>; 3],
+}
+
+fn read_text(path: &Path) -> Result<(Vec<u8>, String), InputError> {
+    let bytes = read_bounded(path, MAX_TEXT_BYTES)?;
+    let text = String::from_utf8(bytes.clone())
+        .map_err(|e| InputError::new(path, None, format!("not UTF-8 text: {e}")))?;
+    Ok((bytes, text))
+}
+
+impl Recording {
+    /// Opens and checks a recording directory.
+    pub fn open(dir: &Path) -> Result<Self, InputError> {
+        if !dir.is_dir() {
+            return Err(InputError::new(
+                dir,
+                None,
+                "not a directory (expected a recording: session.json, poses.jsonl, kinect/)",
+            ));
+        }
+        let session_path = dir.join("session.json");
+        let (session_bytes, session_text) = read_text(&session_path)?;
+        let session = Session::parse(&session_path, &session_text)?;
+        let poses_path = dir.join("poses.jsonl");
+        let (poses_bytes, poses_text) = read_text(&poses_path)?;
+        let poses_file = parse_poses(&poses_path, &poses_text)?;
+        let index_path = dir.join("kinect").join("INDEX.txt");
+        let (index_bytes, index_text) = read_text(&index_path)?;
+        let index = parse_index(&index_path, &index_text)?;
+
+        let intrinsics = session.kinect.intrinsics;
+        let frame_bytes = fakenect_frame_len(intrinsics.width, intrinsics.height);
+        let names: std::collections::HashMap<&str, &DumpEntry> =
+            index.iter().map(|e| (e.name.as_str(), e)).collect();
+        for pose in &poses_file.poses {
+            for name in &pose.depth_frames {
+                let at = |m: String| {
+                    InputError::new(
+                        &poses_path,
+                        Some(pose.line),
+                        format!("pose {}: {m}", pose.index),
+                    )
+                };
+                match names.get(name.as_str()) {
+                    None => {
+                        return Err(at(format!(
+                            "depth frame \"{name}\" is not in kinect/INDEX.txt"
+                        )))
+                    }
+                    Some(entry) if entry.kind != EntryKind::Depth => {
+                        return Err(at(format!("\"{name}\" is not a depth frame")))
+                    }
+                    Some(_) => {}
+                }
+                let frame_path = dir.join("kinect").join(name);
+                let len = std::fs::metadata(&frame_path)
+                    .map_err(|e| {
+                        InputError::new(
+                            &frame_path,
+                            None,
+                            format!("depth frame of pose {} cannot be read: {e}", pose.index),
+                        )
+                    })?
+                    .len();
+                if len != frame_bytes as u64 {
+                    return Err(InputError::new(
+                        &frame_path,
+                        None,
+                        format!(
+                            "a {}×{} depth frame is {frame_bytes} bytes, this one is {len} (truncated or corrupt)",
+                            intrinsics.width, intrinsics.height
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            session,
+            poses: poses_file.poses,
+            truncated_tail: poses_file.truncated_tail,
+            index,
+            texts: [session_bytes, poses_bytes, index_bytes],
+        })
+    }
+
+    /// The path of a file of the dump.
+    pub fn kinect_path(&self, name: &str) -> PathBuf {
+        self.dir.join("kinect").join(name)
+    }
+
+    /// Reads one depth frame, with its bytes (for the digest).
+    pub fn read_depth_frame(&self, name: &str) -> Result<(DepthImage, Vec<u8>), InputError> {
+        let path = self.kinect_path(name);
+        let intrinsics = self.session.kinect.intrinsics;
+        let bytes = read_bounded(
+            &path,
+            fakenect_frame_len(intrinsics.width, intrinsics.height) as u64,
+        )?;
+        let image = parse_fakenect_pgm(&path, &bytes)
+            .map_err(|e| InputError::new(&path, None, e.to_string()))?;
+        if image.width != intrinsics.width || image.height != intrinsics.height {
+            return Err(InputError::new(
+                &path,
+                None,
+                format!(
+                    "frame is {}×{}, session.json says {}×{}",
+                    image.width, image.height, intrinsics.width, intrinsics.height
+                ),
+            ));
+        }
+        Ok((image, bytes))
+    }
+
+    /// The text files' bytes (session.json, poses.jsonl, INDEX.txt).
+    pub fn text_files(&self) -> [&[u8]; 3] {
+        [&self.texts[0], &self.texts[1], &self.texts[2]]
+    }
+}
+
+/// Size of a fakenect depth file: the header and two bytes per pixel.
+pub fn fakenect_frame_len(width: usize, height: usize) -> usize {
+    format!("P5 {width} {height} 65535\n").len() + 2 * width * height
 }

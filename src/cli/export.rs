@@ -1,0 +1,30 @@
+//! `groundcal export RESULT.json --format urdf|ros-static|json`: the calibration
+//! in other tools' formats (`crate::export`, `docs/export.md`).
+
+use std::io::Write;
+use std::path::Path;
+
+use super::ExitStatus;
+use crate::export::{read_result, render, ExportFormat};
+
+/// Runs the command: the export on stdout, messages on stderr. A rejected
+/// calibration, a missing file or an inconsistent result is bad input (exit 2).
+pub fn run(file: &Path, format: ExportFormat) -> ExitStatus {
+    let robot_from_sensor = match read_result(file, false) {
+        Ok(mount) => mount,
+        Err(e) => {
+            eprintln!("groundcal export: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let text = render(&robot_from_sensor, format);
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        eprintln!("groundcal export: cannot write the export: {e}");
+        return ExitStatus::RuntimeFailure;
+    }
+    ExitStatus::Success
+}

@@ -1,0 +1,61 @@
+//! `groundcal replay DIR`: solve a recording offline.
+
+use std::path::Path;
+
+use super::{print_json, ExitStatus};
+use crate::recording::Recording;
+use crate::replay::{replay, ReplayOptions};
+use crate::report::{write_report, Provenance};
+
+/// Runs the command; the result goes to stdout, messages to stderr, and the
+/// HTML report to `report_dir` if given.
+pub fn run(
+    dir: &Path,
+    json: bool,
+    report_dir: Option<&Path>,
+    options: &ReplayOptions,
+) -> ExitStatus {
+    let recording = match Recording::open(dir) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("groundcal replay: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let outcome = match replay(&recording, options) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("groundcal replay: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    tracing::info!(frames = outcome.frames, digest = %outcome.input_digest, "replayed");
+    if let Some(report_dir) = report_dir {
+        let provenance = Provenance::now(&dir.display().to_string(), outcome.input_digest.clone());
+        match write_report(report_dir, &outcome.result, &provenance) {
+            Ok(path) => eprintln!("groundcal replay: report written to {}", path.display()),
+            Err(e) => {
+                eprintln!(
+                    "groundcal replay: cannot write the report to {}: {e}",
+                    report_dir.display()
+                );
+                return ExitStatus::RuntimeFailure;
+            }
+        }
+    }
+    let printed = if json {
+        print_json(&outcome.result)
+    } else {
+        print!("{}", outcome.result.to_table());
+        Ok(())
+    };
+    if let Err(e) = printed {
+        eprintln!("groundcal replay: {e}");
+        return ExitStatus::RuntimeFailure;
+    }
+    if outcome.result.accepted() {
+        ExitStatus::Success
+    } else {
+        ExitStatus::Rejected
+    }
+}

@@ -1,0 +1,200 @@
+//! From one pose's evidence to an observation for the solve: the real body
+//! pose from the feet (paper 4.2) and the ground from the depth frames (paper
+//! 4.1), the ground chosen with a prior from the nominal mount. Shared by the
+//! offline replay and the live calibration session, so that both compute the
+//! same thing from the same evidence.
+
+use nalgebra::Vector3;
+
+use crate::calib::body::{Feet, GroundFrame};
+use crate::calib::geometry::{PoseDegMm, Transform};
+use crate::calib::plane::{fit_ground, GroundPrior, PlaneFitSettings};
+use crate::calib::sensor::{
+    DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics, PointCloud,
+};
+use crate::calib::solve::Observation;
+use crate::recording::session::NominalMount;
+
+/// Where the body pose of an observation comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BodyPoseSource {
+    /// From the feet the lower computer reports (the method).
+    Feet,
+    /// The commanded pose, trusted as if reached. Only for showing what that
+    /// costs: the real pose differs by the robot's own errors (paper 4.2).
+    Commanded,
+}
+
+/// Tuning of the per-pose processing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseSettings {
+    pub plane: PlaneFitSettings,
+    /// A foot farther than this from where the other five put it has slipped, metres.
+    pub slip_threshold_m: f64,
+    pub body_pose_source: BodyPoseSource,
+    pub depth_range: DepthRange,
+}
+
+impl Default for PoseSettings {
+    fn default() -> Self {
+        Self {
+            plane: PlaneFitSettings::default(),
+            slip_threshold_m: 0.010,
+            body_pose_source: BodyPoseSource::Feet,
+            depth_range: DepthRange::default(),
+        }
+    }
+}
+
+/// Feet in millimetres (files, messages) to metres.
+pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
+    if feet_mm.len() != 6 {
+        return Err(format!("expected six feet, got {}", feet_mm.len()));
+    }
+    Ok(std::array::from_fn(|i| {
+        Vector3::new(feet_mm[i][0], feet_mm[i][1], feet_mm[i][2]) / 1000.0
+    }))
+}
+
+/// Turns each pose's feet and frames into an [`Observation`].
+#[derive(Debug, Clone)]
+pub struct PoseProcessor {
+    camera: DepthCamera,
+    ground_frame: GroundFrame,
+    nominal: Option<NominalMount>,
+    settings: PoseSettings,
+}
+
+/// The body pose of one observation, and whether it can be trusted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodyEstimate {
+    pub ground_from_robot: Transform,
+    /// Why the pose must be set aside (a slipped foot), if it must.
+    pub set_aside: Option<String>,
+}
+
+impl PoseProcessor {
+    /// A processor for one calibration: the sensor model, the ground frame from
+    /// the home stance's feet, and the nominal mount (if known) for the prior.
+    pub fn new(
+        model: DepthModel,
+        intrinsics: Intrinsics,
+        home_feet_mm: &[[f64; 3]],
+        nominal: Option<NominalMount>,
+        settings: PoseSettings,
+    ) -> Result<Self, String> {
+        let home = feet_from_mm(home_feet_mm)?;
+        let ground_frame =
+            GroundFrame::from_home_feet(&home).map_err(|e| format!("home stance: {e}"))?;
+        let camera = DepthCamera::new(
+            DepthEncoding::Raw11(model),
+            intrinsics,
+            settings.depth_range,
+        );
+        Ok(Self {
+            camera,
+            ground_frame,
+            nominal,
+            settings,
+        })
+    }
+
+    /// The converter from raw frames to points.
+    pub fn camera(&self) -> &DepthCamera {
+        &self.camera
+    }
+
+    /// A note for the operator when there is no nominal mount to tell which
+    /// plane is the ground.
+    pub fn prior_note(&self) -> Option<String> {
+        self.nominal.is_none().then(|| {
+            "no nominal mount was given: the ground is taken as the dominant plane facing the sensor (give --nominal-mount to rule out walls and boxes)".to_string()
+        })
+    }
+
+    /// The real body pose from the feet reported at a pose (or the commanded
+    /// pose, if so configured).
+    pub fn body_pose(
+        &self,
+        commanded: &PoseDegMm,
+        feet_mm: &[[f64; 3]],
+    ) -> Result<BodyEstimate, String> {
+        let feet = feet_from_mm(feet_mm)?;
+        let from_feet = self
+            .ground_frame
+            .body_pose(&feet, self.settings.slip_threshold_m)
+            .map_err(|e| e.to_string())?;
+        let set_aside = from_feet.slipped_foot.map(|(foot, miss)| {
+            format!(
+                "foot {foot} slipped: it is {:.1} mm from where it was planted (limit {:.1} mm)",
+                miss * 1e3,
+                self.settings.slip_threshold_m * 1e3
+            )
+        });
+        let ground_from_robot = match self.settings.body_pose_source {
+            BodyPoseSource::Feet => from_feet.ground_from_robot,
+            BodyPoseSource::Commanded => commanded.to_params().to_transform(),
+        };
+        Ok(BodyEstimate {
+            ground_from_robot,
+            set_aside,
+        })
+    }
+
+    /// Where the ground should be, in the sensor frame, at a body pose.
+    pub fn prior(&self, ground_from_robot: &Transform) -> GroundPrior {
+        match &self.nominal {
+            Some(m) => {
+                let mount = m.pose().to_params();
+                let r = ground_from_robot.rotation.matrix();
+                let up_robot = Vector3::new(r[(1, 0)], r[(1, 1)], r[(1, 2)]);
+                let up_sensor = mount.rotation_matrix().transpose() * up_robot;
+                let height =
+                    up_robot.dot(&mount.translation) + ground_from_robot.translation.vector.y;
+                GroundPrior {
+                    up: up_sensor,
+                    up_tolerance: m.tolerance_deg.to_radians(),
+                    height: Some((height, m.tolerance_mm / 1000.0)),
+                }
+            }
+            // Without a mount, any plane facing the sensor from below its
+            // optical axis: up in the image, within 89°.
+            None => GroundPrior::up_only(Vector3::y(), 89f64.to_radians()),
+        }
+    }
+
+    /// The observation of one pose from its body pose and the points of its
+    /// frames (all frames of the pose appended into one cloud).
+    pub fn observe(
+        &self,
+        index: u32,
+        body: &BodyEstimate,
+        cloud: &PointCloud,
+    ) -> Result<Observation, String> {
+        let prior = self.prior(&body.ground_from_robot);
+        let fit = fit_ground(&[cloud], &prior, &self.settings.plane).map_err(|e| e.to_string())?;
+        Ok(Observation {
+            index,
+            ground_from_robot: body.ground_from_robot,
+            plane: fit.plane,
+            plane_covariance: Some(fit.covariance),
+            inliers: Some(fit.inliers),
+            set_aside: body.set_aside.clone(),
+        })
+    }
+}
+
+/// The nominal mount from `--nominal-mount a,b,g,x,y,z` (degrees, millimetres),
+/// with the tolerances of recording.md's example.
+pub fn nominal_mount_from_values(values: [f64; 6]) -> NominalMount {
+    NominalMount {
+        alpha_deg: values[0],
+        beta_deg: values[1],
+        gamma_deg: values[2],
+        px_mm: values[3],
+        py_mm: values[4],
+        pz_mm: values[5],
+        tolerance_deg: 15.0,
+        tolerance_mm: 200.0,
+    }
+}

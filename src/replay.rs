@@ -1,0 +1,191 @@
+//! Offline replay of a recording (`groundcal replay DIR`): per pose, the body
+//! pose from the feet and the ground from the frames, then the solve.
+//!
+//! Streaming with bounded memory: a pose's frames are read, turned into
+//! points and fitted, then dropped; only a few poses are in flight (one per
+//! worker thread). Poses are processed in parallel and gathered in order, and
+//! every step is deterministic, so the result is bit-identical from run to run
+//! and for any number of threads.
+
+use rayon::prelude::*;
+use sha2::{Digest, Sha256};
+
+use crate::calib::sensor::PointCloud;
+use crate::calib::solve::{solve_among, Observation, SolveError, SolveSettings};
+use crate::output::ResultJson;
+use crate::pipeline::{PoseProcessor, PoseSettings};
+use crate::recording::session::NominalMount;
+use crate::recording::{InputError, Recording};
+
+/// How to replay.
+#[derive(Debug, Clone, Default)]
+pub struct ReplayOptions {
+    /// Overrides the recording's nominal mount.
+    pub nominal_mount: Option<NominalMount>,
+    pub pose: PoseSettings,
+    pub solve: SolveSettings,
+    /// Worker threads; `None` uses every core.
+    pub threads: Option<usize>,
+}
+
+/// The outcome of a replay.
+#[derive(Debug, Clone)]
+pub struct Replay {
+    pub result: ResultJson,
+    /// SHA-256 of the text files and of every frame used, in order (hex).
+    pub input_digest: String,
+    /// Depth frames read.
+    pub frames: usize,
+}
+
+thread_local! {
+    /// Each worker's point buffer, reused from pose to pose: a pose's points
+    /// take a few megabytes, and fresh memory costs page faults every time.
+    static CLOUD: std::cell::RefCell<PointCloud> = std::cell::RefCell::new(PointCloud::default());
+}
+
+/// What one pose gave.
+struct PoseOutcome {
+    index: u32,
+    observation: Result<Observation, String>,
+    frame_digests: Vec<[u8; 32]>,
+}
+
+fn process_pose(
+    recording: &Recording,
+    processor: &PoseProcessor,
+    pose: &crate::recording::poses::PoseRecord,
+    cloud: &mut PointCloud,
+) -> Result<PoseOutcome, InputError> {
+    let poses_path = recording.dir.join("poses.jsonl");
+    let failed = |reason: String| PoseOutcome {
+        index: pose.index,
+        observation: Err(reason),
+        frame_digests: Vec::new(),
+    };
+    if pose.depth_frames.is_empty() {
+        return Ok(failed(
+            "no depth frames were captured at this pose: skipped".into(),
+        ));
+    }
+    let body = processor
+        .body_pose(&pose.commanded, &pose.feet_body_mm)
+        .map_err(|e| {
+            InputError::new(
+                &poses_path,
+                Some(pose.line),
+                format!("pose {}: feet: {e}", pose.index),
+            )
+        })?;
+    cloud.clear();
+    let mut frame_digests = Vec::with_capacity(pose.depth_frames.len());
+    for name in &pose.depth_frames {
+        let (image, bytes) = recording.read_depth_frame(name)?;
+        frame_digests.push(Sha256::digest(&bytes).into());
+        processor.camera().append_points(&image.pixels, cloud);
+    }
+    let observation = processor
+        .observe(pose.index, &body, cloud)
+        .map_err(|e| format!("no ground found: {e}"));
+    Ok(PoseOutcome {
+        index: pose.index,
+        observation,
+        frame_digests,
+    })
+}
+
+/// Replays a recording.
+pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, InputError> {
+    let session = &recording.session;
+    let session_path = recording.dir.join("session.json");
+    let nominal = options.nominal_mount.or(session.nominal_mount);
+    let processor = PoseProcessor::new(
+        session.kinect.depth_model,
+        session.kinect.intrinsics,
+        &session.home.feet_body_mm,
+        nominal,
+        options.pose,
+    )
+    .map_err(|e| InputError::new(&session_path, None, e))?;
+
+    let work = || -> Vec<Result<PoseOutcome, InputError>> {
+        recording
+            .poses
+            .par_iter()
+            .with_max_len(1)
+            .map(|pose| {
+                CLOUD.with_borrow_mut(|cloud| process_pose(recording, &processor, pose, cloud))
+            })
+            .collect()
+    };
+    let gathered = match options.threads {
+        Some(threads) => rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .map_err(|e| {
+                InputError::new(
+                    &recording.dir,
+                    None,
+                    format!("cannot start worker threads: {e}"),
+                )
+            })?
+            .install(work),
+        None => work(),
+    };
+    // The first error in pose order, whichever thread met it first.
+    let outcomes: Vec<PoseOutcome> = gathered.into_iter().collect::<Result<_, _>>()?;
+
+    let mut hasher = Sha256::new();
+    for text in recording.text_files() {
+        hasher.update(Sha256::digest(text));
+    }
+    let mut frames = 0;
+    for outcome in &outcomes {
+        for digest in &outcome.frame_digests {
+            hasher.update(digest);
+            frames += 1;
+        }
+    }
+    let input_digest = hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+
+    let mut observations = Vec::new();
+    let mut failed = Vec::new();
+    for outcome in outcomes {
+        match outcome.observation {
+            Ok(o) => observations.push(o),
+            Err(reason) => failed.push((outcome.index, reason)),
+        }
+    }
+    let total = recording.poses.len();
+    let mut result = match solve_among(&observations, total, &options.solve) {
+        Ok(calibration) => ResultJson::from_calibration(&calibration),
+        Err(SolveError::TooFewObservations { usable, outcomes }) => ResultJson::unsolved(
+            SolveError::TooFewObservations {
+                usable,
+                outcomes: Vec::new(),
+            }
+            .to_string(),
+            &outcomes,
+        ),
+    }
+    .with_failed_poses(&failed);
+    result.kinect_tilt_deg = Some(session.kinect.tilt_deg);
+    if let Some(note) = processor.prior_note() {
+        result.notes.push(note);
+    }
+    if recording.truncated_tail {
+        result.notes.push("poses.jsonl ends in a line cut off part-way (the recording was interrupted): it was left out".into());
+    }
+    for (index, reason) in &failed {
+        result.notes.push(format!("pose {index}: {reason}"));
+    }
+    Ok(Replay {
+        result,
+        input_digest,
+        frames,
+    })
+}

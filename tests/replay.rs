@@ -1,0 +1,298 @@
+//! `groundcal replay` on the shared 12-pose sample recording, and on damaged
+//! copies of it.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{groundcal, groundcal_json, shared};
+use groundcal::calib::geometry::PoseDegMm;
+use groundcal::pipeline::BodyPoseSource;
+use groundcal::recording::Recording;
+use groundcal::replay::{replay, ReplayOptions};
+use nalgebra::Rotation3;
+
+fn sample() -> PathBuf {
+    shared().join("data/sample-12")
+}
+
+fn truth() -> PoseDegMm {
+    let text = std::fs::read_to_string(shared().join("data/sample-12.truth.json")).unwrap();
+    let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    serde_json::from_value(value["extrinsics"].clone()).unwrap()
+}
+
+/// Rotation angle (degrees) and translation distance (mm) between two mounts.
+fn distance(a: &PoseDegMm, b: &PoseDegMm) -> (f64, f64) {
+    let (pa, pb) = (a.to_params(), b.to_params());
+    let ra = Rotation3::from_matrix_unchecked(pa.rotation_matrix());
+    let rb = Rotation3::from_matrix_unchecked(pb.rotation_matrix());
+    (
+        (ra.inverse() * rb).angle().to_degrees(),
+        (pa.translation - pb.translation).norm() * 1e3,
+    )
+}
+
+fn mount_of(result: &serde_json::Value) -> PoseDegMm {
+    let m = &result["robot_from_sensor"];
+    let get = |k: &str| m[k].as_f64().unwrap();
+    PoseDegMm {
+        alpha_deg: get("alpha_deg"),
+        beta_deg: get("beta_deg"),
+        gamma_deg: get("gamma_deg"),
+        px_mm: get("px_mm"),
+        py_mm: get("py_mm"),
+        pz_mm: get("pz_mm"),
+    }
+}
+
+#[test]
+fn the_sample_recording_is_accepted_and_matches_its_truth() {
+    let (code, result) = groundcal_json(&["replay", sample().to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{result:#}");
+    assert_eq!(result["status"], "accepted");
+    let (angle, offset) = distance(&mount_of(&result), &truth());
+    assert!(angle <= 0.03, "rotation off by {angle}°");
+    assert!(offset <= 1.0, "translation off by {offset} mm");
+    assert_eq!(result["poses"].as_array().unwrap().len(), 12);
+    assert_eq!(result["kinect_tilt_deg"], -20.0);
+}
+
+/// The method's point: the real pose from the feet, not the commanded one.
+#[test]
+fn trusting_the_commanded_poses_fails_the_bound_that_the_feet_meet() {
+    let recording = Recording::open(&sample()).unwrap();
+    let solve = |source| {
+        let mut options = ReplayOptions::default();
+        options.pose.body_pose_source = source;
+        let result = serde_json::to_value(replay(&recording, &options).unwrap().result).unwrap();
+        distance(&mount_of(&result), &truth())
+    };
+    let (feet_angle, feet_offset) = solve(BodyPoseSource::Feet);
+    let (commanded_angle, commanded_offset) = solve(BodyPoseSource::Commanded);
+    assert!(feet_angle <= 0.03 && feet_offset <= 1.0);
+    assert!(
+        commanded_angle > 0.03 || commanded_offset > 1.0,
+        "commanded poses gave {commanded_angle}° and {commanded_offset} mm: the test cannot tell feet from commands"
+    );
+    assert!(commanded_angle > 3.0 * feet_angle || commanded_offset > 3.0 * feet_offset);
+}
+
+#[test]
+fn the_result_is_bit_identical_for_any_thread_count() {
+    let dir = sample();
+    let run = |threads: &str| {
+        groundcal(&[
+            "replay",
+            dir.to_str().unwrap(),
+            "--json",
+            "--threads",
+            threads,
+        ])
+        .1
+    };
+    let one = run("1");
+    assert!(!one.is_empty());
+    assert_eq!(one, run("2"));
+    assert_eq!(one, run("3"));
+    assert_eq!(one, run("2"));
+}
+
+/// A copy of the sample recording to damage.
+struct Copy(PathBuf);
+
+impl Copy {
+    fn new(tag: &str) -> Self {
+        let dir =
+            std::env::temp_dir().join(format!("groundcal-replay-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("kinect")).unwrap();
+        for name in ["session.json", "poses.jsonl"] {
+            std::fs::copy(sample().join(name), dir.join(name)).unwrap();
+        }
+        for entry in std::fs::read_dir(sample().join("kinect")).unwrap() {
+            let entry = entry.unwrap();
+            std::fs::copy(entry.path(), dir.join("kinect").join(entry.file_name())).unwrap();
+        }
+        Self(dir)
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    fn edit(&self, name: &str, f: impl FnOnce(String) -> String) {
+        let path = self.path(name);
+        std::fs::write(&path, f(std::fs::read_to_string(&path).unwrap())).unwrap();
+    }
+
+    fn replay(&self) -> (i32, String, String) {
+        groundcal(&["replay", self.0.to_str().unwrap(), "--json"])
+    }
+}
+
+impl Drop for Copy {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn assert_bad(copy: &Copy, mentions: &[&str]) {
+    let (code, stdout, stderr) = copy.replay();
+    assert_eq!(code, 2, "stderr: {stderr}");
+    assert!(stdout.is_empty());
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for m in mentions {
+        assert!(
+            stderr.contains(m),
+            "stderr does not mention {m:?}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn a_truncated_frame_is_named() {
+    let copy = Copy::new("truncated");
+    let frame = copy.path("kinect/d-1700000000.006999-8007000.pgm");
+    let bytes = std::fs::read(&frame).unwrap();
+    std::fs::write(&frame, &bytes[..bytes.len() / 2]).unwrap();
+    assert_bad(
+        &copy,
+        &[
+            "d-1700000000.006999-8007000.pgm",
+            "614417 bytes",
+            "truncated",
+        ],
+    );
+}
+
+#[test]
+fn a_missing_frame_and_a_name_not_in_the_index_are_named() {
+    let copy = Copy::new("missing");
+    std::fs::remove_file(copy.path("kinect/d-1700000000.001000-2001000.pgm")).unwrap();
+    assert_bad(&copy, &["d-1700000000.001000-2001000.pgm"]);
+    let copy = Copy::new("unindexed");
+    copy.edit("kinect/INDEX.txt", |t| {
+        t.replace("d-1700000000.002000-3002000.pgm\n", "")
+    });
+    assert_bad(
+        &copy,
+        &[
+            "poses.jsonl:1:",
+            "d-1700000000.002000-3002000.pgm",
+            "INDEX.txt",
+        ],
+    );
+}
+
+#[test]
+fn bad_numbers_feet_and_versions_are_named() {
+    let copy = Copy::new("version");
+    copy.edit("session.json", |t| {
+        t.replace("\"version\": 1", "\"version\": 2")
+    });
+    assert_bad(&copy, &["session.json", "version 2"]);
+
+    let copy = Copy::new("feet");
+    copy.edit("poses.jsonl", |t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        let mut pose: serde_json::Value = serde_json::from_str(&lines[3]).unwrap();
+        pose["feet_body_mm"].as_array_mut().unwrap().pop();
+        lines[3] = pose.to_string();
+        lines.join("\n") + "\n"
+    });
+    assert_bad(&copy, &["poses.jsonl:4:", "six feet"]);
+
+    let copy = Copy::new("nan");
+    copy.edit("poses.jsonl", |t| {
+        t.replacen("\"py_mm\": 615", "\"py_mm\": NaN", 1)
+    });
+    assert_bad(&copy, &["poses.jsonl:1:"]);
+
+    let copy = Copy::new("pgm");
+    let frame = copy.path("kinect/d-1700000000.001000-2001000.pgm");
+    let mut bytes = std::fs::read(&frame).unwrap();
+    bytes[0] = b'Q';
+    std::fs::write(&frame, bytes).unwrap();
+    assert_bad(&copy, &["d-1700000000.001000-2001000.pgm"]);
+}
+
+#[test]
+fn a_pose_without_frames_is_skipped_and_said_so() {
+    let copy = Copy::new("noframes");
+    copy.edit("poses.jsonl", |t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        let mut pose: serde_json::Value = serde_json::from_str(&lines[4]).unwrap();
+        pose["depth_frames"] = serde_json::json!([]);
+        lines[4] = pose.to_string();
+        lines.join("\n") + "\n"
+    });
+    let (code, stdout, _) = copy.replay();
+    let result: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let pose = &result["poses"][4];
+    assert_eq!(pose["index"], 5);
+    assert_eq!(pose["used"], false);
+    assert!(pose["reason"].as_str().unwrap().contains("no depth frames"));
+    assert!(pose.get("plane").is_none());
+    assert_eq!(result["summary"]["poses_used"], 11);
+    assert_eq!(result["summary"]["poses_total"], 12);
+    assert!(result["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|n| n.as_str().unwrap().starts_with("pose 5:")));
+    assert_eq!(code, 0, "11 of 12 poses still calibrate");
+}
+
+#[test]
+fn a_recording_cut_off_mid_line_is_valid_up_to_its_last_complete_pose() {
+    let copy = Copy::new("cut");
+    copy.edit("poses.jsonl", |t| {
+        let cut = t.trim_end().rfind('\n').unwrap() + 40;
+        t[..cut].to_string()
+    });
+    let (_, stdout, stderr) = copy.replay();
+    let result: serde_json::Value =
+        serde_json::from_str(&stdout).unwrap_or_else(|_| panic!("{stderr}"));
+    assert_eq!(result["poses"].as_array().unwrap().len(), 11);
+    assert!(result["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|n| n.as_str().unwrap().contains("cut off")));
+}
+
+#[test]
+fn not_a_recording_is_named() {
+    let (code, _, stderr) = groundcal(&["replay", "/nonexistent/recording", "--json"]);
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("/nonexistent/recording") && stderr.contains("not a directory"),
+        "{stderr}"
+    );
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (code, _, stderr) = groundcal(&["replay", path.join("tests").to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("session.json"), "{stderr}");
+}
+
+#[test]
+fn replay_writes_a_self_contained_report() {
+    let out = std::env::temp_dir().join(format!("groundcal-report-{}", std::process::id()));
+    let (code, _, stderr) = groundcal(&[
+        "replay",
+        sample().to_str().unwrap(),
+        "--json",
+        "--report",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    let _ = std::fs::remove_dir_all(&out);
+    assert!(html.contains("ACCEPTED"));
+    assert_eq!(html.matches("<svg").count(), 4);
+    assert!(!html.contains("http://") && !html.contains("https://"));
+    // Provenance: the version and the input's digest.
+    assert!(html.contains(env!("CARGO_PKG_VERSION")));
+    assert!(html.contains("sample-12"));
+}

@@ -1,0 +1,138 @@
+//! The calibration report in a real browser: headless Chromium, driven by
+//! Playwright (`tests/browser/report.mjs`), opens the page written for the
+//! paper's Table 2 as a phone and as a laptop would, and must see the verdict
+//! and the charts with no console error, no script error and no network
+//! request. Screenshots land in `target/test-screenshots/` for a person to look at.
+//!
+//! Needs Node.js ≥ 20, `npm ci` in `tests/browser` and Debian's chromium. Under
+//! `CI=true` a missing one fails the test; elsewhere the test warns and returns.
+
+mod common;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use groundcal::calib::solve::{solve, SolveSettings};
+use groundcal::output::ResultJson;
+use groundcal::recording::planes::read_planes;
+use groundcal::report::{write_report, Provenance};
+use sha2::{Digest, Sha256};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+/// What the project's test script runs before the tests (Node.js ≥ 20 with npm
+/// comes with the machine).
+const SETUP: &str = "apt-get install -y chromium && npm ci --prefix tests/browser";
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// What is missing to run the browser, in words that say what to install.
+fn missing_prerequisites() -> Vec<String> {
+    let mut missing = Vec::new();
+    match Command::new("node").arg("--version").output() {
+        Ok(out) if out.status.success() => {
+            let version = String::from_utf8_lossy(&out.stdout).trim().to_string();
+            let major: u32 = version
+                .trim_start_matches('v')
+                .split('.')
+                .next()
+                .and_then(|m| m.parse().ok())
+                .unwrap_or(0);
+            if major < 20 {
+                missing.push(format!(
+                    "Node.js ≥ 20 (found {version}; playwright-core needs 20)"
+                ));
+            }
+        }
+        _ => missing.push("Node.js ≥ 20 (`node` is not on PATH)".to_string()),
+    }
+    if !root()
+        .join("tests/browser/node_modules/playwright-core/package.json")
+        .is_file()
+    {
+        missing.push("playwright-core (run `npm ci --prefix tests/browser`)".to_string());
+    }
+    if !Path::new(CHROMIUM).is_file() {
+        missing.push(format!(
+            "Chromium at {CHROMIUM} (`apt-get install -y chromium`)"
+        ));
+    }
+    missing
+}
+
+/// A directory of its own under the system's temporary directory.
+fn temp_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("groundcal-report-browser-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).expect("temporary directory");
+    dir
+}
+
+#[test]
+fn report_opens_cleanly_in_chromium_on_a_phone_and_a_laptop() {
+    let missing = missing_prerequisites();
+    if !missing.is_empty() {
+        let message = format!(
+            "the browser test cannot run; missing: {}. The setup the test script runs: {SETUP}",
+            missing.join("; ")
+        );
+        if std::env::var("CI").as_deref() == Ok("true") {
+            panic!("{message}");
+        }
+        eprintln!(
+            "\n{0}\nWARNING: SKIPPED report_browser: {message}\n{0}\n",
+            "!".repeat(78)
+        );
+        return;
+    }
+
+    let input = common::test_data("paper-table2-printed.json");
+    let observations = read_planes(&input).expect("Table 2 reads");
+    let calibration = solve(&observations, &SolveSettings::default()).expect("Table 2 solves");
+    let result = ResultJson::from_calibration(&calibration);
+    let digest = Sha256::digest(fs::read(&input).unwrap());
+    let digest: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+    let provenance = Provenance::now("tests/data/paper-table2-printed.json", digest);
+
+    let dir = temp_dir();
+    let html = write_report(&dir.join("report"), &result, &provenance).expect("report written");
+
+    let shots = root().join("target/test-screenshots");
+    fs::create_dir_all(&shots).expect("screenshot directory");
+    let png = shots.join("report.png");
+    let _ = fs::remove_file(&png);
+
+    let out = Command::new("node")
+        .arg(root().join("tests/browser/report.mjs"))
+        .arg(&html)
+        .arg(&png)
+        .current_dir(root())
+        .output()
+        .expect("node runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "the report failed in Chromium ({}):\n{stderr}\n{stdout}",
+        out.status
+    );
+
+    let seen: serde_json::Value = serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("report.mjs printed no JSON ({e}): {stdout}"));
+    let views = seen["seen"].as_array().expect("views");
+    assert_eq!(views.len(), 2, "{seen}");
+    for view in views {
+        assert_eq!(view["verdict"], "REJECTED", "{view}");
+        assert!(view["rendered"].as_u64().unwrap() >= 4, "{view}");
+    }
+    for name in ["report.png", "report-desktop.png"] {
+        let bytes = fs::read(shots.join(name)).expect("screenshot saved");
+        assert!(
+            bytes.len() > 1000 && bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+            "{name} is not a PNG with content"
+        );
+    }
+    fs::remove_dir_all(&dir).unwrap();
+}
