@@ -12,6 +12,9 @@
 
 #![forbid(unsafe_code)]
 
+pub mod depth;
+pub mod geometry;
+
 /// What went wrong with a piece of hardware, in terms a caller can act on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[non_exhaustive]

@@ -11,7 +11,9 @@
 //! - [`quality`]: θ and e_d per pose (paper 5.2), gates and verdict.
 
 pub mod body;
-pub mod geometry;
+/// Frames, the six parameters and planes (in the hardware crate, which
+/// carries poses in its messages).
+pub use groundcal_hal::geometry;
 pub mod plane;
 pub mod quality;
 pub mod sensor;
