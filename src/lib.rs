@@ -15,11 +15,14 @@
 
 pub mod calib;
 pub mod cli;
+pub mod config;
 pub mod depth_image;
 pub mod export;
+pub mod hardware;
 pub mod output;
 pub mod pipeline;
 pub mod recording;
 pub mod replay;
 pub mod report;
 pub mod schedule;
+pub mod session;

@@ -1,0 +1,336 @@
+//! The configuration (`config/groundcal.toml` on the robot, `config/sim.toml`
+//! for simulated hardware): strict TOML (`deny_unknown_fields`), then semantic
+//! checks, so that a typo is an error naming the key rather than a default
+//! silently used. `groundcal check-config FILE` runs both.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::calib::quality::Gates;
+use crate::calib::sensor::{DepthModel, Intrinsics};
+use crate::recording::session::NominalMount;
+use crate::recording::{read_bounded, InputError};
+use crate::schedule::{Limits, Schedule};
+
+/// The whole configuration.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    pub robot: RobotConfig,
+    pub sensor: SensorConfig,
+    pub calibration: CalibrationConfig,
+    #[serde(default)]
+    pub sim: Option<SimConfig>,
+    #[serde(default)]
+    pub serve: Option<ServeConfig>,
+}
+
+/// The lower computer.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotConfig {
+    /// `host:port` of the lower computer (hexapod-udp.md), or `sim` for the
+    /// simulated one in process.
+    pub address: String,
+    /// Bind the socket to this network interface (the robot's Wi-Fi).
+    #[serde(default)]
+    pub interface: Option<String>,
+    #[serde(default = "default_retry_interval_ms")]
+    pub retry_interval_ms: u64,
+    #[serde(default = "default_retries")]
+    pub retries: u32,
+    /// groundcal's own limits; the stricter of these and the lower
+    /// computer's (WELCOME) apply.
+    pub limits: Limits,
+}
+
+fn default_retry_interval_ms() -> u64 {
+    100
+}
+
+fn default_retries() -> u32 {
+    10
+}
+
+/// The depth sensor.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorConfig {
+    /// `kinect`, `sim`, or `replay:DIR`.
+    pub source: String,
+    /// The libfreenect library file (e.g. libfreenect's fakenect build).
+    #[serde(default)]
+    pub freenect_lib: Option<PathBuf>,
+    /// The Kinect's motor tilt during calibration; the result holds for it.
+    pub tilt_deg: f64,
+    /// Overrides the sensor's own model.
+    #[serde(default)]
+    pub depth_model: Option<DepthModel>,
+    /// Overrides the sensor's own intrinsics.
+    #[serde(default)]
+    pub intrinsics: Option<Intrinsics>,
+}
+
+/// How to calibrate.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationConfig {
+    /// The pose schedule, relative to the configuration file.
+    pub schedule: PathBuf,
+    pub frames_per_pose: usize,
+    /// Time to move to each pose (SET_POSE duration).
+    pub motion_ms: u32,
+    /// Wait after the body has settled before capturing.
+    pub settle_ms: u64,
+    /// The rough mount that tells which plane is the ground.
+    #[serde(default)]
+    pub nominal_mount: Option<NominalMount>,
+    #[serde(default)]
+    pub gates: Gates,
+    /// A foot farther than this from where it was planted has slipped.
+    #[serde(default = "default_slip_mm")]
+    pub slip_threshold_mm: f64,
+}
+
+fn default_slip_mm() -> f64 {
+    10.0
+}
+
+/// The simulated robot and world (`--robot sim`, `--sensor sim`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimConfig {
+    pub seed: u64,
+    /// Motions and frames this many times faster than real time.
+    pub time_scale: f64,
+    /// The simulated robot's true `robot_from_sensor`: what a calibration
+    /// should find.
+    pub mount: crate::calib::geometry::PoseDegMm,
+    /// `flat`, `boxes-and-wall` or `uneven`.
+    pub world: String,
+}
+
+/// The daemon's HTTP terminal.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServeConfig {
+    pub listen: String,
+    /// A file holding the token required for everything that moves the robot.
+    pub token_file: PathBuf,
+    /// Where the active calibration, its history and recordings live.
+    pub state_dir: PathBuf,
+}
+
+impl Config {
+    /// Parses a configuration's text (no semantic checks).
+    pub fn parse(path: &Path, text: &str) -> Result<Self, InputError> {
+        toml::from_str(text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|span| text[..span.start.min(text.len())].lines().count().max(1));
+            InputError::new(path, line, e.message().to_string())
+        })
+    }
+
+    /// Reads and checks a configuration file, and the schedule it names.
+    pub fn load(path: &Path) -> Result<(Self, Schedule), InputError> {
+        let bytes = read_bounded(path, 1 << 20)?;
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|e| InputError::new(path, None, format!("not UTF-8: {e}")))?;
+        let config = Self::parse(path, text)?;
+        let schedule = config.validate(path)?;
+        Ok((config, schedule))
+    }
+
+    /// The schedule's path, relative to the configuration file.
+    pub fn schedule_path(&self, config_path: &Path) -> PathBuf {
+        match config_path.parent() {
+            Some(dir) if self.calibration.schedule.is_relative() => {
+                dir.join(&self.calibration.schedule)
+            }
+            _ => self.calibration.schedule.clone(),
+        }
+    }
+
+    /// The semantic checks; returns the schedule, checked against the limits.
+    pub fn validate(&self, path: &Path) -> Result<Schedule, InputError> {
+        let bad = |key: &str, m: String| InputError::new(path, None, format!("{key}: {m}"));
+        let l = &self.robot.limits;
+        if ![
+            l.max_tilt_deg,
+            l.min_height_mm,
+            l.max_height_mm,
+            l.max_shift_mm,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+            || l.max_tilt_deg <= 0.0
+            || l.min_height_mm >= l.max_height_mm
+            || l.max_shift_mm < 0.0
+        {
+            return Err(bad(
+                "robot.limits",
+                "must be finite, with min_height_mm < max_height_mm and positive tilt".into(),
+            ));
+        }
+        if self.robot.address != "sim"
+            && self.robot.address.parse::<std::net::SocketAddr>().is_err()
+        {
+            // A host name is allowed too; it must at least have a port.
+            if self
+                .robot
+                .address
+                .rsplit_once(':')
+                .and_then(|(_, p)| p.parse::<u16>().ok())
+                .is_none()
+            {
+                return Err(bad(
+                    "robot.address",
+                    format!("\"{}\" is neither `sim` nor host:port", self.robot.address),
+                ));
+            }
+        }
+        if self.robot.retry_interval_ms == 0 || self.robot.retries == 0 {
+            return Err(bad(
+                "robot",
+                "retry_interval_ms and retries must be positive".into(),
+            ));
+        }
+        match self.sensor.source.as_str() {
+            "kinect" | "sim" => {}
+            s if s.starts_with("replay:") && s.len() > "replay:".len() => {}
+            s => {
+                return Err(bad(
+                    "sensor.source",
+                    format!("\"{s}\" is not kinect, sim or replay:DIR"),
+                ))
+            }
+        }
+        if !(self.sensor.tilt_deg.is_finite() && (-31.0..=31.0).contains(&self.sensor.tilt_deg)) {
+            return Err(bad(
+                "sensor.tilt_deg",
+                format!(
+                    "{} is outside the Kinect motor's ±31°",
+                    self.sensor.tilt_deg
+                ),
+            ));
+        }
+        if let Some(m) = &self.sensor.depth_model {
+            m.validate().map_err(|e| bad("sensor.depth_model", e))?;
+        }
+        if let Some(i) = &self.sensor.intrinsics {
+            i.validate().map_err(|e| bad("sensor.intrinsics", e))?;
+        }
+        let c = &self.calibration;
+        if c.frames_per_pose == 0 || c.frames_per_pose > 30 {
+            return Err(bad(
+                "calibration.frames_per_pose",
+                format!("{} is not in 1..=30", c.frames_per_pose),
+            ));
+        }
+        if c.motion_ms == 0 || c.motion_ms > 60_000 {
+            return Err(bad(
+                "calibration.motion_ms",
+                format!("{} is not in 1..=60000", c.motion_ms),
+            ));
+        }
+        if c.settle_ms > 60_000 {
+            return Err(bad(
+                "calibration.settle_ms",
+                format!("{} is more than a minute", c.settle_ms),
+            ));
+        }
+        if !(c.slip_threshold_mm.is_finite() && c.slip_threshold_mm > 0.0) {
+            return Err(bad(
+                "calibration.slip_threshold_mm",
+                "must be a positive number".into(),
+            ));
+        }
+        if let Some(m) = &c.nominal_mount {
+            m.validate().map_err(|e| bad("calibration", e))?;
+        }
+        c.gates.validate().map_err(|e| bad("calibration", e))?;
+        if let Some(sim) = &self.sim {
+            if !(sim.time_scale.is_finite() && sim.time_scale > 0.0 && sim.time_scale <= 1000.0) {
+                return Err(bad(
+                    "sim.time_scale",
+                    format!("{} is not in (0, 1000]", sim.time_scale),
+                ));
+            }
+            if !sim.mount.is_finite() {
+                return Err(bad(
+                    "sim.mount",
+                    "has a value that is not a finite number".into(),
+                ));
+            }
+            if !["flat", "boxes-and-wall", "uneven"].contains(&sim.world.as_str()) {
+                return Err(bad(
+                    "sim.world",
+                    format!("\"{}\" is not flat, boxes-and-wall or uneven", sim.world),
+                ));
+            }
+        } else if self.robot.address == "sim" || self.sensor.source == "sim" {
+            return Err(bad(
+                "sim",
+                "the simulated robot or sensor needs a [sim] table".into(),
+            ));
+        }
+        if let Some(serve) = &self.serve {
+            serve
+                .listen
+                .parse::<std::net::SocketAddr>()
+                .map_err(|e| bad("serve.listen", format!("\"{}\": {e}", serve.listen)))?;
+        }
+        let schedule_path = self.schedule_path(path);
+        let schedule = Schedule::read(&schedule_path)?;
+        schedule
+            .validate(&self.robot.limits)
+            .map_err(|e| InputError::new(&schedule_path, None, e.to_string()))?;
+        Ok(schedule)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("config")
+            .join(name)
+    }
+
+    #[test]
+    fn every_shipped_configuration_is_valid() {
+        for name in ["groundcal.toml", "sim.toml"] {
+            let (config, schedule) = Config::load(&shipped(name)).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(schedule.poses.len(), 52, "{name}");
+            assert!(config.calibration.frames_per_pose >= 1);
+        }
+    }
+
+    #[test]
+    fn typos_and_bad_values_are_named() {
+        let text = std::fs::read_to_string(shipped("sim.toml")).unwrap();
+        let path = shipped("sim.toml");
+        let err = Config::parse(
+            &path,
+            &text.replace("frames_per_pose", "frames_per_posture"),
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("frames_per_posture"), "{err}");
+        assert!(err.line.is_some());
+        let config =
+            Config::parse(&path, &text.replace("tilt_deg = -20.0", "tilt_deg = 45.0")).unwrap();
+        let err = config.validate(&path).unwrap_err();
+        assert!(err.to_string().contains("sensor.tilt_deg"), "{err}");
+        let config =
+            Config::parse(&path, &text.replace("world = \"flat\"", "world = \"moon\"")).unwrap();
+        assert!(config
+            .validate(&path)
+            .unwrap_err()
+            .to_string()
+            .contains("sim.world"));
+    }
+}

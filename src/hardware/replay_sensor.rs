@@ -1,0 +1,131 @@
+//! The replayed sensor (`--sensor replay:DIR`): serves a recording's frames
+//! for the pose being captured, so that a live session can be run again on
+//! what the robot saw. It lives here rather than in `hal/` because it reads
+//! the recording format, which is this crate's.
+
+use std::collections::HashMap;
+
+use groundcal_hal::{DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo, TiltState};
+
+use crate::recording::{InputError, Recording};
+
+/// Why the recording cannot serve a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplaySensorError {
+    #[error("{0}")]
+    Input(#[from] InputError),
+    #[error("the recording has no pose {0}")]
+    NoSuchPose(u16),
+    #[error("the recording has only {recorded} frames for pose {pose}")]
+    OutOfFrames { pose: u16, recorded: usize },
+    #[error("no pose is being captured (begin_pose was not called)")]
+    NoPose,
+}
+
+impl Error for ReplaySensorError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            ReplaySensorError::Input(_) => ErrorKind::Protocol,
+            _ => ErrorKind::Other,
+        }
+    }
+}
+
+/// A recording played back as a sensor.
+pub struct ReplaySensor {
+    recording: Recording,
+    /// Pose id → its line in the recording.
+    poses: HashMap<u16, usize>,
+    current: Option<(u16, usize)>,
+    tilt_deg: f64,
+}
+
+impl ReplaySensor {
+    /// Serves the frames of an opened recording.
+    pub fn new(recording: Recording) -> Self {
+        let poses = recording
+            .poses
+            .iter()
+            .enumerate()
+            .filter_map(|(k, p)| u16::try_from(p.index).ok().map(|id| (id, k)))
+            .collect();
+        let tilt_deg = recording.session.kinect.tilt_deg;
+        Self {
+            recording,
+            poses,
+            current: None,
+            tilt_deg,
+        }
+    }
+
+    /// The recording served.
+    pub fn recording(&self) -> &Recording {
+        &self.recording
+    }
+}
+
+impl DepthSensor for ReplaySensor {
+    type Error = ReplaySensorError;
+
+    fn info(&self) -> SensorInfo {
+        SensorInfo {
+            depth_model: self.recording.session.kinect.depth_model,
+            intrinsics: self.recording.session.kinect.intrinsics,
+        }
+    }
+
+    /// The recording was made at its own tilt; the motor "moves" instantly.
+    async fn set_tilt(&mut self, degrees: f64) -> Result<(), Self::Error> {
+        if (degrees - self.recording.session.kinect.tilt_deg).abs() > 1e-9 {
+            tracing::warn!(
+                asked = degrees,
+                recorded = self.recording.session.kinect.tilt_deg,
+                "the recording was made at another tilt; its frames are served as they are"
+            );
+        }
+        self.tilt_deg = degrees;
+        Ok(())
+    }
+
+    async fn tilt_state(&mut self) -> Result<TiltState, Self::Error> {
+        Ok(TiltState {
+            tilt_deg: self.tilt_deg,
+            accelerometer_g: [0.0, 1.0, 0.0],
+            stopped: true,
+        })
+    }
+
+    async fn set_led(&mut self, _led: Led) -> Result<(), Self::Error> {
+        Ok(())
+    }
+
+    fn begin_pose(&mut self, pose_id: u16) {
+        self.current = Some((pose_id, 0));
+    }
+
+    async fn next_frame(&mut self) -> Result<DepthFrame, Self::Error> {
+        let (pose_id, served) = self.current.ok_or(ReplaySensorError::NoPose)?;
+        let line = *self
+            .poses
+            .get(&pose_id)
+            .ok_or(ReplaySensorError::NoSuchPose(pose_id))?;
+        let record = &self.recording.poses[line];
+        let name = record
+            .depth_frames
+            .get(served)
+            .ok_or(ReplaySensorError::OutOfFrames {
+                pose: pose_id,
+                recorded: record.depth_frames.len(),
+            })?;
+        let entry = self.recording.index.iter().find(|e| &e.name == name);
+        let (image, _) = self.recording.read_depth_frame(name)?;
+        self.current = Some((pose_id, served + 1));
+        Ok(DepthFrame {
+            timestamp: entry.map_or(0, |e| e.timestamp),
+            time_s: entry.map_or(0.0, |e| e.time),
+            width: image.width,
+            height: image.height,
+            raw: image.pixels,
+        })
+    }
+}

@@ -1,0 +1,499 @@
+//! The session's steps (see the module documentation for the order and why).
+
+use std::future::Future;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use groundcal_hal::{
+    BodyController, BodyState, DepthFrame, DepthSensor, ErrorKind, Led, MotionState,
+};
+use tokio::sync::mpsc::UnboundedSender;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use super::{Event, Plan, PoseFit};
+use crate::calib::sensor::PointCloud;
+use crate::calib::solve::{solve_among, Observation, SolveError};
+use crate::depth_image::DepthImage;
+use crate::output::ResultJson;
+use crate::pipeline::{BodyEstimate, PoseProcessor};
+use crate::recording::poses::PoseRecord;
+use crate::recording::session::{Home, KinectInfo, Session};
+use crate::recording::writer::{RecordingWriter, WriteError};
+use crate::schedule::Limits;
+
+/// How a session ended when it produced a result.
+#[derive(Debug, Clone)]
+pub struct SessionOutcome {
+    pub result: ResultJson,
+    /// The recording written, if one was asked for.
+    pub recording: Option<PathBuf>,
+}
+
+/// Why a session produced no result. In every case the robot was halted and
+/// sent home before this is returned (as far as the link allowed).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SessionError {
+    /// The schedule was refused before anything moved.
+    #[error("{0}")]
+    Refused(String),
+    /// The depth sensor failed.
+    #[error("depth sensor: {message}")]
+    Sensor { kind: ErrorKind, message: String },
+    /// The lower computer failed, refused, or the link was lost.
+    #[error("lower computer: {message}")]
+    Robot { kind: ErrorKind, message: String },
+    /// The recording could not be written.
+    #[error("recording: {0}")]
+    Recording(String),
+    /// The operator or a signal stopped the session.
+    #[error("aborted: {0}")]
+    Aborted(String),
+}
+
+impl SessionError {
+    fn robot<E: groundcal_hal::Error>(e: E) -> Self {
+        SessionError::Robot {
+            kind: e.kind(),
+            message: e.to_string(),
+        }
+    }
+
+    fn sensor<E: groundcal_hal::Error>(e: E) -> Self {
+        SessionError::Sensor {
+            kind: e.kind(),
+            message: e.to_string(),
+        }
+    }
+}
+
+impl From<WriteError> for SessionError {
+    fn from(e: WriteError) -> Self {
+        SessionError::Recording(e.to_string())
+    }
+}
+
+fn send(events: &UnboundedSender<Event>, event: Event) {
+    // Nobody listening is not an error: progress is for the operator.
+    let _ = events.send(event);
+}
+
+fn millis(d: Duration) -> u32 {
+    d.as_millis().min(u128::from(u32::MAX)) as u32
+}
+
+/// Polls the body's state until `done` holds, failing on a fault, a halt
+/// nobody asked for, or the deadline. Polling every `plan.poll` (≤ 200 ms)
+/// also feeds the lower computer's watchdog.
+async fn wait_for<C: BodyController>(
+    controller: &mut C,
+    plan: &Plan,
+    deadline: Duration,
+    what: &str,
+    done: impl Fn(&BodyState) -> bool,
+) -> Result<BodyState, SessionError> {
+    let start = Instant::now();
+    loop {
+        let state = controller.state().await.map_err(SessionError::robot)?;
+        if done(&state) {
+            return Ok(state);
+        }
+        match state.state {
+            MotionState::Fault(code) => {
+                return Err(SessionError::Robot {
+                    kind: ErrorKind::Refused,
+                    message: format!("fault {code} while waiting for {what}"),
+                })
+            }
+            MotionState::Halted => {
+                return Err(SessionError::Robot {
+                    kind: ErrorKind::Refused,
+                    message: format!("the body halted while waiting for {what} (the lower computer's watchdog or its operator)"),
+                })
+            }
+            _ => {}
+        }
+        if start.elapsed() > deadline {
+            return Err(SessionError::Robot {
+                kind: ErrorKind::Timeout,
+                message: format!(
+                    "{what} did not happen within {:.1} s",
+                    deadline.as_secs_f64()
+                ),
+            });
+        }
+        tokio::time::sleep(plan.poll).await;
+    }
+}
+
+/// A pose whose ground is being fitted on a worker thread.
+struct PendingFit {
+    index: u16,
+    handle: JoinHandle<Result<Observation, String>>,
+}
+
+/// Fits the ground of a pose from its frames (on a blocking worker).
+fn fit_pose(
+    processor: Arc<PoseProcessor>,
+    index: u16,
+    body: BodyEstimate,
+    frames: Vec<DepthFrame>,
+) -> Result<Observation, String> {
+    let mut cloud = PointCloud::default();
+    for frame in &frames {
+        processor.camera().append_points(&frame.raw, &mut cloud);
+    }
+    processor
+        .observe(u32::from(index), &body, &cloud)
+        .map_err(|e| format!("no ground found: {e}"))
+}
+
+/// Reports the fits that have finished, in pose order.
+async fn report_finished(
+    pending: &mut [PendingFit],
+    reported: &mut usize,
+    of: usize,
+    events: &UnboundedSender<Event>,
+    all: bool,
+) {
+    while let Some(fit) = pending.get_mut(*reported) {
+        if !all && !fit.handle.is_finished() {
+            break;
+        }
+        let outcome = match (&mut fit.handle).await {
+            Ok(Ok(o)) => Ok(PoseFit {
+                inliers: o.inliers.unwrap_or(0),
+                plane: [
+                    o.plane.normal.x,
+                    o.plane.normal.y,
+                    o.plane.normal.z,
+                    o.plane.d,
+                ],
+            }),
+            Ok(Err(e)) => Err(e),
+            Err(e) => Err(format!("the fit failed: {e}")),
+        };
+        send(
+            events,
+            Event::PoseDone {
+                index: fit.index,
+                of,
+                outcome,
+            },
+        );
+        *reported += 1;
+    }
+}
+
+async fn body<S: DepthSensor, C: BodyController>(
+    sensor: &mut S,
+    controller: &mut C,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+    pending: &mut Vec<PendingFit>,
+) -> Result<SessionOutcome, SessionError> {
+    let schedule = &plan.schedule;
+    let of = schedule.poses.len();
+    // 1. The schedule, against our limits, then the lower computer's.
+    schedule
+        .validate(&plan.limits)
+        .map_err(|e| SessionError::Refused(e.to_string()))?;
+    let welcome = controller.hello().await.map_err(SessionError::robot)?;
+    let theirs = Limits {
+        max_tilt_deg: welcome.limits.max_tilt_deg,
+        min_height_mm: welcome.limits.min_height_mm,
+        max_height_mm: welcome.limits.max_height_mm,
+        max_shift_mm: welcome.limits.max_shift_mm,
+    };
+    schedule
+        .validate(&plan.limits.intersect(&theirs))
+        .map_err(|e| {
+            SessionError::Refused(format!(
+                "{e} (limits of the lower computer, firmware {})",
+                welcome.firmware
+            ))
+        })?;
+    send(
+        events,
+        Event::Started {
+            poses: of,
+            schedule: schedule.name.clone(),
+        },
+    );
+    send(
+        events,
+        Event::Connected {
+            firmware: welcome.firmware.clone(),
+        },
+    );
+
+    // 2. Home stance and its feet; the Kinect tilted and still.
+    controller
+        .home(millis(plan.motion))
+        .await
+        .map_err(SessionError::robot)?;
+    let home = wait_for(
+        controller,
+        plan,
+        plan.motion_deadline(plan.motion),
+        "the home stance",
+        |s| s.state == MotionState::Idle,
+    )
+    .await?;
+    send(events, Event::AtHome);
+    sensor
+        .set_tilt(plan.tilt_deg)
+        .await
+        .map_err(SessionError::sensor)?;
+    let _ = sensor.set_led(Led::BlinkGreen).await;
+    send(
+        events,
+        Event::SensorReady {
+            tilt_deg: plan.tilt_deg,
+        },
+    );
+
+    let info = sensor.info();
+    let home_feet: Vec<[f64; 3]> = home.feet_mm.to_vec();
+    let processor = Arc::new(
+        PoseProcessor::new(
+            info.depth_model,
+            info.intrinsics,
+            &home_feet,
+            plan.nominal_mount,
+            plan.pose,
+        )
+        .map_err(|e| SessionError::Robot {
+            kind: ErrorKind::Protocol,
+            message: format!("home feet: {e}"),
+        })?,
+    );
+    let mut writer = match &plan.record {
+        Some(dir) => Some(RecordingWriter::create(
+            dir,
+            &Session {
+                format: "groundcal-recording".into(),
+                version: 1,
+                robot: welcome.firmware.clone(),
+                home: Home {
+                    commanded: schedule.home,
+                    feet_body_mm: home_feet.clone(),
+                },
+                kinect: KinectInfo {
+                    tilt_deg: plan.tilt_deg,
+                    depth_model: info.depth_model,
+                    intrinsics: info.intrinsics,
+                },
+                frames_per_pose: Some(plan.frames_per_pose as u32),
+                schedule: Some(schedule.name.clone()),
+                nominal_mount: plan.nominal_mount,
+            },
+        )?),
+        None => None,
+    };
+
+    // 3. The poses.
+    let mut reported = 0;
+    for (k, commanded) in schedule.poses.iter().enumerate() {
+        let index = (k + 1) as u16;
+        send(
+            events,
+            Event::Moving {
+                index,
+                of,
+                commanded: *commanded,
+            },
+        );
+        controller
+            .set_pose(index, commanded, millis(plan.motion))
+            .await
+            .map_err(SessionError::robot)?;
+        wait_for(
+            controller,
+            plan,
+            plan.motion_deadline(plan.motion),
+            &format!("pose {index}"),
+            |s| s.state == MotionState::Settled && s.pose_id == index,
+        )
+        .await?;
+        tokio::time::sleep(plan.settle).await;
+        // The feet once the body has been still for the settle delay; never
+        // feet reported before it settled (hexapod-udp.md).
+        let settled = controller.state().await.map_err(SessionError::robot)?;
+        if settled.state != MotionState::Settled || settled.pose_id != index {
+            return Err(SessionError::Robot {
+                kind: ErrorKind::Protocol,
+                message: format!(
+                    "the body left pose {index} before its frames were captured ({:?})",
+                    settled.state
+                ),
+            });
+        }
+        send(events, Event::Capturing { index, of });
+        sensor.begin_pose(index);
+        let mut frames = Vec::with_capacity(plan.frames_per_pose);
+        let mut names = Vec::with_capacity(plan.frames_per_pose);
+        for _ in 0..plan.frames_per_pose {
+            let frame = sensor.next_frame().await.map_err(SessionError::sensor)?;
+            if let Some(w) = writer.as_mut() {
+                let image = DepthImage {
+                    width: frame.width,
+                    height: frame.height,
+                    pixels: frame.raw.clone(),
+                };
+                names.push(w.write_depth_frame(frame.time_s, frame.timestamp, &image)?);
+            }
+            frames.push(frame);
+        }
+        let feet_mm: Vec<[f64; 3]> = settled.feet_mm.to_vec();
+        if let Some(w) = writer.as_mut() {
+            w.write_pose(&PoseRecord {
+                index: u32::from(index),
+                commanded: *commanded,
+                feet_body_mm: feet_mm.clone(),
+                depth_frames: names,
+                line: 0,
+            })?;
+        }
+        let fit = match processor.body_pose(commanded, &feet_mm) {
+            Ok(body) => {
+                let processor = Arc::clone(&processor);
+                tokio::task::spawn_blocking(move || fit_pose(processor, index, body, frames))
+            }
+            Err(e) => {
+                let reason = format!("feet: {e}");
+                tokio::task::spawn_blocking(move || Err(reason))
+            }
+        };
+        pending.push(PendingFit { index, handle: fit });
+        report_finished(pending, &mut reported, of, events, false).await;
+    }
+
+    // 4. Home, then the solve.
+    controller
+        .home(millis(plan.motion))
+        .await
+        .map_err(SessionError::robot)?;
+    wait_for(
+        controller,
+        plan,
+        plan.motion_deadline(plan.motion),
+        "the home stance",
+        |s| s.state == MotionState::Idle,
+    )
+    .await?;
+    let _ = sensor.set_led(Led::Green).await;
+    send(events, Event::Solving);
+    report_finished(pending, &mut reported, of, events, true).await;
+    let mut observations = Vec::new();
+    let mut failed = Vec::new();
+    for fit in pending.drain(..) {
+        match fit.handle.await {
+            Ok(Ok(o)) => observations.push(o),
+            Ok(Err(reason)) => failed.push((u32::from(fit.index), reason)),
+            Err(e) => failed.push((u32::from(fit.index), format!("the fit failed: {e}"))),
+        }
+    }
+    let mut result = match solve_among(&observations, of, &plan.solve) {
+        Ok(calibration) => ResultJson::from_calibration(&calibration),
+        Err(SolveError::TooFewObservations { usable, outcomes }) => ResultJson::unsolved(
+            SolveError::TooFewObservations {
+                usable,
+                outcomes: Vec::new(),
+            }
+            .to_string(),
+            &outcomes,
+        ),
+    }
+    .with_failed_poses(&failed);
+    result.kinect_tilt_deg = Some(plan.tilt_deg);
+    if let Some(note) = processor.prior_note() {
+        result.notes.push(note);
+    }
+    for (index, reason) in &failed {
+        result.notes.push(format!("pose {index}: {reason}"));
+    }
+    let recording = match writer {
+        Some(w) => Some(w.finish()?),
+        None => None,
+    };
+    send(
+        events,
+        Event::Finished {
+            accepted: result.accepted(),
+        },
+    );
+    Ok(SessionOutcome { result, recording })
+}
+
+/// Halts the body, then sends it home and waits until it is there (or the
+/// link is lost). Returns a description of how the robot was left.
+async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> String {
+    if let Err(e) = controller.halt().await {
+        return format!("could not halt the robot ({e}); check it");
+    }
+    if let Err(e) = controller.home(millis(plan.motion)).await {
+        return format!("halted, but could not send it home ({e})");
+    }
+    match wait_for(
+        controller,
+        plan,
+        plan.motion_deadline(plan.motion),
+        "the home stance",
+        |s| s.state == MotionState::Idle,
+    )
+    .await
+    {
+        Ok(_) => "halted and sent home; it stands at the home stance".to_string(),
+        Err(e) => format!("halted and sent home, but it did not report the home stance: {e}"),
+    }
+}
+
+/// Runs a calibration session. `abort` completes (with a reason) when the
+/// operator or a signal stops the session; the robot is then halted and sent
+/// home, as after any failure.
+pub async fn run<S: DepthSensor, C: BodyController>(
+    sensor: &mut S,
+    controller: &mut C,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+    abort: impl Future<Output = String>,
+) -> Result<SessionOutcome, SessionError> {
+    let mut pending = Vec::new();
+    let outcome = {
+        let work = body(sensor, controller, plan, events, &mut pending);
+        tokio::pin!(work);
+        tokio::select! {
+            outcome = &mut work => outcome,
+            reason = abort => Err(SessionError::Aborted(reason)),
+        }
+    };
+    match outcome {
+        Ok(o) => Ok(o),
+        Err(SessionError::Refused(reason)) => {
+            // Nothing moved: nothing to stop.
+            send(
+                events,
+                Event::Aborted {
+                    reason: reason.clone(),
+                },
+            );
+            Err(SessionError::Refused(reason))
+        }
+        Err(e) => {
+            let left = stop_safely(controller, plan).await;
+            let _ = sensor.set_led(Led::Red).await;
+            for fit in pending {
+                fit.handle.abort();
+            }
+            send(
+                events,
+                Event::Aborted {
+                    reason: format!("{e}; {left}"),
+                },
+            );
+            Err(e)
+        }
+    }
+}
