@@ -26,3 +26,5 @@ pub mod replay;
 pub mod report;
 pub mod schedule;
 pub mod session;
+pub mod store;
+pub mod systemd;

@@ -1,0 +1,325 @@
+//! The calibration store: the active calibration that the robot's other
+//! programs read, and the history of every result.
+//!
+//! Layout under the state directory (`/var/lib/groundcal` on the robot):
+//!
+//! ```text
+//! active.json               the active calibration (format below)
+//! history/<id>.json         every result ever made, accepted or not
+//! ```
+//!
+//! `active.json` is `{"format": "groundcal-active", "version": 1, "id": ...,
+//! "activated": RFC 3339, "kinect_tilt_deg": ..., "robot_from_sensor": {...},
+//! "sigma": {...}, "status": "accepted", "provenance": {...}}` with the keys of
+//! the result document (cli.md). Readers take `robot_from_sensor` and check
+//! `kinect_tilt_deg` against the Kinect's tilt: a calibration holds for one
+//! tilt. Every write goes to a temporary file that is fsynced, renamed over
+//! the old one, and the directory fsynced: a reader sees the old file or the
+//! new one, never half of one, even across a power cut.
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+/// Why the store could not do something.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("{}: {action}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        action: &'static str,
+        source: std::io::Error,
+    },
+    #[error("{}: {message}", path.display())]
+    Invalid { path: PathBuf, message: String },
+    #[error("no calibration {0} in the history")]
+    NotFound(String),
+    #[error("calibration {0} was rejected and cannot be made active")]
+    Rejected(String),
+}
+
+fn io<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -> StoreError + 'a {
+    move |source| StoreError::Io {
+        path: path.to_path_buf(),
+        action,
+        source,
+    }
+}
+
+/// Writes `bytes` to `path` atomically and durably.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    fs::create_dir_all(dir).map_err(io(dir, "cannot create the directory"))?;
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
+    let temp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = (|| {
+        let mut file = File::create(&temp).map_err(io(&temp, "cannot create"))?;
+        file.write_all(bytes).map_err(io(&temp, "cannot write"))?;
+        file.sync_all().map_err(io(&temp, "cannot sync"))?;
+        fs::rename(&temp, path).map_err(io(path, "cannot replace"))?;
+        File::open(dir)
+            .and_then(|d| d.sync_all())
+            .map_err(io(dir, "cannot sync the directory"))
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&temp);
+    }
+    result
+}
+
+/// One entry of the history.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HistoryEntry {
+    pub id: String,
+    pub status: String,
+    pub created: String,
+    pub active: bool,
+}
+
+/// The store in a state directory.
+#[derive(Debug, Clone)]
+pub struct Store {
+    dir: PathBuf,
+}
+
+impl Store {
+    /// The store in `dir` (created on first write).
+    pub fn new(dir: &Path) -> Self {
+        Self {
+            dir: dir.to_path_buf(),
+        }
+    }
+
+    pub fn active_path(&self) -> PathBuf {
+        self.dir.join("active.json")
+    }
+
+    fn history_dir(&self) -> PathBuf {
+        self.dir.join("history")
+    }
+
+    fn entry_path(&self, id: &str) -> Result<PathBuf, StoreError> {
+        // Ids are ours (a timestamp and a counter); refuse anything that could
+        // name a file outside the history.
+        if id.is_empty()
+            || !id
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(StoreError::NotFound(id.to_string()));
+        }
+        Ok(self.history_dir().join(format!("{id}.json")))
+    }
+
+    /// Keeps a result in the history and returns its id.
+    pub fn add(&self, result: &Value, created: &str) -> Result<String, StoreError> {
+        let stamp: String = created.chars().filter(|c| c.is_ascii_digit()).collect();
+        let mut n = 1;
+        let id = loop {
+            let id = format!("{stamp}-{n}");
+            if !self.entry_path(&id)?.exists() {
+                break id;
+            }
+            n += 1;
+        };
+        let mut entry = result.clone();
+        if let Value::Object(map) = &mut entry {
+            map.insert("id".into(), Value::String(id.clone()));
+            map.insert("created".into(), Value::String(created.to_string()));
+        }
+        let bytes = serde_json::to_vec_pretty(&entry).map_err(|e| StoreError::Invalid {
+            path: self.history_dir(),
+            message: e.to_string(),
+        })?;
+        write_atomically(&self.entry_path(&id)?, &bytes)?;
+        Ok(id)
+    }
+
+    /// A result of the history.
+    pub fn get(&self, id: &str) -> Result<Value, StoreError> {
+        let path = self.entry_path(id)?;
+        let text = fs::read_to_string(&path).map_err(|_| StoreError::NotFound(id.to_string()))?;
+        serde_json::from_str(&text).map_err(|e| StoreError::Invalid {
+            path,
+            message: e.to_string(),
+        })
+    }
+
+    /// The active calibration, if any.
+    pub fn active(&self) -> Result<Option<Value>, StoreError> {
+        let path = self.active_path();
+        match fs::read_to_string(&path) {
+            Ok(text) => serde_json::from_str(&text)
+                .map(Some)
+                .map_err(|e| StoreError::Invalid {
+                    path,
+                    message: e.to_string(),
+                }),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(StoreError::Io {
+                path,
+                action: "cannot read",
+                source: e,
+            }),
+        }
+    }
+
+    /// Makes a result of the history the active calibration (accept, or roll
+    /// back to an earlier one). Rejected results never become active.
+    pub fn activate(&self, id: &str, now: &str) -> Result<Value, StoreError> {
+        let entry = self.get(id)?;
+        if entry.get("status").and_then(Value::as_str) != Some("accepted") {
+            return Err(StoreError::Rejected(id.to_string()));
+        }
+        let mut active = serde_json::json!({
+            "format": "groundcal-active",
+            "version": 1,
+            "id": id,
+            "activated": now,
+            "status": "accepted",
+        });
+        for key in [
+            "robot_from_sensor",
+            "sigma",
+            "kinect_tilt_deg",
+            "summary",
+            "created",
+            "provenance",
+        ] {
+            if let Some(v) = entry.get(key) {
+                active[key] = v.clone();
+            }
+        }
+        let bytes = serde_json::to_vec_pretty(&active).map_err(|e| StoreError::Invalid {
+            path: self.active_path(),
+            message: e.to_string(),
+        })?;
+        write_atomically(&self.active_path(), &bytes)?;
+        Ok(active)
+    }
+
+    /// The history, newest first.
+    pub fn history(&self) -> Result<Vec<HistoryEntry>, StoreError> {
+        let dir = self.history_dir();
+        let active_id = self
+            .active()?
+            .and_then(|a| a.get("id").and_then(Value::as_str).map(String::from));
+        let mut entries = Vec::new();
+        let listing = match fs::read_dir(&dir) {
+            Ok(l) => l,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(entries),
+            Err(e) => {
+                return Err(StoreError::Io {
+                    path: dir,
+                    action: "cannot list",
+                    source: e,
+                })
+            }
+        };
+        for item in listing {
+            let item = item.map_err(io(&dir, "cannot list"))?;
+            let name = item.file_name().to_string_lossy().into_owned();
+            let Some(id) = name.strip_suffix(".json") else {
+                continue;
+            };
+            if name.starts_with('.') {
+                continue;
+            }
+            let Ok(value) = self.get(id) else { continue };
+            entries.push(HistoryEntry {
+                id: id.to_string(),
+                status: value
+                    .get("status")
+                    .and_then(Value::as_str)
+                    .unwrap_or("unknown")
+                    .to_string(),
+                created: value
+                    .get("created")
+                    .and_then(Value::as_str)
+                    .unwrap_or("")
+                    .to_string(),
+                active: active_id.as_deref() == Some(id),
+            });
+        }
+        entries.sort_by(|a, b| b.id.cmp(&a.id));
+        Ok(entries)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_store(tag: &str) -> (Store, PathBuf) {
+        let dir =
+            std::env::temp_dir().join(format!("groundcal-store-{tag}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        (Store::new(&dir), dir)
+    }
+
+    #[test]
+    fn accept_roll_back_and_refuse_rejected() {
+        let (store, dir) = temp_store("cycle");
+        let a = store
+            .add(
+                &serde_json::json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 1.0}}),
+                "2026-11-23T20:00:00Z",
+            )
+            .unwrap();
+        let b = store
+            .add(
+                &serde_json::json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 2.0}}),
+                "2026-11-23T21:00:00Z",
+            )
+            .unwrap();
+        let r = store
+            .add(
+                &serde_json::json!({"status": "rejected"}),
+                "2026-11-23T22:00:00Z",
+            )
+            .unwrap();
+        assert!(store.active().unwrap().is_none());
+        store.activate(&b, "now").unwrap();
+        assert_eq!(
+            store.active().unwrap().unwrap()["robot_from_sensor"]["alpha_deg"],
+            2.0
+        );
+        store.activate(&a, "later").unwrap();
+        assert_eq!(store.active().unwrap().unwrap()["id"], a.as_str());
+        assert!(matches!(
+            store.activate(&r, "x"),
+            Err(StoreError::Rejected(_))
+        ));
+        assert_eq!(
+            store.active().unwrap().unwrap()["id"],
+            a.as_str(),
+            "a refused activation leaves the active one"
+        );
+        let history = store.history().unwrap();
+        assert_eq!(history.len(), 3);
+        assert_eq!(history.iter().filter(|h| h.active).count(), 1);
+        // No temporary files are left behind.
+        assert!(fs::read_dir(&dir).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .starts_with('.')));
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn ids_cannot_escape_the_history() {
+        let (store, _) = temp_store("escape");
+        assert!(matches!(
+            store.get("../active"),
+            Err(StoreError::NotFound(_))
+        ));
+        assert!(matches!(
+            store.activate("/etc/passwd", "x"),
+            Err(StoreError::NotFound(_))
+        ));
+    }
+}

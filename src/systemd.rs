@@ -1,0 +1,119 @@
+//! The systemd notification protocol (`sd_notify`): READY=1 once the hardware
+//! is open and HTTP listens, WATCHDOG=1 from the session loop, STATUS= for
+//! `systemctl status`. A datagram to the Unix socket named by `NOTIFY_SOCKET`
+//! (a path, or `@name` for the abstract namespace); nothing when it is unset.
+
+use std::os::unix::net::UnixDatagram;
+use std::time::Duration;
+
+/// A handle to systemd's notification socket, if the service has one.
+#[derive(Debug)]
+pub struct Notifier {
+    socket: Option<(UnixDatagram, String)>,
+}
+
+impl Notifier {
+    /// From the environment (`NOTIFY_SOCKET`).
+    pub fn from_env() -> Self {
+        let socket = std::env::var("NOTIFY_SOCKET")
+            .ok()
+            .filter(|s| !s.is_empty())
+            .and_then(|path| UnixDatagram::unbound().ok().map(|socket| (socket, path)));
+        Self { socket }
+    }
+
+    /// Whether systemd is listening.
+    pub fn enabled(&self) -> bool {
+        self.socket.is_some()
+    }
+
+    fn send(&self, message: &str) {
+        let Some((socket, path)) = &self.socket else {
+            return;
+        };
+        let sent = if let Some(name) = path.strip_prefix('@') {
+            send_abstract(socket, name, message)
+        } else {
+            socket.send_to(message.as_bytes(), path).map(|_| ())
+        };
+        if let Err(e) = sent {
+            tracing::warn!(%e, "cannot notify systemd");
+        }
+    }
+
+    /// The service is up.
+    pub fn ready(&self, status: &str) {
+        self.send(&format!("READY=1\nSTATUS={status}"));
+    }
+
+    /// The service is alive (to be sent more often than `WatchdogSec`).
+    pub fn watchdog(&self) {
+        self.send("WATCHDOG=1");
+    }
+
+    /// A line for `systemctl status`.
+    pub fn status(&self, status: &str) {
+        self.send(&format!("STATUS={status}"));
+    }
+
+    /// The service is stopping.
+    pub fn stopping(&self) {
+        self.send("STOPPING=1");
+    }
+}
+
+#[cfg(target_os = "linux")]
+fn send_abstract(socket: &UnixDatagram, name: &str, message: &str) -> std::io::Result<()> {
+    use std::os::linux::net::SocketAddrExt;
+    let address = std::os::unix::net::SocketAddr::from_abstract_name(name.as_bytes())?;
+    socket
+        .send_to_addr(message.as_bytes(), &address)
+        .map(|_| ())
+}
+
+#[cfg(not(target_os = "linux"))]
+fn send_abstract(_socket: &UnixDatagram, _name: &str, _message: &str) -> std::io::Result<()> {
+    Err(std::io::Error::other("abstract sockets are Linux only"))
+}
+
+/// Half of the watchdog interval systemd asks for (`WATCHDOG_USEC`), if any.
+pub fn watchdog_interval() -> Option<Duration> {
+    let usec: u64 = std::env::var("WATCHDOG_USEC").ok()?.parse().ok()?;
+    (usec > 0).then(|| Duration::from_micros(usec / 2))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_reach_a_fake_notify_socket() {
+        let path = std::env::temp_dir().join(format!("groundcal-notify-{}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        let listener = UnixDatagram::bind(&path).unwrap();
+        listener
+            .set_read_timeout(Some(Duration::from_secs(2)))
+            .unwrap();
+        let notifier = Notifier {
+            socket: Some((
+                UnixDatagram::unbound().unwrap(),
+                path.to_string_lossy().into_owned(),
+            )),
+        };
+        notifier.ready("listening on 127.0.0.1:8080");
+        notifier.watchdog();
+        let mut buf = [0u8; 256];
+        let n = listener.recv(&mut buf).unwrap();
+        assert_eq!(&buf[..n], b"READY=1\nSTATUS=listening on 127.0.0.1:8080");
+        let n = listener.recv(&mut buf).unwrap();
+        assert_eq!(&buf[..n], b"WATCHDOG=1");
+        let _ = std::fs::remove_file(&path);
+    }
+
+    #[test]
+    fn without_a_socket_nothing_is_sent() {
+        let notifier = Notifier { socket: None };
+        assert!(!notifier.enabled());
+        notifier.ready("x");
+    }
+}
