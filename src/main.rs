@@ -53,6 +53,8 @@ enum Command {
         #[arg(long, value_enum)]
         format: groundcal::export::ExportFormat,
     },
+    /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
+    CheckConfig { file: PathBuf },
     /// Fit the ground in one depth image.
     #[command(allow_negative_numbers = true)]
     Plane {
@@ -111,6 +113,20 @@ fn run(args: Args) -> ExitStatus {
             };
             cli::replay::run(&dir, json, report.as_deref(), &options)
         }
+        Command::CheckConfig { file } => match groundcal::config::Config::load(&file) {
+            Ok((config, schedule)) => {
+                println!(
+                    "{}: valid; robot {}, sensor {}, schedule \"{}\" with {} poses",
+                    file.display(),
+                    config.robot.address,
+                    config.sensor.source,
+                    schedule.name,
+                    schedule.poses.len()
+                );
+                ExitStatus::Success
+            }
+            Err(e) => usage_error(e.to_string()),
+        },
         Command::Export { file, format } => cli::export::run(&file, format),
         Command::Plane {
             file,
