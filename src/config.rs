@@ -143,6 +143,19 @@ impl Config {
         Ok((config, schedule))
     }
 
+    /// The shipped simulation configuration (`config/sim.toml`) and its
+    /// schedule, built into the binary so that `groundcal calibrate --robot sim
+    /// --sensor sim` runs anywhere.
+    pub fn embedded_sim() -> (Self, Schedule) {
+        const CONFIG: &str = include_str!("../config/sim.toml");
+        const SCHEDULE: &str = include_str!("../config/schedules/octopus-52.toml");
+        let config = Self::parse(Path::new("(built-in config/sim.toml)"), CONFIG)
+            .expect("the shipped sim.toml parses (tested)");
+        let schedule = Schedule::parse(Path::new("(built-in octopus-52.toml)"), SCHEDULE)
+            .expect("the shipped schedule parses (tested)");
+        (config, schedule)
+    }
+
     /// The schedule's path, relative to the configuration file.
     pub fn schedule_path(&self, config_path: &Path) -> PathBuf {
         match config_path.parent() {
@@ -308,6 +321,14 @@ mod tests {
             assert_eq!(schedule.poses.len(), 52, "{name}");
             assert!(config.calibration.frames_per_pose >= 1);
         }
+    }
+
+    #[test]
+    fn the_built_in_simulation_configuration_is_the_shipped_one() {
+        let (embedded, schedule) = Config::embedded_sim();
+        let (shipped, shipped_schedule) = Config::load(&shipped("sim.toml")).unwrap();
+        assert_eq!(embedded, shipped);
+        assert_eq!(schedule, shipped_schedule);
     }
 
     #[test]

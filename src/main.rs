@@ -53,8 +53,46 @@ enum Command {
         #[arg(long, value_enum)]
         format: groundcal::export::ExportFormat,
     },
+    /// One calibration in the foreground (the daemon's session logic).
+    Calibrate {
+        /// The configuration (default: built-in simulation with --robot sim, else /etc/groundcal/groundcal.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// The lower computer: host:port, or sim (simulated, in process).
+        #[arg(long)]
+        robot: Option<String>,
+        /// The depth sensor: kinect, sim, or replay:DIR.
+        #[arg(long)]
+        sensor: Option<String>,
+        /// The libfreenect library file (e.g. libfreenect's fakenect build).
+        #[arg(long, value_name = "PATH")]
+        freenect_lib: Option<PathBuf>,
+        /// Write everything as a recording into this new directory, as it goes.
+        #[arg(long, value_name = "DIR")]
+        record: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
     /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
     CheckConfig { file: PathBuf },
+    /// Record N depth frames from the sensor as a recording whose kinect/ is a fakenect dump.
+    Capture {
+        /// The configuration (sensor, library); the flags override it.
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// The sensor: kinect (libfreenect).
+        #[arg(long, default_value = "kinect")]
+        sensor: String,
+        /// The libfreenect library file to load (e.g. libfreenect's fakenect, to play a dump back).
+        #[arg(long, value_name = "PATH")]
+        freenect_lib: Option<PathBuf>,
+        /// How many depth frames to record.
+        #[arg(long)]
+        frames: usize,
+        /// The new recording's directory (must not exist, or be empty).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
     /// Fit the ground in one depth image.
     #[command(allow_negative_numbers = true)]
     Plane {
@@ -113,6 +151,15 @@ fn run(args: Args) -> ExitStatus {
             };
             cli::replay::run(&dir, json, report.as_deref(), &options)
         }
+        Command::Calibrate { config, robot, sensor, freenect_lib, record, json } => {
+            let options = cli::calibrate::CalibrateOptions {
+                config,
+                selection: groundcal::hardware::Selection { robot, sensor, freenect_lib },
+                record,
+                json,
+            };
+            cli::calibrate::run(&options)
+        }
         Command::CheckConfig { file } => match groundcal::config::Config::load(&file) {
             Ok((config, schedule)) => {
                 println!(
@@ -128,6 +175,18 @@ fn run(args: Args) -> ExitStatus {
             Err(e) => usage_error(e.to_string()),
         },
         Command::Export { file, format } => cli::export::run(&file, format),
+        Command::Capture {
+            config: _,
+            sensor,
+            freenect_lib,
+            frames,
+            out,
+        } => match sensor.as_str() {
+            "kinect" => cli::capture::run(freenect_lib.as_deref(), frames, &out),
+            other => usage_error(format!(
+                "--sensor: \"{other}\" cannot capture (yet); use kinect"
+            )),
+        },
         Command::Plane {
             file,
             json,

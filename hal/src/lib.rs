@@ -12,14 +12,16 @@
 //!   real and the simulated hardware;
 //! - [`sensor`], [`controller`], [`error`]: the traits and their vocabulary.
 
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 
 pub mod controller;
 pub mod depth;
 pub mod error;
 pub mod geometry;
+pub mod kinect;
 pub mod sensor;
 pub mod sim;
+pub mod udp;
 
 pub use controller::{BodyController, BodyLimits, BodyState, MotionState, Welcome};
 pub use error::{Error, ErrorKind};

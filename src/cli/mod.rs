@@ -3,6 +3,8 @@
 //! `main.rs` only parses arguments and sets up logging; everything a command
 //! does lives here so that tests can call it directly.
 
+pub mod calibrate;
+pub mod capture;
 pub mod export;
 pub mod plane;
 pub mod replay;

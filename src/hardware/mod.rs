@@ -1,4 +1,236 @@
 //! The hardware a session runs on, chosen at run time from the configuration
-//! and the `--robot` / `--sensor` overrides.
+//! and the `--robot` / `--sensor` overrides: the real Kinect or lower
+//! computer, the simulated ones, or a recording. The session is generic over
+//! the traits; these enums let the command line pick at run time.
 
 pub mod replay_sensor;
+
+use std::net::ToSocketAddrs;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use groundcal_hal::kinect::Kinect;
+use groundcal_hal::sim::kinect::{SimKinect, SimKinectConfig};
+use groundcal_hal::sim::robot::{SimBodyController, SimRobotConfig};
+use groundcal_hal::sim::world::World;
+use groundcal_hal::sim::TruePose;
+use groundcal_hal::udp::{LinkConfig, UdpBodyController};
+use groundcal_hal::{
+    BodyController, BodyState, DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo, TiltState, Welcome,
+};
+
+use crate::calib::geometry::PoseDegMm;
+use crate::config::{Config, SimConfig};
+use crate::recording::Recording;
+use replay_sensor::ReplaySensor;
+
+/// Any hardware error, keeping its kind and its words.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct HardwareError {
+    pub kind: ErrorKind,
+    pub message: String,
+}
+
+impl Error for HardwareError {
+    fn kind(&self) -> ErrorKind {
+        self.kind
+    }
+}
+
+fn wrap<E: Error>(e: E) -> HardwareError {
+    HardwareError { kind: e.kind(), message: e.to_string() }
+}
+
+/// The depth sensor chosen at run time.
+pub enum Sensor {
+    Kinect(Box<Kinect>),
+    Sim(Box<SimKinect>),
+    Replay(Box<ReplaySensor>),
+}
+
+/// The lower computer chosen at run time.
+pub enum Controller {
+    Udp(Box<UdpBodyController>),
+    Sim(Box<SimBodyController>),
+}
+
+macro_rules! each_sensor {
+    ($self:ident, $s:ident => $body:expr) => {
+        match $self {
+            Sensor::Kinect($s) => $body,
+            Sensor::Sim($s) => $body,
+            Sensor::Replay($s) => $body,
+        }
+    };
+}
+
+macro_rules! each_controller {
+    ($self:ident, $c:ident => $body:expr) => {
+        match $self {
+            Controller::Udp($c) => $body,
+            Controller::Sim($c) => $body,
+        }
+    };
+}
+
+impl DepthSensor for Sensor {
+    type Error = HardwareError;
+
+    fn info(&self) -> SensorInfo {
+        each_sensor!(self, s => s.info())
+    }
+
+    async fn set_tilt(&mut self, degrees: f64) -> Result<(), HardwareError> {
+        each_sensor!(self, s => s.set_tilt(degrees).await.map_err(wrap))
+    }
+
+    async fn tilt_state(&mut self) -> Result<TiltState, HardwareError> {
+        each_sensor!(self, s => s.tilt_state().await.map_err(wrap))
+    }
+
+    async fn set_led(&mut self, led: Led) -> Result<(), HardwareError> {
+        each_sensor!(self, s => s.set_led(led).await.map_err(wrap))
+    }
+
+    fn begin_pose(&mut self, pose_id: u16) {
+        each_sensor!(self, s => s.begin_pose(pose_id))
+    }
+
+    async fn next_frame(&mut self) -> Result<DepthFrame, HardwareError> {
+        each_sensor!(self, s => s.next_frame().await.map_err(wrap))
+    }
+}
+
+impl BodyController for Controller {
+    type Error = HardwareError;
+
+    async fn hello(&mut self) -> Result<Welcome, HardwareError> {
+        each_controller!(self, c => c.hello().await.map_err(wrap))
+    }
+
+    async fn set_pose(&mut self, pose_id: u16, pose: &PoseDegMm, duration_ms: u32) -> Result<(), HardwareError> {
+        each_controller!(self, c => c.set_pose(pose_id, pose, duration_ms).await.map_err(wrap))
+    }
+
+    async fn state(&mut self) -> Result<BodyState, HardwareError> {
+        each_controller!(self, c => c.state().await.map_err(wrap))
+    }
+
+    async fn home(&mut self, duration_ms: u32) -> Result<(), HardwareError> {
+        each_controller!(self, c => c.home(duration_ms).await.map_err(wrap))
+    }
+
+    async fn halt(&mut self) -> Result<(), HardwareError> {
+        each_controller!(self, c => c.halt().await.map_err(wrap))
+    }
+
+    async fn bye(&mut self) -> Result<(), HardwareError> {
+        each_controller!(self, c => c.bye().await.map_err(wrap))
+    }
+}
+
+/// Where the hardware comes from: the configuration, with the command line's
+/// overrides.
+#[derive(Debug, Clone, Default)]
+pub struct Selection {
+    /// `sim` or `host:port`.
+    pub robot: Option<String>,
+    /// `kinect`, `sim` or `replay:DIR`.
+    pub sensor: Option<String>,
+    pub freenect_lib: Option<PathBuf>,
+}
+
+/// The simulated robot and Kinect share the body's true pose.
+struct SimParts {
+    true_pose: TruePose,
+    sim: SimConfig,
+}
+
+fn sim_parts(config: &Config) -> Result<SimParts, HardwareError> {
+    let sim = config.sim.clone().ok_or_else(|| HardwareError {
+        kind: ErrorKind::DeviceMissing,
+        message: "the simulated robot and Kinect need a [sim] table in the configuration".into(),
+    })?;
+    let robot = SimRobotConfig::reference(sim.seed, sim.time_scale);
+    let true_pose = TruePose::new(robot.home.to_params().to_transform());
+    Ok(SimParts { true_pose, sim })
+}
+
+fn world(sim: &SimConfig) -> World {
+    match sim.world.as_str() {
+        "boxes-and-wall" => World::boxes_and_wall(sim.seed),
+        "uneven" => World::uneven(sim.seed, 0.01),
+        _ => World::flat(),
+    }
+}
+
+/// The sensor source after overrides (`kinect`, `sim`, `replay:DIR`).
+pub fn sensor_source(config: &Config, selection: &Selection) -> String {
+    selection.sensor.clone().unwrap_or_else(|| config.sensor.source.clone())
+}
+
+/// Opens the hardware. The simulated robot and Kinect, when both are chosen,
+/// share one simulated body.
+pub async fn open(config: &Config, selection: &Selection) -> Result<(Sensor, Controller), HardwareError> {
+    let robot = selection.robot.clone().unwrap_or_else(|| config.robot.address.clone());
+    let source = sensor_source(config, selection);
+    let sim = if robot == "sim" || source == "sim" { Some(sim_parts(config)?) } else { None };
+
+    let controller = if robot == "sim" {
+        let parts = sim.as_ref().expect("made above for the simulated robot");
+        Controller::Sim(Box::new(SimBodyController::new(
+            SimRobotConfig::reference(parts.sim.seed, parts.sim.time_scale),
+            parts.true_pose.clone(),
+        )))
+    } else {
+        let peer = robot
+            .to_socket_addrs()
+            .ok()
+            .and_then(|mut a| a.next())
+            .ok_or_else(|| HardwareError { kind: ErrorKind::LinkLost, message: format!("cannot resolve the lower computer's address \"{robot}\"") })?;
+        let mut link = LinkConfig::new(peer);
+        link.interface = config.robot.interface.clone();
+        link.client.retry_interval = std::time::Duration::from_millis(config.robot.retry_interval_ms);
+        link.client.retry_limit = config.robot.retries;
+        Controller::Udp(Box::new(UdpBodyController::connect(&link).await.map_err(wrap)?))
+    };
+
+    let sensor = match source.as_str() {
+        "sim" => {
+            let parts = sim.as_ref().expect("made above for the simulated sensor");
+            if robot != "sim" {
+                tracing::warn!("the simulated Kinect sees the simulated body, which a real lower computer does not move");
+            }
+            let mut kinect = SimKinectConfig { seed: parts.sim.seed, time_scale: parts.sim.time_scale, mount_tilt_deg: config.sensor.tilt_deg, ..SimKinectConfig::default() };
+            if let Some(model) = config.sensor.depth_model {
+                kinect.depth_model = model;
+            }
+            if let Some(intrinsics) = config.sensor.intrinsics {
+                kinect.intrinsics = intrinsics;
+            }
+            let mount = parts.sim.mount.to_params().to_transform();
+            Sensor::Sim(Box::new(
+                SimKinect::new(Arc::new(world(&parts.sim)), parts.true_pose.clone(), mount, kinect).map_err(wrap)?,
+            ))
+        }
+        "kinect" => {
+            let library = selection.freenect_lib.clone().or_else(|| config.sensor.freenect_lib.clone());
+            Sensor::Kinect(Box::new(Kinect::open(library.as_deref(), 0).map_err(wrap)?))
+        }
+        other => match other.strip_prefix("replay:") {
+            Some(dir) => {
+                let recording = Recording::open(Path::new(dir))
+                    .map_err(|e| HardwareError { kind: ErrorKind::DeviceMissing, message: e.to_string() })?;
+                Sensor::Replay(Box::new(ReplaySensor::new(recording)))
+            }
+            None => {
+                return Err(HardwareError {
+                    kind: ErrorKind::DeviceMissing,
+                    message: format!("--sensor: \"{other}\" is not kinect, sim or replay:DIR"),
+                })
+            }
+        },
+    };
+    Ok((sensor, controller))
+}

@@ -131,6 +131,21 @@ async fn wait_for<C: BodyController>(
 struct PendingFit {
     index: u16,
     handle: JoinHandle<Result<Observation, String>>,
+    /// The fit's outcome once it has been awaited (a handle is awaited once).
+    done: Option<Result<Observation, String>>,
+}
+
+impl PendingFit {
+    async fn outcome(&mut self) -> &Result<Observation, String> {
+        if self.done.is_none() {
+            let outcome = match (&mut self.handle).await {
+                Ok(outcome) => outcome,
+                Err(e) => Err(format!("the fit failed: {e}")),
+            };
+            self.done = Some(outcome);
+        }
+        self.done.get_or_insert_with(|| Err("the fit was lost".into()))
+    }
 }
 
 /// Fits the ground of a pose from its frames (on a blocking worker).
@@ -161,18 +176,12 @@ async fn report_finished(
         if !all && !fit.handle.is_finished() {
             break;
         }
-        let outcome = match (&mut fit.handle).await {
-            Ok(Ok(o)) => Ok(PoseFit {
+        let outcome = match fit.outcome().await {
+            Ok(o) => Ok(PoseFit {
                 inliers: o.inliers.unwrap_or(0),
-                plane: [
-                    o.plane.normal.x,
-                    o.plane.normal.y,
-                    o.plane.normal.z,
-                    o.plane.d,
-                ],
+                plane: [o.plane.normal.x, o.plane.normal.y, o.plane.normal.z, o.plane.d],
             }),
-            Ok(Err(e)) => Err(e),
-            Err(e) => Err(format!("the fit failed: {e}")),
+            Err(e) => Err(e.clone()),
         };
         send(
             events,
@@ -366,7 +375,7 @@ async fn body<S: DepthSensor, C: BodyController>(
                 tokio::task::spawn_blocking(move || Err(reason))
             }
         };
-        pending.push(PendingFit { index, handle: fit });
+        pending.push(PendingFit { index, handle: fit, done: None });
         report_finished(pending, &mut reported, of, events, false).await;
     }
 
@@ -388,11 +397,10 @@ async fn body<S: DepthSensor, C: BodyController>(
     report_finished(pending, &mut reported, of, events, true).await;
     let mut observations = Vec::new();
     let mut failed = Vec::new();
-    for fit in pending.drain(..) {
-        match fit.handle.await {
-            Ok(Ok(o)) => observations.push(o),
-            Ok(Err(reason)) => failed.push((u32::from(fit.index), reason)),
-            Err(e) => failed.push((u32::from(fit.index), format!("the fit failed: {e}"))),
+    for mut fit in pending.drain(..) {
+        match fit.outcome().await.clone() {
+            Ok(o) => observations.push(o),
+            Err(reason) => failed.push((u32::from(fit.index), reason)),
         }
     }
     let mut result = match solve_among(&observations, of, &plan.solve) {

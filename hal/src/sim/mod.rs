@@ -7,6 +7,10 @@
 //! to render each frame. Nothing else may read it: the calibration must find
 //! the pose from the feet, as on the robot.
 
+pub mod kinect;
+pub mod robot;
+pub mod world;
+
 use std::sync::{Arc, Mutex};
 
 use crate::geometry::Transform;

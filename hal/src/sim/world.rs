@@ -1,0 +1,752 @@
+//! The simulated world the simulated Kinect looks at, in the ground frame G
+//! (Y up, the ground at `y = 0`; conventions.md).
+//!
+//! The calibration assumes only that the robot stands on a ground it can see.
+//! The simulator must therefore also show it what makes that hard on real
+//! floors: boxes whose tops are planes parallel to the ground, walls that are
+//! large planes of their own, and ground that is not quite flat. A [`World`] is
+//! a ground (flat or a smooth [`HeightField`]) with [`BoxObstacle`]s standing on
+//! it and finite vertical [`Wall`]s; [`World::cast`] finds where a ray meets it,
+//! exactly for the planes and boxes and to well below a micrometre for the
+//! height field.
+//!
+//! Scenarios are constructors: [`World::flat`], [`World::boxes_and_wall`] and
+//! [`World::uneven`]. The seeded ones are deterministic: the same seed gives
+//! the same world on every machine.
+
+use nalgebra::{Point3, Vector2, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Hits closer than this to the ray's origin (in units of the ray parameter)
+/// are ignored, so that a ray leaving a surface does not hit that surface.
+const T_MIN: f64 = 1e-9;
+
+/// Where a ray meets the world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// The ray parameter: the point is `origin + t·direction` (the distance in
+    /// metres when the direction is a unit vector).
+    pub t: f64,
+    /// The surface's unit normal at the hit, facing the ray's origin.
+    pub normal: Vector3<f64>,
+    /// What was hit.
+    pub surface: Surface,
+}
+
+/// The part of the world a ray hit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Surface {
+    Ground,
+    /// The box of that index in [`World::boxes`].
+    Box(usize),
+    /// The wall of that index in [`World::walls`].
+    Wall(usize),
+}
+
+/// One sinusoid of a height field: `amplitude · sin(k·(x, z) + phase)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wave {
+    /// Metres.
+    pub amplitude_m: f64,
+    /// Radians per metre along ground X and Z.
+    pub wavevector: Vector2<f64>,
+    /// Radians.
+    pub phase: f64,
+}
+
+/// Ground that is not quite flat: `y = h(x, z) = Σ aᵢ·sin(kᵢ·(x, z) + φᵢ)`.
+///
+/// Real floors undulate by millimetres to centimetres over metres. A sum of a
+/// few sinusoids is smooth (so ray casting converges), has a known bound on
+/// its height and slope (so sphere tracing is safe), and averages to the plane
+/// `y = 0` over a large area, which stays the ground frame's ground.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeightField {
+    waves: Vec<Wave>,
+    /// `Σ |aᵢ|`: no point of the surface is farther than this from `y = 0`.
+    max_height: f64,
+    /// `Σ |aᵢ|·|kᵢ|`: a bound on the gradient's norm.
+    max_slope: f64,
+}
+
+impl HeightField {
+    /// A height field from its waves.
+    pub fn new(waves: Vec<Wave>) -> Self {
+        let max_height = waves.iter().map(|w| w.amplitude_m.abs()).sum();
+        let max_slope = waves
+            .iter()
+            .map(|w| w.amplitude_m.abs() * w.wavevector.norm())
+            .sum();
+        Self {
+            waves,
+            max_height,
+            max_slope,
+        }
+    }
+
+    /// Four waves of random direction, wavelength 0.7–3 m and phase, whose
+    /// amplitudes add up to `amplitude_m`: the surface stays within
+    /// `±amplitude_m` of `y = 0`.
+    pub fn seeded(seed: u64, amplitude_m: f64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let raw: Vec<(f64, f64, f64, f64)> = (0..4)
+            .map(|_| {
+                (
+                    rng.gen_range(0.5..1.0),
+                    rng.gen_range(0.0..std::f64::consts::TAU),
+                    rng.gen_range(0.7..3.0),
+                    rng.gen_range(0.0..std::f64::consts::TAU),
+                )
+            })
+            .collect();
+        let total: f64 = raw.iter().map(|r| r.0).sum();
+        let waves = raw
+            .into_iter()
+            .map(|(weight, heading, wavelength, phase)| Wave {
+                amplitude_m: amplitude_m.abs() * weight / total,
+                wavevector: Vector2::new(heading.cos(), heading.sin())
+                    * (std::f64::consts::TAU / wavelength),
+                phase,
+            })
+            .collect();
+        Self::new(waves)
+    }
+
+    /// The waves.
+    pub fn waves(&self) -> &[Wave] {
+        &self.waves
+    }
+
+    /// The surface's height at ground coordinates `(x, z)`, metres.
+    pub fn height(&self, x: f64, z: f64) -> f64 {
+        self.waves
+            .iter()
+            .map(|w| w.amplitude_m * (w.wavevector.x * x + w.wavevector.y * z + w.phase).sin())
+            .sum()
+    }
+
+    /// The height and its gradient `(∂h/∂x, ∂h/∂z)` at `(x, z)`.
+    pub fn height_and_gradient(&self, x: f64, z: f64) -> (f64, Vector2<f64>) {
+        let mut h = 0.0;
+        let mut g = Vector2::zeros();
+        for w in &self.waves {
+            let (s, c) = (w.wavevector.x * x + w.wavevector.y * z + w.phase).sin_cos();
+            h += w.amplitude_m * s;
+            g += w.wavevector * (w.amplitude_m * c);
+        }
+        (h, g)
+    }
+
+    /// The upward unit normal at `(x, z)`.
+    pub fn normal(&self, x: f64, z: f64) -> Vector3<f64> {
+        let (_, g) = self.height_and_gradient(x, z);
+        Vector3::new(-g.x, 1.0, -g.y).normalize()
+    }
+
+    /// A bound on `|h|`.
+    pub fn max_height(&self) -> f64 {
+        self.max_height
+    }
+
+    /// The first intersection of the ray with the surface, seen from above,
+    /// with `t` in `(T_MIN, t_max]`.
+    ///
+    /// Along the ray, `f(t) = y(t) - h(x(t), z(t))` has the slope
+    /// `f' = d_y - ∇h·d_xz`, at most `L = |d_y| + max_slope·|d_xz|` in size,
+    /// and below zero whenever the ray falls more steeply than the surface
+    /// can rise (`-d_y > max_slope·|d_xz|`). Every ray a Kinect on a
+    /// robot sees the ground with within 5 m does: `f` then has one root, and
+    /// Newton's method kept inside the bracket where the ray crosses the slab
+    /// `|y| ≤ max_height` finds it in three or four steps. Flatter rays, where a
+    /// bump may hide what lies behind it, are sphere traced: a step of `f/L`
+    /// never crosses the surface, so the first root is never skipped; Newton
+    /// finishes the root once the ray is within 0.1 mm of the surface.
+    fn cast(&self, origin: &Point3<f64>, direction: &Vector3<f64>, t_max: f64) -> Option<Hit> {
+        let a = self.max_height;
+        let dy = direction.y;
+        // Where the ray enters the slab |y| <= A, and where it leaves it below.
+        let t_start = if origin.y > a {
+            if dy >= 0.0 {
+                return None;
+            }
+            (origin.y - a) / -dy
+        } else {
+            0.0
+        };
+        let t_end = if dy < 0.0 {
+            ((origin.y + a) / -dy).min(t_max)
+        } else {
+            t_max
+        };
+        if t_start > t_end {
+            return None;
+        }
+        let horizontal = Vector2::new(direction.x, direction.z).norm();
+        let f = |t: f64| -> (f64, f64) {
+            let p = origin + direction * t;
+            let (h, g) = self.height_and_gradient(p.x, p.z);
+            (p.y - h, dy - g.x * direction.x - g.y * direction.z)
+        };
+        let (start_value, _) = f(t_start);
+        if start_value < 0.0 {
+            // The origin is under the surface: nothing is seen from there.
+            return None;
+        }
+        let t = if -dy > self.max_slope * horizontal {
+            self.newton_in_bracket(&f, t_start, t_end, -origin.y / dy)?
+        } else {
+            self.sphere_trace(&f, t_start, t_end, start_value, dy.abs() + self.max_slope * horizontal)?
+        };
+        if t <= T_MIN || t > t_max {
+            return None;
+        }
+        let p = origin + direction * t;
+        let mut normal = self.normal(p.x, p.z);
+        if normal.dot(direction) > 0.0 {
+            normal = -normal;
+        }
+        Some(Hit {
+            t,
+            normal,
+            surface: Surface::Ground,
+        })
+    }
+
+    /// The root of a decreasing `f` in `[lo, hi]` (`f(lo) ≥ 0`), by Newton's
+    /// method from `guess`, falling back to bisection when a step leaves the
+    /// bracket. `None` if `f(hi) > 0`: the root lies beyond `hi` (`t_max`).
+    fn newton_in_bracket(
+        &self,
+        f: &impl Fn(f64) -> (f64, f64),
+        mut lo: f64,
+        mut hi: f64,
+        guess: f64,
+    ) -> Option<f64> {
+        if f(hi).0 > 0.0 {
+            return None;
+        }
+        let mut t = guess.clamp(lo, hi);
+        for _ in 0..60 {
+            let (value, slope) = f(t);
+            if value > 0.0 {
+                lo = t;
+            } else {
+                hi = t;
+            }
+            let mut next = t - value / slope;
+            if !(next > lo && next < hi) {
+                next = 0.5 * (lo + hi);
+            }
+            let step = (next - t).abs();
+            t = next;
+            if step < 1e-12 * (1.0 + t.abs()) || hi - lo < 1e-13 {
+                break;
+            }
+        }
+        Some(t)
+    }
+
+    /// The first root of `f` in `[t, t_end]` by sphere tracing with the
+    /// Lipschitz bound `lipschitz`, finished by Newton's method.
+    fn sphere_trace(
+        &self,
+        f: &impl Fn(f64) -> (f64, f64),
+        mut t: f64,
+        t_end: f64,
+        mut value: f64,
+        lipschitz: f64,
+    ) -> Option<f64> {
+        if lipschitz <= 0.0 {
+            return None;
+        }
+        // Where Newton takes over: close enough that the surface is locally a
+        // plane to far better than a micrometre.
+        const NEAR: f64 = 1e-4;
+        let mut steps = 0;
+        while value > NEAR {
+            t += value / lipschitz;
+            if t > t_end || steps > 10_000 {
+                return None;
+            }
+            value = f(t).0;
+            steps += 1;
+        }
+        // Newton from just above the surface. It can only fail near a
+        // tangent ray, where the sphere-traced point is already within NEAR.
+        for _ in 0..8 {
+            let (v, slope) = f(t);
+            if v.abs() < 1e-12 || slope >= -1e-12 {
+                break;
+            }
+            let next = t - v / slope;
+            if !(next.is_finite() && (next - t).abs() < 10.0 * NEAR / slope.abs().max(1e-3)) {
+                break;
+            }
+            t = next;
+        }
+        Some(t)
+    }
+}
+
+/// The ground the robot stands on.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Ground {
+    /// The plane `y = 0`.
+    Flat,
+    /// A smooth surface near `y = 0`.
+    HeightField(HeightField),
+}
+
+/// A box standing on the ground: a vertical prism on a rectangle, rotated
+/// about the vertical by `yaw`. Its top is a plane parallel to the ground, the
+/// kind of plane a careless ground fit takes for the ground.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxObstacle {
+    /// Centre of the footprint, ground X and Z, metres.
+    pub centre_x: f64,
+    pub centre_z: f64,
+    /// Half the footprint along the box's own x and z, metres.
+    pub half_x: f64,
+    pub half_z: f64,
+    /// Height of the top above `y = 0`, metres.
+    pub height: f64,
+    /// Rotation about ground Y (as `Ry` of conventions.md), radians.
+    pub yaw: f64,
+}
+
+impl BoxObstacle {
+    /// Ray against box by the slab method, in the box's own frame.
+    fn cast(&self, origin: &Point3<f64>, direction: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+        let (s, c) = self.yaw.sin_cos();
+        // box_from_ground = Ry(yaw)ᵀ about the footprint's centre.
+        let to_box = |v: Vector3<f64>| Vector3::new(c * v.x - s * v.z, v.y, s * v.x + c * v.z);
+        let o = to_box(Vector3::new(
+            origin.x - self.centre_x,
+            origin.y,
+            origin.z - self.centre_z,
+        ));
+        let d = to_box(*direction);
+        let lo = [-self.half_x, 0.0, -self.half_z];
+        let hi = [self.half_x, self.height, self.half_z];
+        let (mut t_near, mut t_far) = (f64::NEG_INFINITY, f64::INFINITY);
+        let (mut near_axis, mut far_axis) = (0, 0);
+        for axis in 0..3 {
+            if d[axis].abs() < 1e-15 {
+                if o[axis] < lo[axis] || o[axis] > hi[axis] {
+                    return None;
+                }
+                continue;
+            }
+            let t1 = (lo[axis] - o[axis]) / d[axis];
+            let t2 = (hi[axis] - o[axis]) / d[axis];
+            let (a, b) = if t1 < t2 { (t1, t2) } else { (t2, t1) };
+            if a > t_near {
+                t_near = a;
+                near_axis = axis;
+            }
+            if b < t_far {
+                t_far = b;
+                far_axis = axis;
+            }
+        }
+        if t_near > t_far || t_far <= T_MIN {
+            return None;
+        }
+        // From inside the box (never for a sensor that sees it) the exit face.
+        let (t, axis) = if t_near > T_MIN {
+            (t_near, near_axis)
+        } else {
+            (t_far, far_axis)
+        };
+        let mut local = Vector3::zeros();
+        local[axis] = -d[axis].signum();
+        // Back to ground: Ry(yaw).
+        let normal = Vector3::new(
+            c * local.x + s * local.z,
+            local.y,
+            -s * local.x + c * local.z,
+        );
+        Some((t, normal))
+    }
+}
+
+/// A finite vertical wall from `y = 0` to `height`, along the segment from
+/// `start` to `end` on the ground (X, Z). It has no thickness: it is seen from
+/// both sides.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wall {
+    /// Ground (X, Z) of one end, metres.
+    pub start: Vector2<f64>,
+    /// Ground (X, Z) of the other end, metres.
+    pub end: Vector2<f64>,
+    /// Metres.
+    pub height: f64,
+}
+
+impl Wall {
+    fn cast(&self, origin: &Point3<f64>, direction: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+        let along = self.end - self.start;
+        let length = along.norm();
+        if length <= 0.0 {
+            return None;
+        }
+        let u = along / length;
+        let mut normal = Vector3::new(-u.y, 0.0, u.x);
+        let denominator = normal.dot(direction);
+        if denominator.abs() < 1e-15 {
+            return None;
+        }
+        let to_wall = Vector3::new(self.start.x - origin.x, -origin.y, self.start.y - origin.z);
+        let t = normal.dot(&to_wall) / denominator;
+        if t <= T_MIN {
+            return None;
+        }
+        let p = origin + direction * t;
+        let s = (Vector2::new(p.x, p.z) - self.start).dot(&u);
+        if !(0.0..=length).contains(&s) || !(0.0..=self.height).contains(&p.y) {
+            return None;
+        }
+        if denominator > 0.0 {
+            normal = -normal;
+        }
+        Some((t, normal))
+    }
+}
+
+/// The simulated world in the ground frame G.
+#[derive(Debug, Clone, PartialEq)]
+pub struct World {
+    pub ground: Ground,
+    pub boxes: Vec<BoxObstacle>,
+    pub walls: Vec<Wall>,
+}
+
+impl World {
+    /// Flat ground and nothing else: the calibration's ideal.
+    pub fn flat() -> Self {
+        Self {
+            ground: Ground::Flat,
+            boxes: Vec::new(),
+            walls: Vec::new(),
+        }
+    }
+
+    /// Flat ground with two boxes (0.1–0.4 m high) and a wall, seeded.
+    ///
+    /// They are placed where the Kinect of a hexapod looks during a schedule
+    /// such as octopus-52: the sensor sits about 0.5 m ahead of the body's
+    /// origin, 0.9–1.1 m above the ground, pitched 10–50° down. The boxes
+    /// (footprints 0.2–0.4 m) stand 1.6–2.5 m ahead of the body's origin, one
+    /// on each side of the view's centre line; the wall is 2–3 m ahead of the
+    /// sensor (ground X 2.5–3.5 m), 1.0–1.5 m wide and off to one side,
+    /// 0.8–1.2 m high. The ground keeps most of the image: the wall hides
+    /// only ground that is far, and far ground is out of range when the body
+    /// pitches up.
+    pub fn boxes_and_wall(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let side = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        let mut boxes = Vec::new();
+        for (i, lateral) in [(0, 0.2..0.5), (1, 0.3..0.6)] {
+            let sign = if i == 0 { side } else { -side };
+            boxes.push(BoxObstacle {
+                centre_x: rng.gen_range(1.6..2.5),
+                centre_z: sign * rng.gen_range(lateral),
+                half_x: rng.gen_range(0.1..0.2),
+                half_z: rng.gen_range(0.1..0.2),
+                height: rng.gen_range(0.1..0.4),
+                yaw: rng.gen_range(-0.6..0.6),
+            });
+        }
+        let x = rng.gen_range(2.5..3.5);
+        let width = rng.gen_range(1.0..1.5);
+        let centre_z = -side * rng.gen_range(1.0..1.4);
+        let skew = rng.gen_range(-0.3..0.3);
+        let walls = vec![Wall {
+            start: Vector2::new(x - skew, centre_z - width / 2.0),
+            end: Vector2::new(x + skew, centre_z + width / 2.0),
+            height: rng.gen_range(0.8..1.2),
+        }];
+        Self {
+            ground: Ground::Flat,
+            boxes,
+            walls,
+        }
+    }
+
+    /// Uneven ground: a seeded [`HeightField`] within `±amplitude_m` of
+    /// `y = 0` (a few millimetres to about 2 cm for real floors).
+    pub fn uneven(seed: u64, amplitude_m: f64) -> Self {
+        Self {
+            ground: Ground::HeightField(HeightField::seeded(seed, amplitude_m)),
+            boxes: Vec::new(),
+            walls: Vec::new(),
+        }
+    }
+
+    /// The height of the ground at `(x, z)`, ignoring boxes and walls.
+    pub fn ground_height(&self, x: f64, z: f64) -> f64 {
+        match &self.ground {
+            Ground::Flat => 0.0,
+            Ground::HeightField(field) => field.height(x, z),
+        }
+    }
+
+    /// The ray parameter of the first hit of the ray `origin + t·direction`
+    /// (the distance when `direction` is a unit vector), if any.
+    pub fn hit(&self, origin: &Point3<f64>, direction: &Vector3<f64>) -> Option<f64> {
+        self.cast(origin, direction, f64::INFINITY).map(|h| h.t)
+    }
+
+    /// Whether a box or a wall meets the ray with `t ≤ t_max`. The ground is
+    /// not asked: a flat ground cannot stand between two points above it,
+    /// and a height field of centimetres hides nothing from a sensor a metre
+    /// above it. This is the cheap test of the emitter's shadows.
+    pub fn blocked_by_obstacle(
+        &self,
+        origin: &Point3<f64>,
+        direction: &Vector3<f64>,
+        t_max: f64,
+    ) -> bool {
+        self.boxes
+            .iter()
+            .filter_map(|b| b.cast(origin, direction))
+            .chain(self.walls.iter().filter_map(|w| w.cast(origin, direction)))
+            .any(|(t, _)| t <= t_max)
+    }
+
+    /// Whether the world has anything but ground.
+    pub fn has_obstacles(&self) -> bool {
+        !(self.boxes.is_empty() && self.walls.is_empty())
+    }
+
+    /// The first hit with `t ≤ t_max`, with its normal and surface. Capping
+    /// `t` lets a sensor skip what is beyond its range.
+    pub fn cast(&self, origin: &Point3<f64>, direction: &Vector3<f64>, t_max: f64) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut limit = t_max;
+        for (i, b) in self.boxes.iter().enumerate() {
+            if let Some((t, normal)) = b.cast(origin, direction) {
+                if t <= limit {
+                    limit = t;
+                    best = Some(Hit {
+                        t,
+                        normal,
+                        surface: Surface::Box(i),
+                    });
+                }
+            }
+        }
+        for (i, w) in self.walls.iter().enumerate() {
+            if let Some((t, normal)) = w.cast(origin, direction) {
+                if t <= limit {
+                    limit = t;
+                    best = Some(Hit {
+                        t,
+                        normal,
+                        surface: Surface::Wall(i),
+                    });
+                }
+            }
+        }
+        // The ground last: the height field's search stops at the nearest
+        // obstacle already found.
+        let ground = match &self.ground {
+            Ground::Flat => {
+                let t = -origin.y / direction.y;
+                (t > T_MIN && t <= limit).then(|| Hit {
+                    t,
+                    normal: Vector3::y() * -direction.y.signum(),
+                    surface: Surface::Ground,
+                })
+            }
+            Ground::HeightField(field) => field.cast(origin, direction, limit),
+        };
+        ground.or(best)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flat_ground_is_hit_at_the_height_over_the_downward_component() {
+        let world = World::flat();
+        let origin = Point3::new(0.3, 1.2, -0.4);
+        let direction = Vector3::new(0.6, -0.8, 0.0);
+        let t = world.hit(&origin, &direction).unwrap();
+        assert!((t - 1.5).abs() < 1e-12);
+        assert_eq!(world.hit(&origin, &Vector3::new(1.0, 0.1, 0.0)), None);
+        assert_eq!(world.hit(&origin, &Vector3::new(1.0, 0.0, 0.0)), None);
+    }
+
+    #[test]
+    fn box_top_and_side_are_hit_exactly() {
+        let b = BoxObstacle {
+            centre_x: 2.0,
+            centre_z: 0.0,
+            half_x: 0.2,
+            half_z: 0.3,
+            height: 0.25,
+            yaw: 0.0,
+        };
+        let world = World {
+            ground: Ground::Flat,
+            boxes: vec![b],
+            walls: vec![],
+        };
+        // Straight down onto the top.
+        let hit = world
+            .cast(&Point3::new(2.05, 1.0, 0.1), &-Vector3::y(), f64::INFINITY)
+            .unwrap();
+        assert_eq!(hit.surface, Surface::Box(0));
+        assert!((hit.t - 0.75).abs() < 1e-12);
+        assert!((hit.normal - Vector3::y()).norm() < 1e-12);
+        // Horizontally onto the near side.
+        let hit = world
+            .cast(&Point3::new(0.0, 0.1, 0.0), &Vector3::x(), f64::INFINITY)
+            .unwrap();
+        assert!((hit.t - 1.8).abs() < 1e-12);
+        assert!((hit.normal + Vector3::x()).norm() < 1e-12);
+        // Just past the side the ray reaches nothing.
+        assert_eq!(world.hit(&Point3::new(0.0, 0.1, 0.31), &Vector3::x()), None);
+    }
+
+    #[test]
+    fn rotated_box_is_hit_on_its_rotated_face() {
+        let yaw = 30f64.to_radians();
+        let b = BoxObstacle {
+            centre_x: 0.0,
+            centre_z: 0.0,
+            half_x: 0.5,
+            half_z: 0.5,
+            height: 1.0,
+            yaw,
+        };
+        let world = World {
+            ground: Ground::Flat,
+            boxes: vec![b],
+            walls: vec![],
+        };
+        // The box's +x face has the normal Ry(yaw)·x = (cos, 0, -sin); aim at it.
+        let face_normal = Vector3::new(yaw.cos(), 0.0, -yaw.sin());
+        let origin = Point3::from(face_normal * 3.0 + Vector3::y() * 0.5);
+        let hit = world.cast(&origin, &-face_normal, f64::INFINITY).unwrap();
+        assert!((hit.t - 2.5).abs() < 1e-12);
+        assert!((hit.normal - face_normal).norm() < 1e-12);
+    }
+
+    #[test]
+    fn wall_is_finite_and_seen_from_both_sides() {
+        let wall = Wall {
+            start: Vector2::new(3.0, -1.0),
+            end: Vector2::new(3.0, 1.0),
+            height: 1.0,
+        };
+        let world = World {
+            ground: Ground::Flat,
+            boxes: vec![],
+            walls: vec![wall],
+        };
+        let hit = world
+            .cast(&Point3::new(0.0, 0.5, 0.0), &Vector3::x(), f64::INFINITY)
+            .unwrap();
+        assert_eq!(hit.surface, Surface::Wall(0));
+        assert!((hit.t - 3.0).abs() < 1e-12);
+        assert!((hit.normal + Vector3::x()).norm() < 1e-12);
+        let hit = world
+            .cast(&Point3::new(5.0, 0.5, 0.0), &-Vector3::x(), f64::INFINITY)
+            .unwrap();
+        assert!((hit.t - 2.0).abs() < 1e-12);
+        assert!((hit.normal - Vector3::x()).norm() < 1e-12);
+        // Over the top and past the end.
+        assert_eq!(world.hit(&Point3::new(0.0, 1.1, 0.0), &Vector3::x()), None);
+        assert_eq!(world.hit(&Point3::new(0.0, 0.5, 1.1), &Vector3::x()), None);
+        // The t cap hides it.
+        assert_eq!(
+            world.cast(&Point3::new(0.0, 0.5, 0.0), &Vector3::x(), 2.9),
+            None
+        );
+    }
+
+    #[test]
+    fn nearest_surface_wins() {
+        let world = World::boxes_and_wall(7);
+        let b = world.boxes[0];
+        // From above the box's centre, down: the box top, not the ground.
+        let origin = Point3::new(b.centre_x, 1.0, b.centre_z);
+        let t = world.hit(&origin, &-Vector3::y()).unwrap();
+        assert!((t - (1.0 - b.height)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn seeded_worlds_are_deterministic_and_within_their_ranges() {
+        assert_eq!(World::boxes_and_wall(3), World::boxes_and_wall(3));
+        assert_ne!(World::boxes_and_wall(3), World::boxes_and_wall(4));
+        assert_eq!(World::uneven(3, 0.01), World::uneven(3, 0.01));
+        for seed in 0..50 {
+            let world = World::boxes_and_wall(seed);
+            assert_eq!(world.boxes.len(), 2);
+            for b in &world.boxes {
+                assert!((0.1..=0.4).contains(&b.height));
+            }
+            let w = world.walls[0];
+            let x = (w.start.x + w.end.x) / 2.0;
+            assert!((2.5..=3.5).contains(&x));
+        }
+    }
+
+    #[test]
+    fn height_field_hits_lie_on_the_surface_and_are_the_first() {
+        let world = World::uneven(11, 0.02);
+        let Ground::HeightField(field) = &world.ground else {
+            unreachable!()
+        };
+        assert!((field.max_height() - 0.02).abs() < 1e-12);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut hits = 0;
+        for _ in 0..2000 {
+            let origin = Point3::new(rng.gen_range(-1.0..1.0), rng.gen_range(0.3..1.5), 0.0);
+            // Downward rays from steep to grazing (2° below the horizon).
+            let down = rng.gen_range(2f64.to_radians()..80f64.to_radians());
+            let heading = rng.gen_range(0.0..std::f64::consts::TAU);
+            let direction = Vector3::new(
+                down.cos() * heading.cos(),
+                -down.sin(),
+                down.cos() * heading.sin(),
+            );
+            let Some(hit) = world.cast(&origin, &direction, 60.0) else {
+                continue;
+            };
+            hits += 1;
+            let p = origin + direction * hit.t;
+            assert!(
+                (p.y - field.height(p.x, p.z)).abs() < 1e-9,
+                "hit {} m off the surface",
+                p.y - field.height(p.x, p.z)
+            );
+            // No earlier crossing: the ray stays above the surface before it.
+            for k in 1..200 {
+                let q = origin + direction * (hit.t * k as f64 / 200.0);
+                assert!(q.y - field.height(q.x, q.z) > -1e-9);
+            }
+            assert!(hit.normal.y > 0.9);
+        }
+        assert!(hits > 1900, "only {hits} of 2000 rays hit the ground");
+    }
+
+    #[test]
+    fn height_field_amplitude_bounds_the_surface() {
+        let field = HeightField::seeded(2, 0.015);
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let mut largest: f64 = 0.0;
+        for _ in 0..10_000 {
+            let h = field.height(rng.gen_range(-5.0..5.0), rng.gen_range(-5.0..5.0));
+            largest = largest.max(h.abs());
+        }
+        assert!(largest <= 0.015 + 1e-12);
+        // And it is not flat: at least a third of the bound is reached.
+        assert!(largest > 0.005, "largest {largest}");
+    }
+}

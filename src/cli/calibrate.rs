@@ -1,0 +1,213 @@
+//! `groundcal calibrate`: one calibration in the foreground, with the same
+//! session logic as the daemon; progress on stderr (a bar on a terminal,
+//! plain lines otherwise), the result on stdout.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use super::{print_json, ExitStatus};
+use crate::config::Config;
+use crate::hardware::{self, Selection};
+use crate::pipeline::PoseSettings;
+use crate::recording::Recording;
+use crate::schedule::Schedule;
+use crate::session::{self, Event, Plan, SessionError};
+
+/// The command's options.
+#[derive(Debug, Clone, Default)]
+pub struct CalibrateOptions {
+    pub config: Option<PathBuf>,
+    pub selection: Selection,
+    pub record: Option<PathBuf>,
+    pub json: bool,
+}
+
+/// Where the configuration comes from: the file given; the built-in
+/// simulation configuration when both robot and sensor are simulated;
+/// otherwise the robot's `/etc/groundcal/groundcal.toml`.
+pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), String> {
+    if let Some(path) = &options.config {
+        return Config::load(path).map_err(|e| e.to_string());
+    }
+    let s = &options.selection;
+    if s.robot.as_deref() == Some("sim") && s.sensor.as_deref().is_none_or(|v| v == "sim" || v.starts_with("replay:")) {
+        return Ok(Config::embedded_sim());
+    }
+    Config::load(Path::new("/etc/groundcal/groundcal.toml")).map_err(|e| format!("{e} (give --config FILE)"))
+}
+
+/// The session plan from the configuration; a replayed sensor brings its
+/// recording's schedule, frames per pose, tilt and nominal mount.
+pub fn plan(config: &Config, schedule: Schedule, replay: Option<&Recording>, record: Option<PathBuf>) -> Plan {
+    let c = &config.calibration;
+    // Simulated hardware runs faster than real time: so do the waits.
+    let scale = match (&config.sim, config.robot.address.as_str()) {
+        (Some(sim), "sim") => sim.time_scale,
+        _ => 1.0,
+    };
+    let mut plan = Plan {
+        schedule,
+        limits: config.robot.limits,
+        frames_per_pose: c.frames_per_pose,
+        motion: Duration::from_millis(u64::from(c.motion_ms)),
+        settle: Duration::from_millis(c.settle_ms).div_f64(scale),
+        tilt_deg: config.sensor.tilt_deg,
+        nominal_mount: c.nominal_mount,
+        pose: PoseSettings { slip_threshold_m: c.slip_threshold_mm / 1000.0, ..PoseSettings::default() },
+        solve: crate::calib::solve::SolveSettings { gates: c.gates, ..Default::default() },
+        record,
+        poll: Duration::from_millis(100).div_f64(scale.max(1.0)).max(Duration::from_millis(5)),
+        motion_slack: Duration::from_secs(5),
+    };
+    if let Some(recording) = replay {
+        plan.schedule = Schedule {
+            name: format!("replay of {}", recording.dir.display()),
+            home: recording.session.home.commanded,
+            poses: recording.poses.iter().map(|p| p.commanded).collect(),
+        };
+        plan.frames_per_pose = recording.poses.iter().map(|p| p.depth_frames.len()).max().unwrap_or(1).max(1);
+        plan.tilt_deg = recording.session.kinect.tilt_deg;
+        plan.nominal_mount = recording.session.nominal_mount.or(plan.nominal_mount);
+    }
+    plan
+}
+
+/// Prints progress as it happens.
+fn show_progress(mut events: tokio::sync::mpsc::UnboundedReceiver<Event>) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        let terminal = std::io::stderr().is_terminal();
+        let bar = terminal.then(|| {
+            let bar = indicatif::ProgressBar::new(0);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] pose {pos}/{len} {msg}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            bar
+        });
+        while let Some(event) = events.recv().await {
+            let line = match &event {
+                Event::Started { poses, schedule } => {
+                    if let Some(bar) = &bar {
+                        bar.set_length(*poses as u64);
+                    }
+                    format!("schedule \"{schedule}\": {poses} poses, checked against the limits")
+                }
+                Event::Connected { firmware } => format!("lower computer: {firmware}"),
+                Event::AtHome => "at the home stance; ground frame fixed".into(),
+                Event::SensorReady { tilt_deg } => format!("Kinect tilted to {tilt_deg}°"),
+                Event::Moving { index, of, .. } => format!("pose {index}/{of}: moving"),
+                Event::Capturing { index, of } => format!("pose {index}/{of}: capturing"),
+                Event::PoseDone { index, of, outcome } => {
+                    if let Some(bar) = &bar {
+                        bar.set_position(u64::from(*index));
+                    }
+                    match outcome {
+                        Ok(fit) => format!("pose {index}/{of}: ground fitted ({} points)", fit.inliers),
+                        Err(e) => format!("pose {index}/{of}: {e}"),
+                    }
+                }
+                Event::Solving => "back home; solving".into(),
+                Event::Finished { accepted } => format!("finished: {}", if *accepted { "accepted" } else { "rejected" }),
+                Event::Aborted { reason } => format!("ABORTED: {reason}"),
+            };
+            match &bar {
+                Some(bar) => bar.set_message(line),
+                None => eprintln!("groundcal calibrate: {line}"),
+            }
+        }
+        if let Some(bar) = bar {
+            bar.finish_and_clear();
+        }
+    })
+}
+
+/// Completes when the operator presses Ctrl-C or systemd sends SIGTERM.
+async fn stop_signal() -> String {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => tokio::select! {
+                _ = tokio::signal::ctrl_c() => "interrupted (SIGINT)".to_string(),
+                _ = term.recv() => "terminated (SIGTERM)".to_string(),
+            },
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+                "interrupted (SIGINT)".to_string()
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+        "interrupted".to_string()
+    }
+}
+
+/// Runs the command.
+pub fn run(options: &CalibrateOptions) -> ExitStatus {
+    let (config, schedule) = match load_config(options) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("groundcal calibrate: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("groundcal calibrate: cannot start the runtime: {e}");
+            return ExitStatus::RuntimeFailure;
+        }
+    };
+    runtime.block_on(async {
+        let (mut sensor, mut controller) = match hardware::open(&config, &options.selection).await {
+            Ok(h) => h,
+            Err(e) => {
+                eprintln!("groundcal calibrate: {e}");
+                return ExitStatus::RuntimeFailure;
+            }
+        };
+        let replay = match &sensor {
+            hardware::Sensor::Replay(r) => Some(r.recording().clone()),
+            _ => None,
+        };
+        let plan = plan(&config, schedule, replay.as_ref(), options.record.clone());
+        let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
+        let progress = show_progress(receiver);
+        let outcome = session::run(&mut sensor, &mut controller, &plan, &events, stop_signal()).await;
+        drop(events);
+        let _ = progress.await;
+        match outcome {
+            Ok(outcome) => {
+                let printed = if options.json {
+                    print_json(&outcome.result)
+                } else {
+                    print!("{}", outcome.result.to_table());
+                    Ok(())
+                };
+                if let Some(dir) = &outcome.recording {
+                    eprintln!("groundcal calibrate: recording written to {}", dir.display());
+                }
+                if let Err(e) = printed {
+                    eprintln!("groundcal calibrate: {e}");
+                    return ExitStatus::RuntimeFailure;
+                }
+                if outcome.result.accepted() {
+                    ExitStatus::Success
+                } else {
+                    ExitStatus::Rejected
+                }
+            }
+            Err(SessionError::Refused(reason)) => {
+                eprintln!("groundcal calibrate: refused before moving: {reason}");
+                ExitStatus::BadInput
+            }
+            Err(e) => {
+                eprintln!("groundcal calibrate: {e}");
+                ExitStatus::RuntimeFailure
+            }
+        }
+    })
+}
