@@ -28,3 +28,4 @@ pub mod schedule;
 pub mod session;
 pub mod store;
 pub mod systemd;
+pub mod terminal;

@@ -73,6 +73,35 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// The simulated lower computer (hexapod-udp.md) on a UDP socket, until SIGINT or SIGTERM.
+    SimRobot {
+        /// The address to listen on, e.g. 127.0.0.1:7400 (port 0: any free port; the
+        /// bound address is printed on stdout as `listening on IP:PORT`).
+        #[arg(long, value_name = "ADDR")]
+        listen: String,
+        /// Picks the robot's kinematic error and noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Motions take duration / X (50: fifty times faster than real time).
+        #[arg(long, value_name = "X", default_value_t = 1.0)]
+        time_scale: f64,
+    },
+    /// The daemon for the phone/pad terminal: HTTP API and page, sd_notify.
+    Serve {
+        #[arg(long)]
+        config: PathBuf,
+        /// The lower computer: host:port, or sim.
+        #[arg(long)]
+        robot: Option<String>,
+        /// The depth sensor: kinect, sim, or replay:DIR.
+        #[arg(long)]
+        sensor: Option<String>,
+        #[arg(long, value_name = "PATH")]
+        freenect_lib: Option<PathBuf>,
+        /// Overrides serve.listen (HOST:PORT; port 0 picks one).
+        #[arg(long)]
+        listen: Option<String>,
+    },
     /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
     CheckConfig { file: PathBuf },
     /// Record N depth frames from the sensor as a recording whose kinect/ is a fakenect dump.
@@ -151,15 +180,46 @@ fn run(args: Args) -> ExitStatus {
             };
             cli::replay::run(&dir, json, report.as_deref(), &options)
         }
-        Command::Calibrate { config, robot, sensor, freenect_lib, record, json } => {
+        Command::Calibrate {
+            config,
+            robot,
+            sensor,
+            freenect_lib,
+            record,
+            json,
+        } => {
             let options = cli::calibrate::CalibrateOptions {
                 config,
-                selection: groundcal::hardware::Selection { robot, sensor, freenect_lib },
+                selection: groundcal::hardware::Selection {
+                    robot,
+                    sensor,
+                    freenect_lib,
+                },
                 record,
                 json,
             };
             cli::calibrate::run(&options)
         }
+        Command::SimRobot {
+            listen,
+            seed,
+            time_scale,
+        } => cli::sim_robot::run(&listen, seed, time_scale),
+        Command::Serve {
+            config,
+            robot,
+            sensor,
+            freenect_lib,
+            listen,
+        } => cli::serve::run(&cli::serve::ServeOptions {
+            config,
+            selection: groundcal::hardware::Selection {
+                robot,
+                sensor,
+                freenect_lib,
+            },
+            listen,
+        }),
         Command::CheckConfig { file } => match groundcal::config::Config::load(&file) {
             Ok((config, schedule)) => {
                 println!(

@@ -14,7 +14,12 @@ fn sim_config() -> PathBuf {
 }
 
 fn true_mount() -> PoseDegMm {
-    groundcal::config::Config::load(&sim_config()).unwrap().0.sim.unwrap().mount
+    groundcal::config::Config::load(&sim_config())
+        .unwrap()
+        .0
+        .sim
+        .unwrap()
+        .mount
 }
 
 fn mount_of(result: &serde_json::Value) -> PoseDegMm {
@@ -34,7 +39,10 @@ fn distance(a: &PoseDegMm, b: &PoseDegMm) -> (f64, f64) {
     let (pa, pb) = (a.to_params(), b.to_params());
     let ra = Rotation3::from_matrix_unchecked(pa.rotation_matrix());
     let rb = Rotation3::from_matrix_unchecked(pb.rotation_matrix());
-    ((ra.inverse() * rb).angle().to_degrees(), (pa.translation - pb.translation).norm() * 1e3)
+    (
+        (ra.inverse() * rb).angle().to_degrees(),
+        (pa.translation - pb.translation).norm() * 1e3,
+    )
 }
 
 /// A copy of sim.toml with another world, its schedule path made absolute.
@@ -43,54 +51,82 @@ fn config_with_world(world: &str) -> PathBuf {
     let schedule = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/schedules/octopus-52.toml");
     let text = text
         .replace("world = \"flat\"", &format!("world = \"{world}\""))
-        .replace("schedule = \"schedules/octopus-52.toml\"", &format!("schedule = \"{}\"", schedule.display()));
-    let path = std::env::temp_dir().join(format!("groundcal-sim-{world}-{}.toml", std::process::id()));
+        .replace(
+            "schedule = \"schedules/octopus-52.toml\"",
+            &format!("schedule = \"{}\"", schedule.display()),
+        );
+    let path =
+        std::env::temp_dir().join(format!("groundcal-sim-{world}-{}.toml", std::process::id()));
     std::fs::write(&path, text).unwrap();
     path
 }
 
 #[test]
 fn the_readme_command_calibrates_the_simulated_robot() {
-    let (code, result) = groundcal_json(&["calibrate", "--robot", "sim", "--sensor", "sim", "--json"]);
+    let (code, result) =
+        groundcal_json(&["calibrate", "--robot", "sim", "--sensor", "sim", "--json"]);
     assert_eq!(code, 0, "{result:#}");
     assert_eq!(result["status"], "accepted");
     let (angle, offset) = distance(&mount_of(&result), &true_mount());
-    assert!(angle <= 0.03 && offset <= 1.0, "off by {angle}° and {offset} mm");
+    assert!(
+        angle <= 0.03 && offset <= 1.0,
+        "off by {angle}° and {offset} mm"
+    );
     assert_eq!(result["summary"]["poses_used"], 52);
 }
 
 #[test]
 fn boxes_and_a_wall_in_view_do_not_pull_the_result() {
     let config = config_with_world("boxes-and-wall");
-    let (code, result) = groundcal_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    let (code, result) =
+        groundcal_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
     let _ = std::fs::remove_file(&config);
     assert_eq!(code, 0, "{result:#}");
     let (angle, offset) = distance(&mount_of(&result), &true_mount());
-    assert!(angle <= 0.05 && offset <= 1.5, "off by {angle}° and {offset} mm");
+    assert!(
+        angle <= 0.05 && offset <= 1.5,
+        "off by {angle}° and {offset} mm"
+    );
 }
 
 #[test]
 fn a_recorded_session_replays_to_the_same_result() {
     let dir = std::env::temp_dir().join(format!("groundcal-recorded-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let (code, live) =
-        groundcal_json(&["calibrate", "--robot", "sim", "--sensor", "sim", "--json", "--record", dir.to_str().unwrap()]);
+    let (code, live) = groundcal_json(&[
+        "calibrate",
+        "--robot",
+        "sim",
+        "--sensor",
+        "sim",
+        "--json",
+        "--record",
+        dir.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0);
     let (code, replayed) = groundcal_json(&["replay", dir.to_str().unwrap(), "--json"]);
     let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(code, 0);
     // The recording holds the very frames and feet the session used.
     let (angle, offset) = distance(&mount_of(&live), &mount_of(&replayed));
-    assert!(angle < 1e-9 && offset < 1e-6, "live and replay differ by {angle}° and {offset} mm");
+    assert!(
+        angle < 1e-9 && offset < 1e-6,
+        "live and replay differ by {angle}° and {offset} mm"
+    );
 }
 
 #[test]
 fn an_invalid_schedule_is_refused_before_anything_moves() {
     let config = config_with_world("flat");
-    let text = std::fs::read_to_string(&config).unwrap().replace("max_tilt_deg = 25.0", "max_tilt_deg = 15.0");
+    let text = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace("max_tilt_deg = 25.0", "max_tilt_deg = 15.0");
     std::fs::write(&config, text).unwrap();
     let (code, _, stderr) = groundcal(&["calibrate", "--config", config.to_str().unwrap()]);
     let _ = std::fs::remove_file(&config);
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("pose 1") && stderr.contains("tilt limit"), "{stderr}");
+    assert!(
+        stderr.contains("pose 1") && stderr.contains("tilt limit"),
+        "{stderr}"
+    );
 }

@@ -375,13 +375,11 @@ fn restart_with_the_robot_on_a_thread() {
 }
 
 #[test]
-#[ignore = "needs the sim-robot subcommand wired in src/main.rs"]
 fn lossy_network_with_the_robot_in_a_process() {
     scenario("process-lossy", Start::Process, None);
 }
 
 #[test]
-#[ignore = "needs the sim-robot subcommand wired in src/main.rs"]
 fn restart_with_the_robot_in_a_process() {
     scenario("process-restart", Start::Process, Some(20));
 }

@@ -63,10 +63,11 @@ pub trait DepthSensor {
     /// Sets the LED (the operator sees the sensor is in use).
     async fn set_led(&mut self, led: Led) -> Result<(), Self::Error>;
 
-    /// Tells the sensor which pose the next frames belong to. Real sensors
-    /// ignore it; a replayed sensor serves that pose's recorded frames.
+    /// Tells the sensor which pose the next frames belong to: frames queued
+    /// before it are discarded (they were taken before the pose began); a
+    /// replayed sensor serves that pose's recorded frames.
     fn begin_pose(&mut self, _pose_id: u16) {}
 
-    /// The next depth frame produced after this call.
+    /// The next depth frame, in the order the sensor delivered them.
     async fn next_frame(&mut self) -> Result<DepthFrame, Self::Error>;
 }

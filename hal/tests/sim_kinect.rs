@@ -70,7 +70,11 @@ fn points(raw: &[u16], model: &DepthModel, k: &Intrinsics) -> Vec<Vector3<f64>> 
     for v in 0..k.height {
         for u in 0..k.width {
             if let Some(z) = model.depth_m(raw[v * k.width + u]) {
-                let optical = Vector3::new((u as f64 - k.cx) * z / k.fx, (v as f64 - k.cy) * z / k.fy, z);
+                let optical = Vector3::new(
+                    (u as f64 - k.cx) * z / k.fx,
+                    (v as f64 - k.cy) * z / k.fy,
+                    z,
+                );
                 out.push(sensor_from_optical() * optical);
             }
         }
@@ -109,7 +113,11 @@ fn pixel_ray(ground_from_sensor: &Transform, k: &Intrinsics, u: f64, v: f64) -> 
 }
 
 /// The pixel (rounded) a ground point projects to, if in the image.
-fn project(ground_from_sensor: &Transform, k: &Intrinsics, p: &Point3<f64>) -> Option<(usize, usize)> {
+fn project(
+    ground_from_sensor: &Transform,
+    k: &Intrinsics,
+    p: &Point3<f64>,
+) -> Option<(usize, usize)> {
     let sensor = ground_from_sensor.inverse() * p;
     let optical = sensor_from_optical().transpose() * sensor.coords;
     if optical.z <= 0.0 {
@@ -137,7 +145,10 @@ fn flat_ground_fits_the_true_plane_for_both_models() {
             let truth = ground_in_sensor(&ground_from_sensor);
             let angle = angle_deg(&n, &truth.normal);
             let offset_mm = (d - truth.d).abs() * 1e3;
-            println!("{model:?} pose {i}: {angle:.4}° {offset_mm:.3} mm, {} points", pts.len());
+            println!(
+                "{model:?} pose {i}: {angle:.4}° {offset_mm:.3} mm, {} points",
+                pts.len()
+            );
             assert!(angle < 0.05, "pose {i}: normal {angle}° off");
             assert!(offset_mm < 1.0, "pose {i}: height {offset_mm} mm off");
             worst = (worst.0.max(angle), worst.1.max(offset_mm));
@@ -163,8 +174,14 @@ fn frames_are_deterministic_per_seed_and_frame() {
     .unwrap();
     assert_ne!(first, other.render(&world, &ground_from_sensor, 3));
     // The same on one thread as on many.
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    assert_eq!(first, pool.install(|| a.render(&world, &ground_from_sensor, 3)));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    assert_eq!(
+        first,
+        pool.install(|| a.render(&world, &ground_from_sensor, 3))
+    );
 }
 
 #[test]
@@ -229,7 +246,9 @@ fn dead_border_out_of_range_and_sky_are_no_reading() {
     let origin = Point3::from(low.translation.vector);
     for v in (0..k.height).step_by(7) {
         for u in (0..k.width - 8).step_by(7) {
-            let z = world.hit(&origin, &pixel_ray(&low, &k, u as f64, v as f64)).unwrap();
+            let z = world
+                .hit(&origin, &pixel_ray(&low, &k, u as f64, v as f64))
+                .unwrap();
             if z < 0.49 {
                 seen_near = true;
                 assert_eq!(raw[v * k.width + u], RAW_NO_READING);
@@ -237,6 +256,45 @@ fn dead_border_out_of_range_and_sky_are_no_reading() {
         }
     }
     assert!(seen_near, "no pixel nearer than 0.5 m was tested");
+}
+
+#[test]
+fn every_pixel_is_the_quantised_depth_of_its_ray() {
+    // Without noise, dropouts and shadows, a frame is the world's depth along
+    // each pixel's ray, quantised: what the renderer's shortcuts (obstacle
+    // rectangles, Newton started at the neighbour's height) must not change.
+    for (world, model) in [
+        (World::boxes_and_wall(3), DepthModel::default()),
+        (
+            World::boxes_and_wall(4),
+            DepthModel::inverse_linear_default(),
+        ),
+        (World::uneven(2, 0.02), DepthModel::default()),
+    ] {
+        let cfg = SimKinectConfig {
+            noise_scale: 0.0,
+            dropout_rate: 0.0,
+            grazing_dropout: 0.0,
+            emitter_baseline_m: 0.0,
+            ..config(model)
+        };
+        let renderer = DepthRenderer::new(&cfg).unwrap();
+        let k = cfg.intrinsics;
+        for body in body_poses() {
+            let ground_from_sensor = body * mount();
+            let raw = renderer.render(&world, &ground_from_sensor, 0);
+            let origin = Point3::from(ground_from_sensor.translation.vector);
+            for v in 0..k.height {
+                for u in 0..k.width - 8 {
+                    let direction = pixel_ray(&ground_from_sensor, &k, u as f64, v as f64);
+                    let expected = world
+                        .cast(&origin, &direction, 10.0)
+                        .map_or(RAW_NO_READING, |hit| renderer.quantise(hit.t));
+                    assert_eq!(raw[v * k.width + u], expected, "({u}, {v})");
+                }
+            }
+        }
+    }
 }
 
 #[test]
@@ -304,7 +362,10 @@ fn grazing_ground_loses_more_pixels_than_steep_ground() {
     );
     assert!(grazing > 1000 && steep > 1000);
     assert!(steep_rate < 0.015, "steep {steep_rate}");
-    assert!(grazing_rate > 2.0 * steep_rate, "grazing {grazing_rate}, steep {steep_rate}");
+    assert!(
+        grazing_rate > 2.0 * steep_rate,
+        "grazing {grazing_rate}, steep {steep_rate}"
+    );
 }
 
 #[test]
@@ -338,7 +399,11 @@ fn box_tops_and_walls_appear_where_they_stand() {
                 let direction = pixel_ray(&ground_from_sensor, &k, u as f64, v as f64);
                 let z = (b.height - origin.y) / direction.y;
                 let value = raw[v * k.width + u];
-                assert_eq!(value, renderer.quantise(z), "seed {seed}: box top at ({u}, {v})");
+                assert_eq!(
+                    value,
+                    renderer.quantise(z),
+                    "seed {seed}: box top at ({u}, {v})"
+                );
                 let measured = cfg.depth_model.depth_m(value).unwrap();
                 // Within half a raw step (27 mm at 3 m) of the top's depth.
                 assert!((measured - z).abs() < 0.5 * 1.4e-2 * z * z);
@@ -353,7 +418,11 @@ fn box_tops_and_walls_appear_where_they_stand() {
                 let hit = world.cast(&origin, &direction, 10.0).unwrap();
                 if u < k.width - 8 && hit.surface == Surface::Wall(0) && hit.t <= 4.9 {
                     let value = raw[v * k.width + u];
-                    assert_eq!(value, renderer.quantise(hit.t), "seed {seed}: wall at ({u}, {v})");
+                    assert_eq!(
+                        value,
+                        renderer.quantise(hit.t),
+                        "seed {seed}: wall at ({u}, {v})"
+                    );
                     // The depth is the wall plane's along this pixel's ray.
                     let along = (w.end - w.start).normalize();
                     let normal = Vector3::new(-along.y, 0.0, along.x);
@@ -365,7 +434,10 @@ fn box_tops_and_walls_appear_where_they_stand() {
             }
         }
     }
-    assert!(checked > 50, "only {checked} box tops and walls were in view");
+    assert!(
+        checked > 50,
+        "only {checked} box tops and walls were in view"
+    );
 }
 
 #[test]
@@ -403,12 +475,21 @@ fn ground_stays_most_of_the_image_with_boxes_and_a_wall() {
             let fraction = ground as f64 / (ground + other) as f64;
             // Pitched up (octopus-52's β = 20°) the ground within range
             // shrinks and the wall looms largest; the ground is still most.
-            assert!(fraction > 0.5, "seed {seed}: ground is {fraction:.2} of what is in range");
+            assert!(
+                fraction > 0.5,
+                "seed {seed}: ground is {fraction:.2} of what is in range"
+            );
             fractions.push(fraction);
         }
-        assert!(seen[0] > 0 && seen[1] > 0, "seed {seed}: boxes or wall never in view {seen:?}");
+        assert!(
+            seen[0] > 0 && seen[1] > 0,
+            "seed {seed}: boxes or wall never in view {seen:?}"
+        );
         let mean = fractions.iter().sum::<f64>() / fractions.len() as f64;
-        assert!(mean > 0.65, "seed {seed}: ground is {mean:.2} of what is in range on average");
+        assert!(
+            mean > 0.65,
+            "seed {seed}: ground is {mean:.2} of what is in range on average"
+        );
     }
 }
 
@@ -487,7 +568,11 @@ fn box_edges_cast_the_emitters_shadow_on_the_ground() {
             })
         })
         .count();
-    assert!(with_nearer_right * 10 >= lost.len() * 9, "{with_nearer_right} of {}", lost.len());
+    assert!(
+        with_nearer_right * 10 >= lost.len() * 9,
+        "{with_nearer_right} of {}",
+        lost.len()
+    );
 }
 
 fn level_kinect(config: SimKinectConfig) -> (SimKinect, TruePose) {
@@ -558,12 +643,18 @@ async fn accelerometer_and_tilt_follow_the_true_pose() {
     kinect.set_tilt(40.0).await.unwrap();
     assert_eq!(kinect.tilt_deg(), 27.0);
     let e = kinect.set_tilt(f64::NAN).await.unwrap_err();
-    assert_eq!(groundcal_hal::Error::kind(&e), groundcal_hal::ErrorKind::Refused);
+    assert_eq!(
+        groundcal_hal::Error::kind(&e),
+        groundcal_hal::ErrorKind::Refused
+    );
 }
 
 #[tokio::test(start_paused = true)]
 async fn frames_come_at_the_frame_rate_scaled_by_the_time_scale() {
-    for (time_scale, expected) in [(1.0, Duration::from_secs(1)), (10.0, Duration::from_millis(100))] {
+    for (time_scale, expected) in [
+        (1.0, Duration::from_secs(1)),
+        (10.0, Duration::from_millis(100)),
+    ] {
         let (mut kinect, _) = level_kinect(SimKinectConfig {
             time_scale,
             ..SimKinectConfig::default()
@@ -572,7 +663,10 @@ async fn frames_come_at_the_frame_rate_scaled_by_the_time_scale() {
         let mut timestamps = Vec::new();
         for _ in 0..30 {
             let frame = kinect.next_frame().await.unwrap();
-            assert_eq!((frame.width, frame.height, frame.raw.len()), (640, 480, 640 * 480));
+            assert_eq!(
+                (frame.width, frame.height, frame.raw.len()),
+                (640, 480, 640 * 480)
+            );
             timestamps.push(frame.timestamp);
         }
         let elapsed = start.elapsed();
@@ -582,11 +676,19 @@ async fn frames_come_at_the_frame_rate_scaled_by_the_time_scale() {
         );
         // The sensor's clock counts simulated microseconds, whatever the scale.
         let steps: Vec<u32> = timestamps.windows(2).map(|w| w[1] - w[0]).collect();
-        assert!(steps.iter().all(|&s| (33_333..=33_334).contains(&s)), "{steps:?}");
+        assert!(
+            steps.iter().all(|&s| (33_333..=33_334).contains(&s)),
+            "{steps:?}"
+        );
         // Tilting at a time scale of 10 is ten times quicker.
         let start = tokio::time::Instant::now();
         kinect.set_tilt(20.0).await.unwrap();
-        assert!(start.elapsed().abs_diff(Duration::from_secs_f64(1.0 / time_scale)) < Duration::from_millis(1));
+        assert!(
+            start
+                .elapsed()
+                .abs_diff(Duration::from_secs_f64(1.0 / time_scale))
+                < Duration::from_millis(1)
+        );
     }
 }
 
@@ -633,7 +735,25 @@ async fn a_session_of_frames_is_deterministic_and_changes_with_the_pose() {
     assert!((d - truth.d).abs() < 1e-3);
 }
 
-/// Render time of one 640×480 frame; run with
+/// CPU time of this process so far (user + system), seconds, from
+/// `/proc/self/stat`: on a loaded machine the wall time of a frame says
+/// little, its CPU time much more.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // After the command's closing parenthesis come fields 3 (state) on;
+    // utime and stime are fields 14 and 15, in clock ticks (100 per second).
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|f| f.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// Render time of one 640×480 frame, wall and CPU; run with
 /// `cargo test --release -p groundcal-hal --test sim_kinect -- --ignored --nocapture`.
 #[test]
 #[ignore]
@@ -647,13 +767,17 @@ fn render_timing() {
         for (i, body) in body_poses().iter().enumerate() {
             let ground_from_sensor = body * mount();
             let _ = renderer.render(&world, &ground_from_sensor, 0);
-            let n = 20;
-            let start = std::time::Instant::now();
+            let n = 40;
+            let (start, cpu) = (std::time::Instant::now(), cpu_seconds());
             for f in 0..n {
                 std::hint::black_box(renderer.render(&world, &ground_from_sensor, f));
             }
-            let ms = start.elapsed().as_secs_f64() * 1e3 / n as f64;
-            println!("{name}, pose {i}: {ms:.1} ms per frame");
+            let wall_ms = start.elapsed().as_secs_f64() * 1e3 / n as f64;
+            let cpu_ms = (cpu_seconds() - cpu) * 1e3 / n as f64;
+            println!(
+                "{name}, pose {i}: {wall_ms:.1} ms per frame ({cpu_ms:.1} ms of CPU on {} threads)",
+                rayon::current_num_threads()
+            );
         }
     }
 }

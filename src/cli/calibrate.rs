@@ -31,15 +31,25 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
         return Config::load(path).map_err(|e| e.to_string());
     }
     let s = &options.selection;
-    if s.robot.as_deref() == Some("sim") && s.sensor.as_deref().is_none_or(|v| v == "sim" || v.starts_with("replay:")) {
+    if s.robot.as_deref() == Some("sim")
+        && s.sensor
+            .as_deref()
+            .is_none_or(|v| v == "sim" || v.starts_with("replay:"))
+    {
         return Ok(Config::embedded_sim());
     }
-    Config::load(Path::new("/etc/groundcal/groundcal.toml")).map_err(|e| format!("{e} (give --config FILE)"))
+    Config::load(Path::new("/etc/groundcal/groundcal.toml"))
+        .map_err(|e| format!("{e} (give --config FILE)"))
 }
 
 /// The session plan from the configuration; a replayed sensor brings its
 /// recording's schedule, frames per pose, tilt and nominal mount.
-pub fn plan(config: &Config, schedule: Schedule, replay: Option<&Recording>, record: Option<PathBuf>) -> Plan {
+pub fn plan(
+    config: &Config,
+    schedule: Schedule,
+    replay: Option<&Recording>,
+    record: Option<PathBuf>,
+) -> Plan {
     let c = &config.calibration;
     // Simulated hardware runs faster than real time: so do the waits.
     let scale = match (&config.sim, config.robot.address.as_str()) {
@@ -54,10 +64,18 @@ pub fn plan(config: &Config, schedule: Schedule, replay: Option<&Recording>, rec
         settle: Duration::from_millis(c.settle_ms).div_f64(scale),
         tilt_deg: config.sensor.tilt_deg,
         nominal_mount: c.nominal_mount,
-        pose: PoseSettings { slip_threshold_m: c.slip_threshold_mm / 1000.0, ..PoseSettings::default() },
-        solve: crate::calib::solve::SolveSettings { gates: c.gates, ..Default::default() },
+        pose: PoseSettings {
+            slip_threshold_m: c.slip_threshold_mm / 1000.0,
+            ..PoseSettings::default()
+        },
+        solve: crate::calib::solve::SolveSettings {
+            gates: c.gates,
+            ..Default::default()
+        },
         record,
-        poll: Duration::from_millis(100).div_f64(scale.max(1.0)).max(Duration::from_millis(5)),
+        poll: Duration::from_millis(100)
+            .div_f64(scale.max(1.0))
+            .max(Duration::from_millis(5)),
         motion_slack: Duration::from_secs(5),
     };
     if let Some(recording) = replay {
@@ -66,7 +84,13 @@ pub fn plan(config: &Config, schedule: Schedule, replay: Option<&Recording>, rec
             home: recording.session.home.commanded,
             poses: recording.poses.iter().map(|p| p.commanded).collect(),
         };
-        plan.frames_per_pose = recording.poses.iter().map(|p| p.depth_frames.len()).max().unwrap_or(1).max(1);
+        plan.frames_per_pose = recording
+            .poses
+            .iter()
+            .map(|p| p.depth_frames.len())
+            .max()
+            .unwrap_or(1)
+            .max(1);
         plan.tilt_deg = recording.session.kinect.tilt_deg;
         plan.nominal_mount = recording.session.nominal_mount.or(plan.nominal_mount);
     }
@@ -74,14 +98,18 @@ pub fn plan(config: &Config, schedule: Schedule, replay: Option<&Recording>, rec
 }
 
 /// Prints progress as it happens.
-fn show_progress(mut events: tokio::sync::mpsc::UnboundedReceiver<Event>) -> tokio::task::JoinHandle<()> {
+fn show_progress(
+    mut events: tokio::sync::mpsc::UnboundedReceiver<Event>,
+) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
         let terminal = std::io::stderr().is_terminal();
         let bar = terminal.then(|| {
             let bar = indicatif::ProgressBar::new(0);
             bar.set_style(
-                indicatif::ProgressStyle::with_template("{spinner} [{bar:30}] pose {pos}/{len} {msg}")
-                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+                indicatif::ProgressStyle::with_template(
+                    "{spinner} [{bar:30}] pose {pos}/{len} {msg}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
             bar
         });
@@ -103,12 +131,17 @@ fn show_progress(mut events: tokio::sync::mpsc::UnboundedReceiver<Event>) -> tok
                         bar.set_position(u64::from(*index));
                     }
                     match outcome {
-                        Ok(fit) => format!("pose {index}/{of}: ground fitted ({} points)", fit.inliers),
+                        Ok(fit) => {
+                            format!("pose {index}/{of}: ground fitted ({} points)", fit.inliers)
+                        }
                         Err(e) => format!("pose {index}/{of}: {e}"),
                     }
                 }
                 Event::Solving => "back home; solving".into(),
-                Event::Finished { accepted } => format!("finished: {}", if *accepted { "accepted" } else { "rejected" }),
+                Event::Finished { accepted } => format!(
+                    "finished: {}",
+                    if *accepted { "accepted" } else { "rejected" }
+                ),
                 Event::Aborted { reason } => format!("ABORTED: {reason}"),
             };
             match &bar {
@@ -154,7 +187,10 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             return ExitStatus::BadInput;
         }
     };
-    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
         Ok(r) => r,
         Err(e) => {
             eprintln!("groundcal calibrate: cannot start the runtime: {e}");
@@ -176,7 +212,8 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
         let plan = plan(&config, schedule, replay.as_ref(), options.record.clone());
         let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
         let progress = show_progress(receiver);
-        let outcome = session::run(&mut sensor, &mut controller, &plan, &events, stop_signal()).await;
+        let outcome =
+            session::run(&mut sensor, &mut controller, &plan, &events, stop_signal()).await;
         drop(events);
         let _ = progress.await;
         match outcome {
@@ -188,7 +225,10 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
                     Ok(())
                 };
                 if let Some(dir) = &outcome.recording {
-                    eprintln!("groundcal calibrate: recording written to {}", dir.display());
+                    eprintln!(
+                        "groundcal calibrate: recording written to {}",
+                        dir.display()
+                    );
                 }
                 if let Err(e) = printed {
                     eprintln!("groundcal calibrate: {e}");

@@ -8,6 +8,8 @@ pub mod capture;
 pub mod export;
 pub mod plane;
 pub mod replay;
+pub mod serve;
+pub mod sim_robot;
 pub mod solve;
 
 /// Exit statuses of `shared/spec/cli.md`.

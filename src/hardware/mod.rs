@@ -16,7 +16,8 @@ use groundcal_hal::sim::world::World;
 use groundcal_hal::sim::TruePose;
 use groundcal_hal::udp::{LinkConfig, UdpBodyController};
 use groundcal_hal::{
-    BodyController, BodyState, DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo, TiltState, Welcome,
+    BodyController, BodyState, DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo,
+    TiltState, Welcome,
 };
 
 use crate::calib::geometry::PoseDegMm;
@@ -39,7 +40,10 @@ impl Error for HardwareError {
 }
 
 fn wrap<E: Error>(e: E) -> HardwareError {
-    HardwareError { kind: e.kind(), message: e.to_string() }
+    HardwareError {
+        kind: e.kind(),
+        message: e.to_string(),
+    }
 }
 
 /// The depth sensor chosen at run time.
@@ -109,7 +113,12 @@ impl BodyController for Controller {
         each_controller!(self, c => c.hello().await.map_err(wrap))
     }
 
-    async fn set_pose(&mut self, pose_id: u16, pose: &PoseDegMm, duration_ms: u32) -> Result<(), HardwareError> {
+    async fn set_pose(
+        &mut self,
+        pose_id: u16,
+        pose: &PoseDegMm,
+        duration_ms: u32,
+    ) -> Result<(), HardwareError> {
         each_controller!(self, c => c.set_pose(pose_id, pose, duration_ms).await.map_err(wrap))
     }
 
@@ -167,15 +176,28 @@ fn world(sim: &SimConfig) -> World {
 
 /// The sensor source after overrides (`kinect`, `sim`, `replay:DIR`).
 pub fn sensor_source(config: &Config, selection: &Selection) -> String {
-    selection.sensor.clone().unwrap_or_else(|| config.sensor.source.clone())
+    selection
+        .sensor
+        .clone()
+        .unwrap_or_else(|| config.sensor.source.clone())
 }
 
 /// Opens the hardware. The simulated robot and Kinect, when both are chosen,
 /// share one simulated body.
-pub async fn open(config: &Config, selection: &Selection) -> Result<(Sensor, Controller), HardwareError> {
-    let robot = selection.robot.clone().unwrap_or_else(|| config.robot.address.clone());
+pub async fn open(
+    config: &Config,
+    selection: &Selection,
+) -> Result<(Sensor, Controller), HardwareError> {
+    let robot = selection
+        .robot
+        .clone()
+        .unwrap_or_else(|| config.robot.address.clone());
     let source = sensor_source(config, selection);
-    let sim = if robot == "sim" || source == "sim" { Some(sim_parts(config)?) } else { None };
+    let sim = if robot == "sim" || source == "sim" {
+        Some(sim_parts(config)?)
+    } else {
+        None
+    };
 
     let controller = if robot == "sim" {
         let parts = sim.as_ref().expect("made above for the simulated robot");
@@ -184,16 +206,26 @@ pub async fn open(config: &Config, selection: &Selection) -> Result<(Sensor, Con
             parts.true_pose.clone(),
         )))
     } else {
+        // IPv4 first: the robot's Wi-Fi is IPv4 (hexapod-udp.md allows both).
         let peer = robot
             .to_socket_addrs()
             .ok()
-            .and_then(|mut a| a.next())
-            .ok_or_else(|| HardwareError { kind: ErrorKind::LinkLost, message: format!("cannot resolve the lower computer's address \"{robot}\"") })?;
+            .and_then(|a| {
+                let all: Vec<_> = a.collect();
+                all.iter().find(|a| a.is_ipv4()).or(all.first()).copied()
+            })
+            .ok_or_else(|| HardwareError {
+                kind: ErrorKind::LinkLost,
+                message: format!("cannot resolve the lower computer's address \"{robot}\""),
+            })?;
         let mut link = LinkConfig::new(peer);
         link.interface = config.robot.interface.clone();
-        link.client.retry_interval = std::time::Duration::from_millis(config.robot.retry_interval_ms);
+        link.client.retry_interval =
+            std::time::Duration::from_millis(config.robot.retry_interval_ms);
         link.client.retry_limit = config.robot.retries;
-        Controller::Udp(Box::new(UdpBodyController::connect(&link).await.map_err(wrap)?))
+        Controller::Udp(Box::new(
+            UdpBodyController::connect(&link).await.map_err(wrap)?,
+        ))
     };
 
     let sensor = match source.as_str() {
@@ -202,7 +234,12 @@ pub async fn open(config: &Config, selection: &Selection) -> Result<(Sensor, Con
             if robot != "sim" {
                 tracing::warn!("the simulated Kinect sees the simulated body, which a real lower computer does not move");
             }
-            let mut kinect = SimKinectConfig { seed: parts.sim.seed, time_scale: parts.sim.time_scale, mount_tilt_deg: config.sensor.tilt_deg, ..SimKinectConfig::default() };
+            let mut kinect = SimKinectConfig {
+                seed: parts.sim.seed,
+                time_scale: parts.sim.time_scale,
+                mount_tilt_deg: config.sensor.tilt_deg,
+                ..SimKinectConfig::default()
+            };
             if let Some(model) = config.sensor.depth_model {
                 kinect.depth_model = model;
             }
@@ -211,17 +248,28 @@ pub async fn open(config: &Config, selection: &Selection) -> Result<(Sensor, Con
             }
             let mount = parts.sim.mount.to_params().to_transform();
             Sensor::Sim(Box::new(
-                SimKinect::new(Arc::new(world(&parts.sim)), parts.true_pose.clone(), mount, kinect).map_err(wrap)?,
+                SimKinect::new(
+                    Arc::new(world(&parts.sim)),
+                    parts.true_pose.clone(),
+                    mount,
+                    kinect,
+                )
+                .map_err(wrap)?,
             ))
         }
         "kinect" => {
-            let library = selection.freenect_lib.clone().or_else(|| config.sensor.freenect_lib.clone());
+            let library = selection
+                .freenect_lib
+                .clone()
+                .or_else(|| config.sensor.freenect_lib.clone());
             Sensor::Kinect(Box::new(Kinect::open(library.as_deref(), 0).map_err(wrap)?))
         }
         other => match other.strip_prefix("replay:") {
             Some(dir) => {
-                let recording = Recording::open(Path::new(dir))
-                    .map_err(|e| HardwareError { kind: ErrorKind::DeviceMissing, message: e.to_string() })?;
+                let recording = Recording::open(Path::new(dir)).map_err(|e| HardwareError {
+                    kind: ErrorKind::DeviceMissing,
+                    message: e.to_string(),
+                })?;
                 Sensor::Replay(Box::new(ReplaySensor::new(recording)))
             }
             None => {

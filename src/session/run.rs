@@ -144,7 +144,8 @@ impl PendingFit {
             };
             self.done = Some(outcome);
         }
-        self.done.get_or_insert_with(|| Err("the fit was lost".into()))
+        self.done
+            .get_or_insert_with(|| Err("the fit was lost".into()))
     }
 }
 
@@ -179,7 +180,12 @@ async fn report_finished(
         let outcome = match fit.outcome().await {
             Ok(o) => Ok(PoseFit {
                 inliers: o.inliers.unwrap_or(0),
-                plane: [o.plane.normal.x, o.plane.normal.y, o.plane.normal.z, o.plane.d],
+                plane: [
+                    o.plane.normal.x,
+                    o.plane.normal.y,
+                    o.plane.normal.z,
+                    o.plane.d,
+                ],
             }),
             Err(e) => Err(e.clone()),
         };
@@ -375,7 +381,11 @@ async fn body<S: DepthSensor, C: BodyController>(
                 tokio::task::spawn_blocking(move || Err(reason))
             }
         };
-        pending.push(PendingFit { index, handle: fit, done: None });
+        pending.push(PendingFit {
+            index,
+            handle: fit,
+            done: None,
+        });
         report_finished(pending, &mut reported, of, events, false).await;
     }
 

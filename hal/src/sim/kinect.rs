@@ -39,7 +39,7 @@ use crate::depth::{DepthModel, Intrinsics, RAW_NO_READING};
 use crate::error::{Error, ErrorKind};
 use crate::geometry::{rot_z, sensor_from_optical, Transform};
 use crate::sensor::{DepthFrame, DepthSensor, Led, SensorInfo, TiltState};
-use crate::sim::world::World;
+use crate::sim::world::{RayHints, Surface, World};
 use crate::sim::TruePose;
 
 /// Accelerometer counts per g (recording.md).
@@ -145,8 +145,9 @@ impl SimKinectConfig {
                 return bad(format!("{name} must lie in [0, 1], not {value}"));
             }
         }
-        if !(self.min_depth_m > 0.0 && self.min_depth_m < self.max_depth_m)
-            || !self.max_depth_m.is_finite()
+        if !(self.min_depth_m > 0.0
+            && self.min_depth_m < self.max_depth_m
+            && self.max_depth_m.is_finite())
         {
             return bad(format!(
                 "the depth range {}–{} m is not a range of positive depths",
@@ -162,7 +163,7 @@ impl SimKinectConfig {
                 return bad(format!("{name} must be a positive number, not {value}"));
             }
         }
-        if !(self.mount_tilt_deg.abs() <= TILT_LIMIT_DEG) {
+        if !(-TILT_LIMIT_DEG..=TILT_LIMIT_DEG).contains(&self.mount_tilt_deg) {
             return bad(format!(
                 "mount_tilt_deg {} is outside the motor's ±{TILT_LIMIT_DEG}°",
                 self.mount_tilt_deg
@@ -247,7 +248,9 @@ impl Quantiser {
             .map(|b| {
                 // The nearest depth of bin b; one midpoint lower for rounding.
                 let nearest = 1.0 / (disparity_high - b as f64 * width);
-                midpoints.partition_point(|&m| m < nearest).saturating_sub(1) as u32
+                midpoints
+                    .partition_point(|&m| m < nearest)
+                    .saturating_sub(1) as u32
             })
             .collect();
         Ok(Self {
@@ -260,6 +263,15 @@ impl Quantiser {
             disparity_high,
             bins,
         })
+    }
+
+    /// The largest depth that quantises to a raw value in the range: the
+    /// midpoint past the farthest raw in range (half a raw step, 4 cm at 5 m).
+    fn farthest_in_range(&self) -> f64 {
+        let last = self.depths.partition_point(|&d| d <= self.max_depth_m);
+        last.checked_sub(1)
+            .and_then(|i| self.midpoints.get(i))
+            .map_or(self.max_depth_m, |&m| m.max(self.max_depth_m))
     }
 
     /// The raw value nearest `z` in depth, or "no reading" outside the range.
@@ -347,15 +359,33 @@ impl DepthRenderer {
         // The emitter sits at optical (baseline, 0, 0): sensor Z (right).
         let emitter = ground_from_sensor * Point3::new(0.0, 0.0, c.emitter_baseline_m);
         // Past this depth even 5σ of noise cannot bring a reading into range.
-        let t_max = c.max_depth_m + 5.0 * c.noise_scale * 1.4e-3 * c.max_depth_m.powi(2) + 0.01;
+        let far = self.quantiser.farthest_in_range();
+        let t_max = far + 5.0 * c.noise_scale * 1.4e-3 * far * far;
         let live = width - c.dead_columns;
         let shadows = c.emitter_baseline_m > 0.0 && world.has_obstacles();
+        // Where each obstacle can be in the image, seen from the camera and
+        // from the emitter: rays elsewhere need not ask about it.
+        let corners = world.obstacle_corners();
+        let in_camera =
+            ObstacleBounds::new(&corners, &ground_from_optical, &origin, &c.intrinsics, 0.0);
+        let in_emitter = ObstacleBounds::new(
+            &corners,
+            &ground_from_optical,
+            &origin,
+            &c.intrinsics,
+            c.emitter_baseline_m,
+        );
+        // A point at depth z seen at column u is at the emitter's column
+        // u - fx·baseline/z.
+        let emitter_shift = c.intrinsics.fx * c.emitter_baseline_m;
 
         let mut raw = vec![RAW_NO_READING; width * c.intrinsics.height];
         raw.par_chunks_mut(width).enumerate().for_each(|(v, row)| {
             let mut rng = row_rng(c.seed, frame_index, v);
             let row_direction = forward + down * self.ray_y[v];
+            let (camera_row, emitter_row) = (in_camera.row(v as f64), in_emitter.row(v as f64));
             let mut spare = None;
+            let mut ground_height = None;
             for (u, value) in row.iter_mut().enumerate().take(live) {
                 // A fixed number of draws per pixel: a pixel's noise does
                 // not depend on what its neighbours saw.
@@ -366,9 +396,16 @@ impl DepthRenderer {
                 });
                 let chance: f64 = rng.gen();
                 let direction = row_direction + right * self.ray_x[u];
-                let Some(hit) = world.cast(&origin, &direction, t_max) else {
+                let hints = RayHints {
+                    candidates: ObstacleBounds::candidates(&camera_row, u as f64),
+                    ground_height,
+                };
+                let Some(hit) = world.cast_with(&origin, &direction, t_max, &hints) else {
                     continue;
                 };
+                if hit.surface == Surface::Ground {
+                    ground_height = Some(origin.y + direction.y * hit.t);
+                }
                 let z = hit.t;
                 let measured = z + c.noise_scale * 1.4e-3 * z * z * gaussian;
                 let quantised = self.quantiser.raw(measured);
@@ -380,11 +417,13 @@ impl DepthRenderer {
                 if chance < c.dropout_rate + c.grazing_dropout * grazing {
                     continue;
                 }
-                if shadows {
+                let candidates =
+                    ObstacleBounds::candidates(&emitter_row, u as f64 - emitter_shift / z);
+                if shadows && candidates != 0 {
                     let lit = origin + direction * z;
                     let towards = lit - emitter;
                     let reach = 1.0 - SHADOW_TOLERANCE_M / towards.norm();
-                    if world.blocked_by_obstacle(&emitter, &towards, reach) {
+                    if world.blocked_by_obstacle_among(&emitter, &towards, reach, candidates) {
                         continue;
                     }
                 }
@@ -392,6 +431,78 @@ impl DepthRenderer {
             }
         });
         raw
+    }
+}
+
+/// The pixel rectangles that hold each obstacle's image, as seen by a
+/// pinhole at the camera or at the emitter (the camera's intrinsics, shifted
+/// along the optical x axis): a ray outside an obstacle's rectangle cannot
+/// meet it. An obstacle with a corner behind the pinhole gets no rectangle
+/// and is asked by every ray.
+struct ObstacleBounds {
+    /// `[u_lo, u_hi, v_lo, v_hi]` per obstacle, a pixel wider on every side.
+    rectangles: Vec<[f64; 4]>,
+}
+
+impl ObstacleBounds {
+    fn new(
+        corners: &[Vec<Point3<f64>>],
+        ground_from_optical: &Matrix3<f64>,
+        camera: &Point3<f64>,
+        intrinsics: &Intrinsics,
+        x_offset: f64,
+    ) -> Self {
+        let everywhere = [
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+        ];
+        let rectangles = corners
+            .iter()
+            .map(|obstacle| {
+                let mut r = [
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                ];
+                for corner in obstacle {
+                    let p = ground_from_optical.transpose() * (corner - camera);
+                    if p.z <= 1e-6 {
+                        return everywhere;
+                    }
+                    let u = intrinsics.fx * (p.x - x_offset) / p.z + intrinsics.cx;
+                    let v = intrinsics.fy * p.y / p.z + intrinsics.cy;
+                    r = [
+                        r[0].min(u - 1.0),
+                        r[1].max(u + 1.0),
+                        r[2].min(v - 1.0),
+                        r[3].max(v + 1.0),
+                    ];
+                }
+                r
+            })
+            .collect();
+        Self { rectangles }
+    }
+
+    /// The obstacles (index, u_lo, u_hi) whose rectangles hold row `v`;
+    /// those from the 65th on are always there.
+    fn row(&self, v: f64) -> Vec<(usize, f64, f64)> {
+        self.rectangles
+            .iter()
+            .enumerate()
+            .filter(|(i, r)| *i >= 64 || (r[2]..=r[3]).contains(&v))
+            .map(|(i, r)| (i, r[0], r[1]))
+            .collect()
+    }
+
+    /// The bits of the row's obstacles whose rectangles hold column `u`.
+    fn candidates(row: &[(usize, f64, f64)], u: f64) -> u64 {
+        row.iter()
+            .filter(|&&(i, lo, hi)| i < 64 && (lo..=hi).contains(&u))
+            .fold(0, |mask, &(i, _, _)| mask | 1 << i)
     }
 }
 

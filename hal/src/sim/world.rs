@@ -68,6 +68,8 @@ pub struct HeightField {
     max_height: f64,
     /// `Σ |aᵢ|·|kᵢ|`: a bound on the gradient's norm.
     max_slope: f64,
+    /// `Σ |aᵢ|·|kᵢ|²`: a bound on the second derivative in any direction.
+    max_curvature: f64,
 }
 
 impl HeightField {
@@ -78,10 +80,15 @@ impl HeightField {
             .iter()
             .map(|w| w.amplitude_m.abs() * w.wavevector.norm())
             .sum();
+        let max_curvature = waves
+            .iter()
+            .map(|w| w.amplitude_m.abs() * w.wavevector.norm_squared())
+            .sum();
         Self {
             waves,
             max_height,
             max_slope,
+            max_curvature,
         }
     }
 
@@ -162,7 +169,16 @@ impl HeightField {
     /// bump may hide what lies behind it, are sphere traced: a step of `f/L`
     /// never crosses the surface, so the first root is never skipped; Newton
     /// finishes the root once the ray is within 0.1 mm of the surface.
-    fn cast(&self, origin: &Point3<f64>, direction: &Vector3<f64>, t_max: f64) -> Option<Hit> {
+    ///
+    /// `height_guess`, the height of the surface near where the ray lands
+    /// (a neighbouring pixel's), starts Newton closer to the root.
+    fn cast(
+        &self,
+        origin: &Point3<f64>,
+        direction: &Vector3<f64>,
+        t_max: f64,
+        height_guess: Option<f64>,
+    ) -> Option<Hit> {
         let a = self.max_height;
         let dy = direction.y;
         // Where the ray enters the slab |y| <= A, and where it leaves it below.
@@ -183,26 +199,42 @@ impl HeightField {
             return None;
         }
         let horizontal = Vector2::new(direction.x, direction.z).norm();
-        let f = |t: f64| -> (f64, f64) {
+        let f = |t: f64| -> Sample {
             let p = origin + direction * t;
-            let (h, g) = self.height_and_gradient(p.x, p.z);
-            (p.y - h, dy - g.x * direction.x - g.y * direction.z)
+            let (h, gradient) = self.height_and_gradient(p.x, p.z);
+            Sample {
+                value: p.y - h,
+                slope: dy - gradient.x * direction.x - gradient.y * direction.z,
+                gradient,
+            }
         };
-        let (start_value, _) = f(t_start);
-        if start_value < 0.0 {
+        // Above the slab the ray starts above the surface; within it, check.
+        let start = (origin.y <= a).then(|| f(t_start));
+        if start.is_some_and(|s| s.value < 0.0) {
             // The origin is under the surface: nothing is seen from there.
             return None;
         }
-        let t = if -dy > self.max_slope * horizontal {
-            self.newton_in_bracket(&f, t_start, t_end, -origin.y / dy)?
+        let (t, gradient) = if -dy > self.max_slope * horizontal {
+            // Beyond t_max the slab's far side is not reached: the root may be.
+            let capped = dy >= 0.0 || (origin.y + a) / -dy > t_max;
+            let guess = (height_guess.unwrap_or(0.0) - origin.y) / dy;
+            // |f''| ≤ max_curvature·|d_xz|² bounds Newton's next error.
+            let curvature = self.max_curvature * horizontal * horizontal;
+            newton_in_bracket(&f, t_start, t_end, guess, capped, curvature)?
         } else {
-            self.sphere_trace(&f, t_start, t_end, start_value, dy.abs() + self.max_slope * horizontal)?
+            let value = start.unwrap_or_else(|| f(t_start)).value;
+            sphere_trace(
+                &f,
+                t_start,
+                t_end,
+                value,
+                dy.abs() + self.max_slope * horizontal,
+            )?
         };
         if t <= T_MIN || t > t_max {
             return None;
         }
-        let p = origin + direction * t;
-        let mut normal = self.normal(p.x, p.z);
+        let mut normal = Vector3::new(-gradient.x, 1.0, -gradient.y).normalize();
         if normal.dot(direction) > 0.0 {
             normal = -normal;
         }
@@ -212,81 +244,135 @@ impl HeightField {
             surface: Surface::Ground,
         })
     }
+}
 
-    /// The root of a decreasing `f` in `[lo, hi]` (`f(lo) ≥ 0`), by Newton's
-    /// method from `guess`, falling back to bisection when a step leaves the
-    /// bracket. `None` if `f(hi) > 0`: the root lies beyond `hi` (`t_max`).
-    fn newton_in_bracket(
-        &self,
-        f: &impl Fn(f64) -> (f64, f64),
-        mut lo: f64,
-        mut hi: f64,
-        guess: f64,
-    ) -> Option<f64> {
-        if f(hi).0 > 0.0 {
+/// `f(t) = y(t) - h(x(t), z(t))` along a ray, its slope, and the surface's
+/// gradient below the point.
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    value: f64,
+    slope: f64,
+    gradient: Vector2<f64>,
+}
+
+/// Newton's search ends when the error of its next step, bounded by
+/// `|f''|·step²/(2·|f'|)`, is below this (metres along a unit ray).
+const NEWTON_TOLERANCE: f64 = 1e-11;
+
+/// The root of a decreasing `f` in `[lo, hi]` (`f(lo) ≥ 0`), by Newton's
+/// method from `guess`, falling back to bisection when a step leaves the
+/// bracket; with the surface's gradient there. When `capped` (the bracket
+/// ends at `t_max`, not at the slab's far side) and `f(hi) > 0`, the root
+/// lies beyond `t_max`: `None`. `curvature` bounds `|f''|`: once a step is
+/// so short that the next one would be below [`NEWTON_TOLERANCE`], the step
+/// is taken without evaluating `f` again.
+fn newton_in_bracket(
+    f: &impl Fn(f64) -> Sample,
+    mut lo: f64,
+    mut hi: f64,
+    guess: f64,
+    capped: bool,
+    curvature: f64,
+) -> Option<(f64, Vector2<f64>)> {
+    if capped && f(hi).value > 0.0 {
+        return None;
+    }
+    let mut t = guess.clamp(lo, hi);
+    let mut gradient = Vector2::zeros();
+    for _ in 0..100 {
+        let s = f(t);
+        gradient = s.gradient;
+        if s.value > 0.0 {
+            lo = t;
+        } else {
+            hi = t;
+        }
+        if s.value == 0.0 {
+            break;
+        }
+        let mut next = t - s.value / s.slope;
+        let newton = next >= lo && next <= hi;
+        if !newton {
+            next = 0.5 * (lo + hi);
+        }
+        let step = next - t;
+        t = next;
+        if (newton && curvature * step * step < 2.0 * NEWTON_TOLERANCE * s.slope.abs())
+            || hi - lo < 1e-13
+        {
+            break;
+        }
+    }
+    Some((t, gradient))
+}
+
+/// The first root of `f` in `[t, t_end]` by sphere tracing with the
+/// Lipschitz bound `lipschitz`, finished by Newton's method.
+fn sphere_trace(
+    f: &impl Fn(f64) -> Sample,
+    mut t: f64,
+    t_end: f64,
+    mut value: f64,
+    lipschitz: f64,
+) -> Option<(f64, Vector2<f64>)> {
+    if lipschitz <= 0.0 {
+        return None;
+    }
+    // Where Newton takes over: close enough that the surface is locally a
+    // plane to far better than a micrometre.
+    const NEAR: f64 = 1e-4;
+    let mut steps = 0;
+    while value > NEAR {
+        t += value / lipschitz;
+        if t > t_end || steps > 10_000 {
             return None;
         }
-        let mut t = guess.clamp(lo, hi);
-        for _ in 0..60 {
-            let (value, slope) = f(t);
-            if value > 0.0 {
-                lo = t;
-            } else {
-                hi = t;
-            }
-            let mut next = t - value / slope;
-            if !(next > lo && next < hi) {
-                next = 0.5 * (lo + hi);
-            }
-            let step = (next - t).abs();
-            t = next;
-            if step < 1e-12 * (1.0 + t.abs()) || hi - lo < 1e-13 {
-                break;
-            }
-        }
-        Some(t)
+        value = f(t).value;
+        steps += 1;
     }
+    // Newton from just above the surface. It can only fail near a tangent
+    // ray, where the sphere-traced point is already within NEAR.
+    let mut s = f(t);
+    for _ in 0..8 {
+        if s.value.abs() < 1e-12 || s.slope >= -1e-12 {
+            break;
+        }
+        let next = t - s.value / s.slope;
+        if !(next.is_finite() && (next - t).abs() < 10.0 * NEAR / s.slope.abs().max(1e-3)) {
+            break;
+        }
+        t = next;
+        s = f(t);
+    }
+    Some((t, s.gradient))
+}
 
-    /// The first root of `f` in `[t, t_end]` by sphere tracing with the
-    /// Lipschitz bound `lipschitz`, finished by Newton's method.
-    fn sphere_trace(
-        &self,
-        f: &impl Fn(f64) -> (f64, f64),
-        mut t: f64,
-        t_end: f64,
-        mut value: f64,
-        lipschitz: f64,
-    ) -> Option<f64> {
-        if lipschitz <= 0.0 {
-            return None;
+/// What a caller of [`World::cast_with`] knows about a ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RayHints {
+    /// The obstacles the ray may meet: bit `i` for obstacle `i` of
+    /// [`World::obstacle_corners`] (boxes, then walls); obstacles from the
+    /// 65th on are always asked. A sensor clears the bits of obstacles whose
+    /// image does not hold the pixel.
+    pub candidates: u64,
+    /// The ground's height near where the ray lands (a neighbouring pixel's
+    /// hit): Newton starts there on uneven ground.
+    pub ground_height: Option<f64>,
+}
+
+impl Default for RayHints {
+    /// Nothing known: every obstacle is asked.
+    fn default() -> Self {
+        Self {
+            candidates: u64::MAX,
+            ground_height: None,
         }
-        // Where Newton takes over: close enough that the surface is locally a
-        // plane to far better than a micrometre.
-        const NEAR: f64 = 1e-4;
-        let mut steps = 0;
-        while value > NEAR {
-            t += value / lipschitz;
-            if t > t_end || steps > 10_000 {
-                return None;
-            }
-            value = f(t).0;
-            steps += 1;
-        }
-        // Newton from just above the surface. It can only fail near a
-        // tangent ray, where the sphere-traced point is already within NEAR.
-        for _ in 0..8 {
-            let (v, slope) = f(t);
-            if v.abs() < 1e-12 || slope >= -1e-12 {
-                break;
-            }
-            let next = t - v / slope;
-            if !(next.is_finite() && (next - t).abs() < 10.0 * NEAR / slope.abs().max(1e-3)) {
-                break;
-            }
-            t = next;
-        }
-        Some(t)
     }
+}
+
+/// Whether obstacle `i` is among `candidates` (bit `i`; always from 64 on).
+fn is_candidate(candidates: u64, i: usize) -> bool {
+    i >= 64 || candidates & (1 << i) != 0
 }
 
 /// The ground the robot stands on.
@@ -508,10 +594,31 @@ impl World {
         direction: &Vector3<f64>,
         t_max: f64,
     ) -> bool {
+        self.blocked_by_obstacle_among(origin, direction, t_max, u64::MAX)
+    }
+
+    /// [`World::blocked_by_obstacle`] among the obstacles whose bits are set
+    /// in `candidates` (as in [`RayHints::candidates`]).
+    pub fn blocked_by_obstacle_among(
+        &self,
+        origin: &Point3<f64>,
+        direction: &Vector3<f64>,
+        t_max: f64,
+        candidates: u64,
+    ) -> bool {
+        let n = self.boxes.len();
         self.boxes
             .iter()
-            .filter_map(|b| b.cast(origin, direction))
-            .chain(self.walls.iter().filter_map(|w| w.cast(origin, direction)))
+            .enumerate()
+            .filter(|&(i, _)| is_candidate(candidates, i))
+            .filter_map(|(_, b)| b.cast(origin, direction))
+            .chain(
+                self.walls
+                    .iter()
+                    .enumerate()
+                    .filter(|&(i, _)| is_candidate(candidates, n + i))
+                    .filter_map(|(_, w)| w.cast(origin, direction)),
+            )
             .any(|(t, _)| t <= t_max)
     }
 
@@ -520,12 +627,56 @@ impl World {
         !(self.boxes.is_empty() && self.walls.is_empty())
     }
 
+    /// The corners of each obstacle, boxes first, then walls: obstacle `i`
+    /// lies within the convex hull of its corners. A sensor projects them to
+    /// know which pixels can see an obstacle at all, and asks only those
+    /// pixels' rays about it ([`RayHints::candidates`]).
+    pub fn obstacle_corners(&self) -> Vec<Vec<Point3<f64>>> {
+        let boxes = self.boxes.iter().map(|b| {
+            let (s, c) = b.yaw.sin_cos();
+            let mut corners = Vec::with_capacity(8);
+            for (dx, dz) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
+                let (x, z) = (dx * b.half_x, dz * b.half_z);
+                // Ry(yaw) · (x, ·, z) about the footprint's centre.
+                let (gx, gz) = (b.centre_x + c * x + s * z, b.centre_z - s * x + c * z);
+                corners.push(Point3::new(gx, 0.0, gz));
+                corners.push(Point3::new(gx, b.height, gz));
+            }
+            corners
+        });
+        let walls = self.walls.iter().map(|w| {
+            vec![
+                Point3::new(w.start.x, 0.0, w.start.y),
+                Point3::new(w.start.x, w.height, w.start.y),
+                Point3::new(w.end.x, 0.0, w.end.y),
+                Point3::new(w.end.x, w.height, w.end.y),
+            ]
+        });
+        boxes.chain(walls).collect()
+    }
+
     /// The first hit with `t ≤ t_max`, with its normal and surface. Capping
     /// `t` lets a sensor skip what is beyond its range.
     pub fn cast(&self, origin: &Point3<f64>, direction: &Vector3<f64>, t_max: f64) -> Option<Hit> {
+        self.cast_with(origin, direction, t_max, &RayHints::default())
+    }
+
+    /// [`World::cast`] with what the caller knows to save work; the hit is
+    /// the same (to far below a micrometre) with any hints that are true.
+    pub fn cast_with(
+        &self,
+        origin: &Point3<f64>,
+        direction: &Vector3<f64>,
+        t_max: f64,
+        hints: &RayHints,
+    ) -> Option<Hit> {
+        let candidates = hints.candidates;
         let mut best: Option<Hit> = None;
         let mut limit = t_max;
         for (i, b) in self.boxes.iter().enumerate() {
+            if !is_candidate(candidates, i) {
+                continue;
+            }
             if let Some((t, normal)) = b.cast(origin, direction) {
                 if t <= limit {
                     limit = t;
@@ -537,7 +688,11 @@ impl World {
                 }
             }
         }
+        let n = self.boxes.len();
         for (i, w) in self.walls.iter().enumerate() {
+            if !is_candidate(candidates, n + i) {
+                continue;
+            }
             if let Some((t, normal)) = w.cast(origin, direction) {
                 if t <= limit {
                     limit = t;
@@ -560,7 +715,7 @@ impl World {
                     surface: Surface::Ground,
                 })
             }
-            Ground::HeightField(field) => field.cast(origin, direction, limit),
+            Ground::HeightField(field) => field.cast(origin, direction, limit, hints.ground_height),
         };
         ground.or(best)
     }
@@ -748,5 +903,67 @@ mod tests {
         assert!(largest <= 0.015 + 1e-12);
         // And it is not flat: at least a third of the bound is reached.
         assert!(largest > 0.005, "largest {largest}");
+    }
+
+    #[test]
+    fn hints_save_work_without_changing_hits() {
+        let world = World::uneven(4, 0.02);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..2000 {
+            let origin = Point3::new(0.5, rng.gen_range(0.8..1.2), 0.0);
+            let down = rng.gen_range(10f64.to_radians()..60f64.to_radians());
+            let heading = rng.gen_range(-0.5..0.5f64);
+            let direction = Vector3::new(
+                down.cos() * heading.cos(),
+                -down.sin(),
+                down.cos() * heading.sin(),
+            );
+            let plain = world.cast(&origin, &direction, 10.0).unwrap();
+            for guess in [-0.02, 0.0, 0.013, 0.02] {
+                let hints = RayHints {
+                    ground_height: Some(guess),
+                    ..RayHints::default()
+                };
+                let hinted = world.cast_with(&origin, &direction, 10.0, &hints).unwrap();
+                assert!((hinted.t - plain.t).abs() < 1e-10);
+                assert!((hinted.normal - plain.normal).norm() < 1e-6);
+            }
+        }
+        // Candidates: an obstacle left out is not hit, one left in is.
+        let world = World::boxes_and_wall(7);
+        let b = world.boxes[1];
+        let origin = Point3::new(b.centre_x, 1.0, b.centre_z);
+        let only = |candidates| {
+            let hints = RayHints {
+                candidates,
+                ground_height: None,
+            };
+            world
+                .cast_with(&origin, &-Vector3::y(), 10.0, &hints)
+                .unwrap()
+                .surface
+        };
+        assert_eq!(only(0b10), Surface::Box(1));
+        assert_eq!(only(0b01), Surface::Ground);
+        assert!(world.blocked_by_obstacle_among(&origin, &-Vector3::y(), 10.0, 0b10));
+        assert!(!world.blocked_by_obstacle_among(&origin, &-Vector3::y(), 10.0, 0b101));
+    }
+
+    #[test]
+    fn obstacle_corners_hold_the_obstacles() {
+        let world = World::boxes_and_wall(5);
+        let corners = world.obstacle_corners();
+        assert_eq!(corners.len(), 3);
+        for (b, c) in world.boxes.iter().zip(&corners) {
+            assert_eq!(c.len(), 8);
+            // Each corner is a corner of the footprint, at the bottom or top.
+            for p in c {
+                let d = Vector2::new(p.x - b.centre_x, p.z - b.centre_z).norm();
+                let half_diagonal = (b.half_x.powi(2) + b.half_z.powi(2)).sqrt();
+                assert!((d - half_diagonal).abs() < 1e-12);
+                assert!(p.y == 0.0 || p.y == b.height);
+            }
+        }
+        assert_eq!(corners[2].len(), 4);
     }
 }

@@ -1,0 +1,104 @@
+//! `groundcal serve --config FILE`: the daemon for the phone/pad terminal
+//! (`crate::terminal`). Prints `listening on ADDR` on stdout once HTTP
+//! listens; SIGTERM or SIGINT aborts a running session (the robot is halted
+//! and sent home) and then stops.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use super::ExitStatus;
+use crate::config::Config;
+use crate::hardware::Selection;
+use crate::terminal::{self, AppState};
+
+/// The command's options.
+#[derive(Debug, Clone, Default)]
+pub struct ServeOptions {
+    pub config: PathBuf,
+    pub selection: Selection,
+    /// Overrides `serve.listen`.
+    pub listen: Option<String>,
+}
+
+async fn stop_signal() {
+    use tokio::signal::unix::{signal, SignalKind};
+    match signal(SignalKind::terminate()) {
+        Ok(mut term) => tokio::select! {
+            _ = tokio::signal::ctrl_c() => {}
+            _ = term.recv() => {}
+        },
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}
+
+/// Runs the command.
+pub fn run(options: &ServeOptions) -> ExitStatus {
+    let (config, schedule) = match Config::load(&options.config) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("groundcal serve: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let Some(serve) = config.serve.clone() else {
+        eprintln!(
+            "groundcal serve: {}: no [serve] table (listen, token_file, state_dir)",
+            options.config.display()
+        );
+        return ExitStatus::BadInput;
+    };
+    let token = match terminal::read_token(&options.config, &serve.token_file) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("groundcal serve: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let state_dir = terminal::resolve(&options.config, &serve.state_dir);
+    let listen = options.listen.clone().unwrap_or(serve.listen);
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("groundcal serve: cannot start the runtime: {e}");
+            return ExitStatus::RuntimeFailure;
+        }
+    };
+    runtime.block_on(async {
+        let listener = match tokio::net::TcpListener::bind(&listen).await {
+            Ok(l) => l,
+            Err(e) => {
+                eprintln!("groundcal serve: cannot listen on {listen}: {e}");
+                return ExitStatus::RuntimeFailure;
+            }
+        };
+        match listener.local_addr() {
+            Ok(addr) => {
+                println!("listening on {addr}");
+                let _ = std::io::stdout().flush();
+            }
+            Err(e) => {
+                eprintln!("groundcal serve: {e}");
+                return ExitStatus::RuntimeFailure;
+            }
+        }
+        let state = AppState::new(
+            config,
+            schedule,
+            options.selection.clone(),
+            token,
+            &state_dir,
+        );
+        match terminal::serve(listener, state, stop_signal()).await {
+            Ok(()) => ExitStatus::Success,
+            Err(e) => {
+                eprintln!("groundcal serve: {e}");
+                ExitStatus::RuntimeFailure
+            }
+        }
+    })
+}

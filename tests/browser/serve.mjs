@@ -1,0 +1,100 @@
+// Drives the `groundcal serve` terminal page in headless Chromium as an
+// operator would on a phone (tests/serve_browser.rs):
+//
+//   node tests/browser/serve.mjs URL TOKEN SCREENSHOT_DIR
+//
+// Types the token, presses Calibrate, watches "pose i of N", waits for the
+// verdict, presses Accept. Checks: no console error, no page error, no request
+// leaving the server (the page works offline). Saves serve-1-idle.png,
+// serve-2-progress.png, serve-3-verdict.png and serve-4-accepted.png. Prints
+// one JSON line of what it saw; exits 0 when every check passes, 1 otherwise,
+// 2 on bad usage.
+
+import { chromium } from 'playwright-core';
+import { mkdtempSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join, resolve } from 'node:path';
+
+const CHROMIUM = '/usr/bin/chromium';
+const ARGS = [
+  '--headless',
+  '--no-sandbox',
+  '--disable-gpu',
+  '--disable-quic',
+  '--no-first-run',
+  '--disable-background-networking',
+  '--disable-component-update',
+  '--disable-sync',
+];
+
+const [url, token, shotDir] = process.argv.slice(2);
+if (!url || !token || !shotDir) {
+  console.error('usage: node serve.mjs URL TOKEN SCREENSHOT_DIR');
+  process.exit(2);
+}
+setTimeout(() => {
+  console.error('serve.mjs: timed out after 240 s');
+  process.exit(1);
+}, 240_000).unref();
+
+const origin = new URL(url).origin;
+const problems = [];
+const seen = {};
+const userDataDir = mkdtempSync(join(tmpdir(), 'groundcal-chromium-'));
+const shot = (page, name) => page.screenshot({ path: resolve(shotDir, `serve-${name}.png`), fullPage: true });
+let context;
+try {
+  context = await chromium.launchPersistentContext(userDataDir, {
+    executablePath: CHROMIUM,
+    headless: true,
+    args: ARGS,
+    timeout: 60_000,
+    viewport: { width: 390, height: 844 },
+    isMobile: true,
+    hasTouch: true,
+    deviceScaleFactor: 2,
+  });
+  await context.route('**/*', (route) => {
+    const requested = route.request().url();
+    if (requested.startsWith(origin) || requested.startsWith('data:')) return route.continue();
+    problems.push(`the page requested ${requested}`);
+    return route.abort();
+  });
+  const page = context.pages()[0] ?? (await context.newPage());
+  page.on('console', (m) => {
+    if (m.type() === 'error') problems.push(`console error: ${m.text()}`);
+  });
+  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
+
+  await page.goto(url, { waitUntil: 'load', timeout: 30_000 });
+  await page.waitForFunction(() => document.getElementById('progress').textContent === 'idle');
+  await shot(page, '1-idle');
+
+  await page.fill('#token', token);
+  await page.click('#calibrate');
+  await page.waitForFunction(() => /pose [1-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
+  seen.progress = await page.locator('#progress').innerText();
+  seen.robot = await page.locator('#robot').innerText();
+  await shot(page, '2-progress');
+
+  await page.waitForFunction(() => ['Accepted', 'Rejected'].includes(document.getElementById('verdict').textContent), null, { timeout: 180_000 });
+  seen.verdict = await page.locator('#verdict').innerText();
+  seen.points = await page.$$eval('#theta circle', (n) => n.length);
+  await shot(page, '3-verdict');
+
+  await page.click('#accept');
+  await page.waitForFunction(() => document.getElementById('message').textContent.startsWith('accepted'), null, { timeout: 30_000 });
+  seen.message = await page.locator('#message').innerText();
+  seen.storedToken = await page.evaluate(() => localStorage.getItem('groundcal-token'));
+  const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+  if (overflow > 1) problems.push(`the page is ${overflow} px wider than the screen`);
+  await shot(page, '4-accepted');
+} catch (error) {
+  problems.push(`the browser failed: ${error.stack ?? error}`);
+} finally {
+  if (context) await context.close();
+  rmSync(userDataDir, { recursive: true, force: true });
+}
+console.log(JSON.stringify({ url, seen, problems }));
+for (const problem of problems) console.error(`serve.mjs: ${problem}`);
+process.exit(problems.length === 0 ? 0 : 1);

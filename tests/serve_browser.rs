@@ -1,0 +1,165 @@
+//! The `groundcal serve` terminal page in a real browser: headless Chromium,
+//! driven by Playwright (`tests/browser/serve.mjs`), types the token, presses
+//! Calibrate, sees progress and the verdict, presses Accept; then the store's
+//! `active.json` must hold the result. The server runs in process on
+//! 127.0.0.1:0 with the built-in simulated robot and Kinect. Screenshots land
+//! in `target/test-screenshots/serve-*.png`.
+//!
+//! Needs Node.js ≥ 20, `npm ci` in `tests/browser` and Debian's chromium. Under
+//! `CI=true` a missing one fails the test; elsewhere the test warns and returns.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use groundcal::config::Config;
+use groundcal::hardware::Selection;
+use groundcal::terminal::{serve, AppState};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+const SETUP: &str = "apt-get install -y chromium && npm ci --prefix tests/browser";
+const TOKEN: &str = "browser-token";
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn missing_prerequisites() -> Vec<String> {
+    let mut missing = Vec::new();
+    match Command::new("node").arg("--version").output() {
+        Ok(out) if out.status.success() => {
+            let version = String::from_utf8_lossy(&out.stdout).trim().to_string();
+            let major: u32 = version
+                .trim_start_matches('v')
+                .split('.')
+                .next()
+                .and_then(|m| m.parse().ok())
+                .unwrap_or(0);
+            if major < 20 {
+                missing.push(format!(
+                    "Node.js ≥ 20 (found {version}; playwright-core needs 20)"
+                ));
+            }
+        }
+        _ => missing.push("Node.js ≥ 20 (`node` is not on PATH)".to_string()),
+    }
+    if !root()
+        .join("tests/browser/node_modules/playwright-core/package.json")
+        .is_file()
+    {
+        missing.push("playwright-core (run `npm ci --prefix tests/browser`)".to_string());
+    }
+    if !Path::new(CHROMIUM).is_file() {
+        missing.push(format!(
+            "Chromium at {CHROMIUM} (`apt-get install -y chromium`)"
+        ));
+    }
+    missing
+}
+
+fn temp_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("groundcal-serve-browser-{}", std::process::id()));
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).expect("temporary directory");
+    dir
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn terminal_page_calibrates_and_accepts_in_chromium() {
+    let missing = missing_prerequisites();
+    if !missing.is_empty() {
+        let message = format!(
+            "the browser test cannot run; missing: {}. The setup the test script runs: {SETUP}",
+            missing.join("; ")
+        );
+        if std::env::var("CI").as_deref() == Ok("true") {
+            panic!("{message}");
+        }
+        eprintln!(
+            "\n{0}\nWARNING: SKIPPED serve_browser: {message}\n{0}\n",
+            "!".repeat(78)
+        );
+        return;
+    }
+
+    let dir = temp_dir();
+    let state_dir = dir.join("state");
+    let (config, schedule) = Config::embedded_sim();
+    let state = AppState::new(
+        config,
+        schedule,
+        Selection::default(),
+        TOKEN.to_string(),
+        &state_dir,
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+
+    let shots = root().join("target/test-screenshots");
+    fs::create_dir_all(&shots).expect("screenshot directory");
+    for step in ["1-idle", "2-progress", "3-verdict", "4-accepted"] {
+        let _ = fs::remove_file(shots.join(format!("serve-{step}.png")));
+    }
+    let url = format!("http://{addr}/");
+    let script = root().join("tests/browser/serve.mjs");
+    let shots_arg = shots.clone();
+    let out = tokio::task::spawn_blocking(move || {
+        Command::new("node")
+            .arg(script)
+            .arg(url)
+            .arg(TOKEN)
+            .arg(shots_arg)
+            .current_dir(root())
+            .output()
+    })
+    .await
+    .unwrap()
+    .expect("node runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "the terminal page failed in Chromium ({}):\n{stderr}\n{stdout}",
+        out.status
+    );
+    let seen: serde_json::Value = serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("serve.mjs printed no JSON ({e}): {stdout}"));
+    assert_eq!(seen["seen"]["verdict"], "Accepted", "{seen}");
+    assert!(seen["seen"]["points"].as_u64().unwrap() > 6, "{seen}");
+    assert_eq!(seen["seen"]["storedToken"], TOKEN, "{seen}");
+
+    let active: serde_json::Value = serde_json::from_str(
+        &fs::read_to_string(state_dir.join("active.json")).expect("active.json written"),
+    )
+    .unwrap();
+    assert!(
+        active["robot_from_sensor"]["beta_deg"].is_number(),
+        "{active}"
+    );
+    let id = active["id"].as_str().unwrap();
+    let stored: serde_json::Value = serde_json::from_str(
+        &fs::read_to_string(state_dir.join(format!("history/{id}.json"))).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(stored["robot_from_sensor"], active["robot_from_sensor"]);
+
+    for step in ["1-idle", "2-progress", "3-verdict", "4-accepted"] {
+        let bytes = fs::read(shots.join(format!("serve-{step}.png"))).expect("screenshot saved");
+        assert!(
+            bytes.len() > 1000 && bytes.starts_with(b"\x89PNG\r\n\x1a\n"),
+            "serve-{step}.png is not a PNG with content"
+        );
+    }
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(30), server)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    let _ = fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,339 @@
+//! `groundcal serve`'s HTTP API, in process: the real server on 127.0.0.1:0
+//! with the built-in simulated robot and Kinect, spoken to with hand-written
+//! HTTP/1.1 requests.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use groundcal::config::Config;
+use groundcal::hardware::Selection;
+use groundcal::terminal::{serve, AppState};
+use serde_json::Value;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+const TOKEN: &str = "s3cret-token";
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("groundcal-serve-http-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// One request on its own connection; returns the status code and the body as JSON.
+async fn request(addr: SocketAddr, method: &str, path: &str, token: Option<&str>) -> (u16, Value) {
+    let mut stream = TcpStream::connect(addr).await.unwrap();
+    let auth = token
+        .map(|t| format!("Authorization: Bearer {t}\r\n"))
+        .unwrap_or_default();
+    let text = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nX-Groundcal-Client: test\r\n{auth}Content-Length: 0\r\nConnection: close\r\n\r\n"
+    );
+    stream.write_all(text.as_bytes()).await.unwrap();
+    let mut response = Vec::new();
+    stream.read_to_end(&mut response).await.unwrap();
+    let response = String::from_utf8_lossy(&response).into_owned();
+    let code: u16 = response
+        .split(' ')
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("bad response: {response}"));
+    let body = response
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b)
+        .unwrap_or("");
+    let json = serde_json::from_str(body).unwrap_or(Value::String(body.to_string()));
+    (code, json)
+}
+
+async fn wait_idle(addr: SocketAddr) -> Value {
+    let start = Instant::now();
+    loop {
+        let (code, status) = request(addr, "GET", "/api/status", None).await;
+        assert_eq!(code, 200);
+        if status["state"] == "idle"
+            && (status["result_id"].is_string() || status["error"].is_string())
+        {
+            return status;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(180),
+            "the calibration did not finish: {status}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn calibrate_accept_and_activate_over_http() {
+    let dir = temp_dir("cycle");
+    let state_dir = dir.join("state");
+    let (config, schedule) = Config::embedded_sim();
+    assert!(
+        config.serve.is_some(),
+        "the built-in config has a [serve] table"
+    );
+    let state = AppState::new(
+        config,
+        schedule,
+        Selection::default(),
+        format!("{TOKEN}\n"),
+        &state_dir,
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+
+    // The page and the idle status.
+    let (code, page) = request(addr, "GET", "/", None).await;
+    assert_eq!(code, 200);
+    assert!(page.as_str().unwrap().contains("Calibrate"));
+    let (code, status) = request(addr, "GET", "/api/status", None).await;
+    assert_eq!((code, status["state"].as_str()), (200, Some("idle")));
+
+    // Nothing moves without the token.
+    let (code, body) = request(addr, "POST", "/api/calibrations", None).await;
+    assert_eq!(code, 401, "{body}");
+    assert!(body["error"].as_str().unwrap().contains("token"));
+    assert_eq!(
+        request(addr, "POST", "/api/calibrations", Some("wrong"))
+            .await
+            .0,
+        401
+    );
+    assert_eq!(
+        request(addr, "POST", "/api/calibrations/current/abort", None)
+            .await
+            .0,
+        401
+    );
+    assert_eq!(
+        request(addr, "POST", "/api/calibrations/current/abort", Some(TOKEN))
+            .await
+            .0,
+        409
+    );
+    assert_eq!(request(addr, "GET", "/api/active", None).await.0, 404);
+    assert_eq!(
+        request(addr, "GET", "/api/calibrations/no-such-id", None)
+            .await
+            .0,
+        404
+    );
+    assert_eq!(
+        request(addr, "GET", "/api/calibrations/..%2Factive", None)
+            .await
+            .0,
+        404
+    );
+    assert_eq!(request(addr, "GET", "/api/nothing", None).await.0, 404);
+
+    // Subscribe to the events before starting.
+    let mut events = TcpStream::connect(addr).await.unwrap();
+    events
+        .write_all(
+            format!(
+                "GET /api/events HTTP/1.1\r\nHost: {addr}\r\nAccept: text/event-stream\r\n\r\n"
+            )
+            .as_bytes(),
+        )
+        .await
+        .unwrap();
+    let mut seen = String::new();
+    let mut buf = [0u8; 4096];
+    while !seen.contains("\r\n\r\n") {
+        let n = tokio::time::timeout(Duration::from_secs(10), events.read(&mut buf))
+            .await
+            .unwrap()
+            .unwrap();
+        assert!(n > 0);
+        seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+    }
+    assert!(seen.starts_with("HTTP/1.1 200"), "{seen}");
+    assert!(seen.contains("text/event-stream"), "{seen}");
+
+    // Start; a second start is refused with who is running.
+    let (code, body) = request(addr, "POST", "/api/calibrations", Some(TOKEN)).await;
+    assert_eq!(code, 202, "{body}");
+    let (code, body) = request(addr, "POST", "/api/calibrations", Some(TOKEN)).await;
+    assert_eq!(code, 409, "{body}");
+    let error = body["error"].as_str().unwrap();
+    assert!(
+        error.contains("already running") && error.contains("test"),
+        "{error}"
+    );
+
+    // The event stream reports progress, pose by pose, then the stored result.
+    let start = Instant::now();
+    while !(seen.contains("\"type\":\"pose_done\"") && seen.contains("\"type\":\"stored\"")) {
+        assert!(
+            start.elapsed() < Duration::from_secs(180),
+            "events so far: {seen}"
+        );
+        let n = tokio::time::timeout(Duration::from_secs(60), events.read(&mut buf))
+            .await
+            .unwrap()
+            .unwrap();
+        assert!(n > 0, "the event stream ended early: {seen}");
+        seen.push_str(&String::from_utf8_lossy(&buf[..n]));
+    }
+    assert!(seen.contains("\"type\":\"started\""), "{seen}");
+    assert!(seen.contains("\"type\":\"moving\""), "{seen}");
+
+    let status = wait_idle(addr).await;
+    assert!(status["error"].is_null(), "{status}");
+    let id = status["result_id"].as_str().unwrap().to_string();
+    let result = &status["result"];
+    assert_eq!(result["status"], "accepted", "{result}");
+    assert!(status["recent_events"].as_array().unwrap().len() > 3);
+
+    // The history has it; accepting needs the token and makes it active.
+    let (code, history) = request(addr, "GET", "/api/calibrations", None).await;
+    assert_eq!(code, 200);
+    assert_eq!(history["calibrations"][0]["id"], id.as_str());
+    let (code, stored) = request(addr, "GET", &format!("/api/calibrations/{id}"), None).await;
+    assert_eq!(code, 200);
+    assert_eq!(stored["robot_from_sensor"], result["robot_from_sensor"]);
+    assert_eq!(
+        request(
+            addr,
+            "POST",
+            &format!("/api/calibrations/{id}/accept"),
+            None
+        )
+        .await
+        .0,
+        401
+    );
+    let (code, active) = request(
+        addr,
+        "POST",
+        &format!("/api/calibrations/{id}/accept"),
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(code, 200, "{active}");
+    let on_disk: Value =
+        serde_json::from_str(&std::fs::read_to_string(state_dir.join("active.json")).unwrap())
+            .unwrap();
+    assert_eq!(on_disk["id"], id.as_str());
+    assert_eq!(on_disk["robot_from_sensor"], result["robot_from_sensor"]);
+    let (code, active) = request(addr, "GET", "/api/active", None).await;
+    assert_eq!((code, &active["id"]), (200, &Value::String(id.clone())));
+    // The active one cannot be rejected; rollback to it works; an unknown id is 404.
+    assert_eq!(
+        request(
+            addr,
+            "POST",
+            &format!("/api/calibrations/{id}/reject"),
+            Some(TOKEN)
+        )
+        .await
+        .0,
+        409
+    );
+    assert_eq!(
+        request(addr, "POST", &format!("/api/rollback/{id}"), Some(TOKEN))
+            .await
+            .0,
+        200
+    );
+    assert_eq!(
+        request(addr, "POST", "/api/rollback/nope", Some(TOKEN))
+            .await
+            .0,
+        404
+    );
+
+    // A second calibration, aborted by the operator: the robot is sent home
+    // and no result is kept.
+    assert_eq!(
+        request(addr, "POST", "/api/calibrations", Some(TOKEN))
+            .await
+            .0,
+        202
+    );
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let (code, body) = request(addr, "POST", "/api/calibrations/current/abort", Some(TOKEN)).await;
+    assert_eq!(code, 202, "{body}");
+    let status = wait_idle(addr).await;
+    let error = status["error"].as_str().unwrap_or_default();
+    assert!(error.contains("aborted"), "{status}");
+    assert!(
+        status["robot"].as_str().unwrap().contains("home"),
+        "{status}"
+    );
+
+    // Reject marks a history entry without deleting it, and it can no longer be made active.
+    let mut extra =
+        serde_json::json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 9.0}});
+    extra["poses"] = Value::Array(vec![]);
+    let other = groundcal::store::Store::new(&state_dir)
+        .add(&extra, "2000-01-01T00:00:00Z")
+        .unwrap();
+    let (code, body) = request(
+        addr,
+        "POST",
+        &format!("/api/calibrations/{other}/reject"),
+        Some(TOKEN),
+    )
+    .await;
+    assert_eq!(code, 200, "{body}");
+    assert_eq!(body["status"], "rejected");
+    assert_eq!(
+        request(
+            addr,
+            "POST",
+            &format!("/api/calibrations/{other}/accept"),
+            Some(TOKEN)
+        )
+        .await
+        .0,
+        409
+    );
+    let (_, history) = request(addr, "GET", "/api/calibrations", None).await;
+    assert_eq!(history["calibrations"].as_array().unwrap().len(), 2);
+
+    // Graceful shutdown ends the event stream too.
+    let _ = stop.send(());
+    tokio::time::timeout(Duration::from_secs(30), server)
+        .await
+        .unwrap()
+        .unwrap()
+        .unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn serve_refuses_a_missing_config_or_token_before_listening() {
+    use groundcal::cli::serve::{run, ServeOptions};
+    use groundcal::cli::ExitStatus;
+    let dir = temp_dir("refuse");
+    let missing = ServeOptions {
+        config: dir.join("nope.toml"),
+        ..ServeOptions::default()
+    };
+    assert_eq!(run(&missing), ExitStatus::BadInput);
+    // config/sim.toml names token.sim next to it; a copy without that file is refused.
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim.toml")).unwrap();
+    let schedule = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/config/schedules/octopus-52.toml"
+    );
+    let text = text.replace("schedules/octopus-52.toml", schedule);
+    let config = dir.join("sim.toml");
+    std::fs::write(&config, text).unwrap();
+    let options = ServeOptions {
+        config,
+        ..ServeOptions::default()
+    };
+    assert_eq!(run(&options), ExitStatus::BadInput);
+    let _ = std::fs::remove_dir_all(&dir);
+}
