@@ -129,7 +129,13 @@ impl Config {
             let line = e
                 .span()
                 .map(|span| text[..span.start.min(text.len())].lines().count().max(1));
-            InputError::new(path, line, e.message().to_string())
+            // Some of toml's errors carry no message of their own: use the whole report then.
+            let message = if e.message().trim().is_empty() {
+                e.to_string()
+            } else {
+                e.message().to_string()
+            };
+            InputError::new(path, line, message)
         })
     }
 

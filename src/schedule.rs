@@ -103,7 +103,13 @@ impl Schedule {
             let line = e
                 .span()
                 .map(|span| text[..span.start.min(text.len())].lines().count().max(1));
-            InputError::new(path, line, e.message().to_string())
+            // Some of toml's errors carry no message of their own: use the whole report then.
+            let message = if e.message().trim().is_empty() {
+                e.to_string()
+            } else {
+                e.message().to_string()
+            };
+            InputError::new(path, line, message)
         })?;
         Ok(schedule)
     }
@@ -252,6 +258,11 @@ mod tests {
         let err = Schedule::parse(Path::new("s.toml"), text).unwrap_err();
         assert_eq!(err.line, Some(3), "{err}");
         assert!(err.to_string().starts_with("s.toml:3:"), "{err}");
+        // Found by fuzzing: some syntax errors once gave an empty message.
+        for text in ["#\u{0}\n", "name = ", "poses = [ #"] {
+            let err = Schedule::parse(Path::new("s.toml"), text).unwrap_err();
+            assert!(!err.message.trim().is_empty(), "{text:?}");
+        }
         let err = Schedule::parse(Path::new("s.toml"), "name = \"x\"\nspeed = 3\n").unwrap_err();
         assert!(
             err.message.contains("speed") || err.message.contains("unknown"),

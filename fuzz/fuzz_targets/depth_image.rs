@@ -46,7 +46,9 @@ fn call(name: &str, parse: Parser, data: &[u8]) -> Option<DepthImage> {
     let result = match result {
         Ok(result) => result,
         Err(_) => {
-            let panic = LAST_PANIC.with(|p| p.borrow_mut().take()).unwrap_or_default();
+            let panic = LAST_PANIC
+                .with(|p| p.borrow_mut().take())
+                .unwrap_or_default();
             eprintln!("{name} panicked: {panic}");
             std::process::abort();
         }
@@ -55,7 +57,10 @@ fn call(name: &str, parse: Parser, data: &[u8]) -> Option<DepthImage> {
         Ok(image) => Some(image),
         Err(e) => {
             let message = e.to_string();
-            assert!(message.starts_with(PATH), "{name}: error without the path: {message}");
+            assert!(
+                message.starts_with(PATH),
+                "{name}: error without the path: {message}"
+            );
             if let Some(panic) = LAST_PANIC.with(|p| p.borrow_mut().take()) {
                 // Caught inside the parser: only guard_panics does that.
                 assert!(

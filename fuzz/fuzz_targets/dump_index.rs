@@ -31,8 +31,12 @@ fn check_entry(entry: &DumpEntry) {
         entry.time
     );
     let written = entry_name(letter, entry.time, entry.timestamp, extension);
-    let again = parse_entry_name(&written)
-        .unwrap_or_else(|e| panic!("{:?} written as {written:?} does not parse: {e}", entry.name));
+    let again = parse_entry_name(&written).unwrap_or_else(|e| {
+        panic!(
+            "{:?} written as {written:?} does not parse: {e}",
+            entry.name
+        )
+    });
     assert_eq!(again.kind, entry.kind);
     assert_eq!(again.timestamp, entry.timestamp);
     // `%f` keeps six decimals.

@@ -36,7 +36,10 @@ fuzz_target!(|data: &[u8]| {
         previous_line = pose.line;
     }
     if file.truncated_tail {
-        assert!(!text.ends_with('\n'), "a torn last line in a text ending in a newline");
+        assert!(
+            !text.ends_with('\n'),
+            "a torn last line in a text ending in a newline"
+        );
     }
 
     // Written back one line each (as the recorder writes them) they read back
@@ -53,5 +56,8 @@ fuzz_target!(|data: &[u8]| {
         serde_json::to_value(&file.poses).unwrap(),
         serde_json::to_value(&again.poses).unwrap(),
     );
-    assert!(json_close(&a, &b), "round trip changed the poses:\n{a}\n{b}");
+    assert!(
+        json_close(&a, &b),
+        "round trip changed the poses:\n{a}\n{b}"
+    );
 });

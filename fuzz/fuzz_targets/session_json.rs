@@ -18,7 +18,11 @@ fuzz_target!(|data: &[u8]| {
     check_feet(&session.home.feet_body_mm).expect("home feet accepted");
     assert!(session.home.commanded.is_finite());
     assert!(session.kinect.tilt_deg.is_finite());
-    session.kinect.depth_model.validate().expect("depth model accepted");
+    session
+        .kinect
+        .depth_model
+        .validate()
+        .expect("depth model accepted");
     let intrinsics = session.kinect.intrinsics;
     intrinsics.validate().expect("intrinsics accepted");
     // Opening a recording sizes its frames from these; that must not overflow.
@@ -37,5 +41,8 @@ fuzz_target!(|data: &[u8]| {
         serde_json::to_value(&session).unwrap(),
         serde_json::to_value(&again).unwrap(),
     );
-    assert!(json_close(&a, &b), "round trip changed the session:\n{a}\n{b}");
+    assert!(
+        json_close(&a, &b),
+        "round trip changed the session:\n{a}\n{b}"
+    );
 });

@@ -38,7 +38,10 @@ pub fn check_input_error(e: &InputError, text: &str) {
         "error without a message: {e:?}"
     );
     let shown = e.to_string();
-    assert!(shown.starts_with(PATH), "error does not start with the path: {shown}");
+    assert!(
+        shown.starts_with(PATH),
+        "error does not start with the path: {shown}"
+    );
 }
 
 /// Whether `GROUNDCAL_FUZZ_KNOWN_BUGS` is set: the findings listed as open
@@ -68,8 +71,7 @@ pub fn json_close(a: &serde_json::Value, b: &serde_json::Value) -> bool {
         }
         (V::Object(x), V::Object(y)) => {
             x.len() == y.len()
-                && x
-                    .iter()
+                && x.iter()
                     .all(|(k, v)| y.get(k).is_some_and(|w| json_close(v, w)))
         }
         _ => a == b,

@@ -232,6 +232,13 @@ impl Plane {
         if ![a, b, c, d].iter().all(|v| v.is_finite()) {
             return Err(PlaneError::NotFinite);
         }
+        // Scale first: the norm of huge coefficients (|a| > 1e154) would overflow.
+        let largest = [a, b, c, d].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let (a, b, c, d) = if largest > 0.0 {
+            (a / largest, b / largest, c / largest, d / largest)
+        } else {
+            (a, b, c, d)
+        };
         let normal = Vector3::new(a, b, c);
         let norm = normal.norm();
         if norm < 1e-12 {
@@ -360,6 +367,9 @@ mod tests {
         assert_abs_diff_eq!(p.d, 0.5);
         assert!(Plane::from_coefficients(0.0, 0.0, 0.0, 1.0).is_err());
         assert!(Plane::from_coefficients(f64::NAN, 0.0, 1.0, 1.0).is_err());
+        // Found by fuzzing: huge coefficients once overflowed to a zero normal.
+        let p = Plane::from_coefficients(1e200, 0.0, 0.0, 1e199).unwrap();
+        assert!((p.normal.norm() - 1.0).abs() < 1e-12 && (p.d - 0.1).abs() < 1e-12);
     }
 
     #[test]
