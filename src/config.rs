@@ -10,7 +10,7 @@ use serde::Deserialize;
 use crate::calib::quality::Gates;
 use crate::calib::sensor::{DepthModel, Intrinsics};
 use crate::recording::session::NominalMount;
-use crate::recording::{read_bounded, InputError};
+use crate::recording::{parse_toml, read_bounded, InputError};
 use crate::schedule::{Limits, Schedule};
 
 /// The whole configuration.
@@ -125,18 +125,7 @@ pub struct ServeConfig {
 impl Config {
     /// Parses a configuration's text (no semantic checks).
     pub fn parse(path: &Path, text: &str) -> Result<Self, InputError> {
-        toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|span| text[..span.start.min(text.len())].lines().count().max(1));
-            // Some of toml's errors carry no message of their own: use the whole report then.
-            let message = if e.message().trim().is_empty() {
-                e.to_string()
-            } else {
-                e.message().to_string()
-            };
-            InputError::new(path, line, message)
-        })
+        parse_toml(path, text)
     }
 
     /// Reads and checks a configuration file, and the schedule it names.

@@ -228,6 +228,36 @@ impl ResultJson {
         }
     }
 
+    /// The result of a calibration from the poses that gave a plane and those
+    /// that did not (with why), out of `poses_total`: the solve's verdict, or
+    /// an unsolved rejection; the failures listed as poses and as notes.
+    pub fn from_poses(
+        observations: &[crate::calib::solve::Observation],
+        failed: &[(u32, String)],
+        poses_total: usize,
+        settings: &crate::calib::solve::SolveSettings,
+        kinect_tilt_deg: f64,
+    ) -> Self {
+        use crate::calib::solve::{solve_among, SolveError};
+        let mut result = match solve_among(observations, poses_total, settings) {
+            Ok(calibration) => Self::from_calibration(&calibration),
+            Err(SolveError::TooFewObservations { usable, outcomes }) => Self::unsolved(
+                SolveError::TooFewObservations {
+                    usable,
+                    outcomes: Vec::new(),
+                }
+                .to_string(),
+                &outcomes,
+            ),
+        }
+        .with_failed_poses(failed);
+        result.kinect_tilt_deg = Some(kinect_tilt_deg);
+        for (index, reason) in failed {
+            result.notes.push(format!("pose {index}: {reason}"));
+        }
+        result
+    }
+
     /// Adds poses that gave no plane, keeping the list in index order.
     pub fn with_failed_poses(mut self, failed: &[(u32, String)]) -> Self {
         self.poses.extend(

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 
 use crate::calib::sensor::PointCloud;
-use crate::calib::solve::{solve_among, Observation, SolveError, SolveSettings};
+use crate::calib::solve::{Observation, SolveSettings};
 use crate::output::ResultJson;
 use crate::pipeline::{PoseProcessor, PoseSettings};
 use crate::recording::session::NominalMount;
@@ -160,28 +160,18 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             Err(reason) => failed.push((outcome.index, reason)),
         }
     }
-    let total = recording.poses.len();
-    let mut result = match solve_among(&observations, total, &options.solve) {
-        Ok(calibration) => ResultJson::from_calibration(&calibration),
-        Err(SolveError::TooFewObservations { usable, outcomes }) => ResultJson::unsolved(
-            SolveError::TooFewObservations {
-                usable,
-                outcomes: Vec::new(),
-            }
-            .to_string(),
-            &outcomes,
-        ),
-    }
-    .with_failed_poses(&failed);
-    result.kinect_tilt_deg = Some(session.kinect.tilt_deg);
+    let mut result = ResultJson::from_poses(
+        &observations,
+        &failed,
+        recording.poses.len(),
+        &options.solve,
+        session.kinect.tilt_deg,
+    );
     if let Some(note) = processor.prior_note() {
-        result.notes.push(note);
+        result.notes.insert(0, note);
     }
     if recording.truncated_tail {
         result.notes.push("poses.jsonl ends in a line cut off part-way (the recording was interrupted): it was left out".into());
-    }
-    for (index, reason) in &failed {
-        result.notes.push(format!("pose {index}: {reason}"));
     }
     Ok(Replay {
         result,

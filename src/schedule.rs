@@ -12,7 +12,7 @@ use serde::Deserialize;
 
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::solve::{observability, Observation, SolveSettings};
-use crate::recording::{read_bounded, InputError};
+use crate::recording::{parse_toml, read_bounded, InputError};
 
 /// A schedule as read from its file.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -99,18 +99,7 @@ pub enum ScheduleError {
 impl Schedule {
     /// Parses a schedule file's text.
     pub fn parse(path: &Path, text: &str) -> Result<Self, InputError> {
-        let schedule: Schedule = toml::from_str(text).map_err(|e| {
-            let line = e
-                .span()
-                .map(|span| text[..span.start.min(text.len())].lines().count().max(1));
-            // Some of toml's errors carry no message of their own: use the whole report then.
-            let message = if e.message().trim().is_empty() {
-                e.to_string()
-            } else {
-                e.message().to_string()
-            };
-            InputError::new(path, line, message)
-        })?;
+        let schedule: Schedule = parse_toml(path, text)?;
         Ok(schedule)
     }
 

@@ -47,6 +47,26 @@ impl fmt::Display for InputError {
 
 impl std::error::Error for InputError {}
 
+/// Parses strict TOML, turning toml's error into one that names the file and
+/// the line (some of toml's errors carry no message of their own: the whole
+/// report is used then).
+pub fn parse_toml<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    text: &str,
+) -> Result<T, InputError> {
+    toml::from_str(text).map_err(|e| {
+        let line = e
+            .span()
+            .map(|span| text[..span.start.min(text.len())].lines().count().max(1));
+        let message = if e.message().trim().is_empty() {
+            e.to_string()
+        } else {
+            e.message().to_string()
+        };
+        InputError::new(path, line, message)
+    })
+}
+
 /// Reads a whole file, refusing ones too large to be an input of this kind.
 pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
     use std::io::Read;

@@ -14,7 +14,7 @@ use tokio::time::Instant;
 
 use super::{Event, Plan, PoseFit};
 use crate::calib::sensor::PointCloud;
-use crate::calib::solve::{solve_among, Observation, SolveError};
+use crate::calib::solve::Observation;
 use crate::depth_image::DepthImage;
 use crate::output::ResultJson;
 use crate::pipeline::{BodyEstimate, PoseProcessor};
@@ -413,24 +413,9 @@ async fn body<S: DepthSensor, C: BodyController>(
             Err(reason) => failed.push((u32::from(fit.index), reason)),
         }
     }
-    let mut result = match solve_among(&observations, of, &plan.solve) {
-        Ok(calibration) => ResultJson::from_calibration(&calibration),
-        Err(SolveError::TooFewObservations { usable, outcomes }) => ResultJson::unsolved(
-            SolveError::TooFewObservations {
-                usable,
-                outcomes: Vec::new(),
-            }
-            .to_string(),
-            &outcomes,
-        ),
-    }
-    .with_failed_poses(&failed);
-    result.kinect_tilt_deg = Some(plan.tilt_deg);
+    let mut result = ResultJson::from_poses(&observations, &failed, of, &plan.solve, plan.tilt_deg);
     if let Some(note) = processor.prior_note() {
-        result.notes.push(note);
-    }
-    for (index, reason) in &failed {
-        result.notes.push(format!("pose {index}: {reason}"));
+        result.notes.insert(0, note);
     }
     let recording = match writer {
         Some(w) => Some(w.finish()?),
