@@ -74,6 +74,23 @@ fn covariance(plane: &Plane, sigma_n: f64, sigma_d: f64) -> Matrix4<f64> {
     c
 }
 
+/// Observations of `mount` from every pose of `schedule`: the true ground
+/// of each pose, passed through `measured` (exact, noisy, ...).
+fn observe(
+    mount: &PoseParams,
+    schedule: &[PoseParams],
+    mut measured: impl FnMut(&Plane) -> Plane,
+) -> Vec<Observation> {
+    schedule
+        .iter()
+        .enumerate()
+        .map(|(i, pose)| {
+            let g = pose.to_transform();
+            Observation::new(i as u32 + 1, g, measured(&predict(mount, &g)))
+        })
+        .collect()
+}
+
 /// Monte-Carlo coverage: in ≥ 99 % of (case, parameter) pairs the error is
 /// within 4 predicted σ, with and without the fits' covariances.
 #[test]
@@ -133,18 +150,9 @@ fn predicted_sigma_follows_the_noise() {
     let mount = random_mount(&mut rng);
     let schedule = random_schedule(&mut rng, 52);
     let solve_with = |sigma_n: f64, rng: &mut ChaCha8Rng| {
-        let obs: Vec<Observation> = schedule
-            .iter()
-            .enumerate()
-            .map(|(i, pose)| {
-                let g = pose.to_transform();
-                Observation::new(
-                    i as u32 + 1,
-                    g,
-                    measure(&predict(&mount, &g), sigma_n, 0.001, rng),
-                )
-            })
-            .collect();
+        let obs: Vec<Observation> = observe(&mount, &schedule, |truth| {
+            measure(truth, sigma_n, 0.001, rng)
+        });
         solve(&obs, &SolveSettings::default()).unwrap().sigma()
     };
     let noisy = solve_with(0.3f64.to_radians(), &mut rng);
@@ -161,18 +169,9 @@ fn predicted_sigma_follows_the_noise() {
 fn schedule_result(schedule: &[PoseParams]) -> groundcal::calib::solve::Calibration {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mount = random_mount(&mut rng);
-    let obs: Vec<Observation> = schedule
-        .iter()
-        .enumerate()
-        .map(|(i, pose)| {
-            let g = pose.to_transform();
-            Observation::new(
-                i as u32 + 1,
-                g,
-                measure(&predict(&mount, &g), 0.001, 0.0005, &mut rng),
-            )
-        })
-        .collect();
+    let obs: Vec<Observation> = observe(&mount, schedule, |truth| {
+        measure(truth, 0.001, 0.0005, &mut rng)
+    });
     solve(&obs, &SolveSettings::default()).unwrap()
 }
 
@@ -260,14 +259,7 @@ fn a_pose_set_aside_beforehand_keeps_its_reason_and_is_not_used() {
     let mut rng = ChaCha8Rng::seed_from_u64(12);
     let mount = random_mount(&mut rng);
     let schedule = random_schedule(&mut rng, 20);
-    let mut obs: Vec<Observation> = schedule
-        .iter()
-        .enumerate()
-        .map(|(i, pose)| {
-            let g = pose.to_transform();
-            Observation::new(i as u32 + 1, g, predict(&mount, &g))
-        })
-        .collect();
+    let mut obs: Vec<Observation> = observe(&mount, &schedule, |truth| *truth);
     // A slipped foot: the body pose is wrong by 3° and 2 cm.
     obs[4].ground_from_robot = PoseParams::new(0.0, 0.05, 0.0, Vector3::new(0.0, 0.02, 0.0))
         .to_transform()
@@ -285,18 +277,9 @@ fn gross_errors_in_a_few_poses_are_set_aside_and_do_not_move_the_result() {
     let mut rng = ChaCha8Rng::seed_from_u64(13);
     let mount = random_mount(&mut rng);
     let schedule = random_schedule(&mut rng, 52);
-    let mut obs: Vec<Observation> = schedule
-        .iter()
-        .enumerate()
-        .map(|(i, pose)| {
-            let g = pose.to_transform();
-            Observation::new(
-                i as u32 + 1,
-                g,
-                measure(&predict(&mount, &g), 0.1f64.to_radians(), 0.0005, &mut rng),
-            )
-        })
-        .collect();
+    let mut obs: Vec<Observation> = observe(&mount, &schedule, |truth| {
+        measure(truth, 0.1f64.to_radians(), 0.0005, &mut rng)
+    });
     // A typo in a table (sign of c), a box top fitted instead of the ground,
     // and a pose whose body height is wrong.
     obs[7].plane.normal.z = -obs[7].plane.normal.z;
@@ -334,14 +317,7 @@ proptest! {
     ) {
         let mount = PoseParams::new(alpha.to_radians(), beta.to_radians(), gamma.to_radians(), Vector3::new(px, py, pz));
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let obs: Vec<Observation> = random_schedule(&mut rng, 12)
-            .iter()
-            .enumerate()
-            .map(|(i, pose)| {
-                let g = pose.to_transform();
-                Observation::new(i as u32 + 1, g, predict(&mount, &g))
-            })
-            .collect();
+        let obs: Vec<Observation> = observe(&mount, &random_schedule(&mut rng, 12), |truth| *truth);
         let result = solve(&obs, &SolveSettings::default()).unwrap();
         prop_assert!((result.robot_from_sensor.to_vector() - mount.to_vector()).amax() < 1e-7);
         prop_assert!(result.poses.iter().all(|p| p.used));
