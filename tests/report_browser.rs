@@ -10,7 +10,6 @@
 mod common;
 
 use std::fs;
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use groundcal::calib::solve::{solve, SolveSettings};
@@ -19,72 +18,9 @@ use groundcal::recording::planes::read_planes;
 use groundcal::report::{write_report, Provenance};
 use sha2::{Digest, Sha256};
 
-const CHROMIUM: &str = "/usr/bin/chromium";
-/// What the project's test script runs before the tests (Node.js ≥ 20 with npm
-/// comes with the machine).
-const SETUP: &str = "apt-get install -y chromium && npm ci --prefix tests/browser";
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// What is missing to run the browser, in words that say what to install.
-fn missing_prerequisites() -> Vec<String> {
-    let mut missing = Vec::new();
-    match Command::new("node").arg("--version").output() {
-        Ok(out) if out.status.success() => {
-            let version = String::from_utf8_lossy(&out.stdout).trim().to_string();
-            let major: u32 = version
-                .trim_start_matches('v')
-                .split('.')
-                .next()
-                .and_then(|m| m.parse().ok())
-                .unwrap_or(0);
-            if major < 20 {
-                missing.push(format!(
-                    "Node.js ≥ 20 (found {version}; playwright-core needs 20)"
-                ));
-            }
-        }
-        _ => missing.push("Node.js ≥ 20 (`node` is not on PATH)".to_string()),
-    }
-    if !root()
-        .join("tests/browser/node_modules/playwright-core/package.json")
-        .is_file()
-    {
-        missing.push("playwright-core (run `npm ci --prefix tests/browser`)".to_string());
-    }
-    if !Path::new(CHROMIUM).is_file() {
-        missing.push(format!(
-            "Chromium at {CHROMIUM} (`apt-get install -y chromium`)"
-        ));
-    }
-    missing
-}
-
-/// A directory of its own under the system's temporary directory.
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("groundcal-report-browser-{}", std::process::id()));
-    let _ = fs::remove_dir_all(&dir);
-    fs::create_dir_all(&dir).expect("temporary directory");
-    dir
-}
-
 #[test]
 fn report_opens_cleanly_in_chromium_on_a_phone_and_a_laptop() {
-    let missing = missing_prerequisites();
-    if !missing.is_empty() {
-        let message = format!(
-            "the browser test cannot run; missing: {}. The setup the test script runs: {SETUP}",
-            missing.join("; ")
-        );
-        if std::env::var("CI").as_deref() == Ok("true") {
-            panic!("{message}");
-        }
-        eprintln!(
-            "\n{0}\nWARNING: SKIPPED report_browser: {message}\n{0}\n",
-            "!".repeat(78)
-        );
+    if !common::browser_ready("report_browser") {
         return;
     }
 
@@ -96,19 +32,19 @@ fn report_opens_cleanly_in_chromium_on_a_phone_and_a_laptop() {
     let digest: String = digest.iter().map(|b| format!("{b:02x}")).collect();
     let provenance = Provenance::now("tests/data/paper-table2-printed.json", digest);
 
-    let dir = temp_dir();
+    let dir = common::temp_dir("report-browser");
     let html = write_report(&dir.join("report"), &result, &provenance).expect("report written");
 
-    let shots = root().join("target/test-screenshots");
+    let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");
     let png = shots.join("report.png");
     let _ = fs::remove_file(&png);
 
     let out = Command::new("node")
-        .arg(root().join("tests/browser/report.mjs"))
+        .arg(common::root().join("tests/browser/report.mjs"))
         .arg(&html)
         .arg(&png)
-        .current_dir(root())
+        .current_dir(common::root())
         .output()
         .expect("node runs");
     let stdout = String::from_utf8_lossy(&out.stdout);

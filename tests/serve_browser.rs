@@ -8,8 +8,9 @@
 //! Needs Node.js ≥ 20, `npm ci` in `tests/browser` and Debian's chromium. Under
 //! `CI=true` a missing one fails the test; elsewhere the test warns and returns.
 
+mod common;
+
 use std::fs;
-use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
@@ -17,73 +18,15 @@ use groundcal::config::Config;
 use groundcal::hardware::Selection;
 use groundcal::terminal::{serve, AppState};
 
-const CHROMIUM: &str = "/usr/bin/chromium";
-const SETUP: &str = "apt-get install -y chromium && npm ci --prefix tests/browser";
 const TOKEN: &str = "browser-token";
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn missing_prerequisites() -> Vec<String> {
-    let mut missing = Vec::new();
-    match Command::new("node").arg("--version").output() {
-        Ok(out) if out.status.success() => {
-            let version = String::from_utf8_lossy(&out.stdout).trim().to_string();
-            let major: u32 = version
-                .trim_start_matches('v')
-                .split('.')
-                .next()
-                .and_then(|m| m.parse().ok())
-                .unwrap_or(0);
-            if major < 20 {
-                missing.push(format!(
-                    "Node.js ≥ 20 (found {version}; playwright-core needs 20)"
-                ));
-            }
-        }
-        _ => missing.push("Node.js ≥ 20 (`node` is not on PATH)".to_string()),
-    }
-    if !root()
-        .join("tests/browser/node_modules/playwright-core/package.json")
-        .is_file()
-    {
-        missing.push("playwright-core (run `npm ci --prefix tests/browser`)".to_string());
-    }
-    if !Path::new(CHROMIUM).is_file() {
-        missing.push(format!(
-            "Chromium at {CHROMIUM} (`apt-get install -y chromium`)"
-        ));
-    }
-    missing
-}
-
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("groundcal-serve-browser-{}", std::process::id()));
-    let _ = fs::remove_dir_all(&dir);
-    fs::create_dir_all(&dir).expect("temporary directory");
-    dir
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn terminal_page_calibrates_and_accepts_in_chromium() {
-    let missing = missing_prerequisites();
-    if !missing.is_empty() {
-        let message = format!(
-            "the browser test cannot run; missing: {}. The setup the test script runs: {SETUP}",
-            missing.join("; ")
-        );
-        if std::env::var("CI").as_deref() == Ok("true") {
-            panic!("{message}");
-        }
-        eprintln!(
-            "\n{0}\nWARNING: SKIPPED serve_browser: {message}\n{0}\n",
-            "!".repeat(78)
-        );
+    if !common::browser_ready("serve_browser") {
         return;
     }
 
-    let dir = temp_dir();
+    let dir = common::temp_dir("serve-browser");
     let state_dir = dir.join("state");
     let (config, schedule) = Config::embedded_sim();
     let state = AppState::new(
@@ -100,13 +43,13 @@ async fn terminal_page_calibrates_and_accepts_in_chromium() {
         let _ = stopped.await;
     }));
 
-    let shots = root().join("target/test-screenshots");
+    let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");
     for step in ["1-idle", "2-progress", "3-verdict", "4-accepted"] {
         let _ = fs::remove_file(shots.join(format!("serve-{step}.png")));
     }
     let url = format!("http://{addr}/");
-    let script = root().join("tests/browser/serve.mjs");
+    let script = common::root().join("tests/browser/serve.mjs");
     let shots_arg = shots.clone();
     let out = tokio::task::spawn_blocking(move || {
         Command::new("node")
@@ -114,7 +57,7 @@ async fn terminal_page_calibrates_and_accepts_in_chromium() {
             .arg(url)
             .arg(TOKEN)
             .arg(shots_arg)
-            .current_dir(root())
+            .current_dir(common::root())
             .output()
     })
     .await

@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// `shared/` beside the project (CI clones main with shared/ beside it).
@@ -36,4 +36,77 @@ pub fn groundcal_json(args: &[&str]) -> (i32, serde_json::Value) {
         panic!("stdout is not one JSON document ({e}): {stdout}\nstderr: {stderr}")
     });
     (code, value)
+}
+
+/// The project's root directory.
+pub fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A fresh directory of its own under the system's temporary directory.
+pub fn temp_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("groundcal-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temporary directory");
+    dir
+}
+
+/// Debian's Chromium, which Playwright drives.
+pub const CHROMIUM: &str = "/usr/bin/chromium";
+/// What the project's test script runs before the browser tests.
+const BROWSER_SETUP: &str = "apt-get install -y chromium && npm ci --prefix tests/browser";
+
+/// What is missing to run the browser tests, in words that say what to install.
+fn missing_browser_prerequisites() -> Vec<String> {
+    let mut missing = Vec::new();
+    match Command::new("node").arg("--version").output() {
+        Ok(out) if out.status.success() => {
+            let version = String::from_utf8_lossy(&out.stdout).trim().to_string();
+            let major: u32 = version
+                .trim_start_matches('v')
+                .split('.')
+                .next()
+                .and_then(|m| m.parse().ok())
+                .unwrap_or(0);
+            if major < 20 {
+                missing.push(format!(
+                    "Node.js ≥ 20 (found {version}; playwright-core needs 20)"
+                ));
+            }
+        }
+        _ => missing.push("Node.js ≥ 20 (`node` is not on PATH)".to_string()),
+    }
+    if !root()
+        .join("tests/browser/node_modules/playwright-core/package.json")
+        .is_file()
+    {
+        missing.push("playwright-core (run `npm ci --prefix tests/browser`)".to_string());
+    }
+    if !Path::new(CHROMIUM).is_file() {
+        missing.push(format!(
+            "Chromium at {CHROMIUM} (`apt-get install -y chromium`)"
+        ));
+    }
+    missing
+}
+
+/// Whether the browser tests can run. Under `CI=true` a missing prerequisite
+/// fails the test; elsewhere `test` warns loudly and should return.
+pub fn browser_ready(test: &str) -> bool {
+    let missing = missing_browser_prerequisites();
+    if missing.is_empty() {
+        return true;
+    }
+    let message = format!(
+        "the browser test cannot run; missing: {}. The setup the test script runs: {BROWSER_SETUP}",
+        missing.join("; ")
+    );
+    if std::env::var("CI").as_deref() == Ok("true") {
+        panic!("{message}");
+    }
+    eprintln!(
+        "\n{0}\nWARNING: SKIPPED {test}: {message}\n{0}\n",
+        "!".repeat(78)
+    );
+    false
 }
