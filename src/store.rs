@@ -39,6 +39,8 @@ pub enum StoreError {
     NotFound(String),
     #[error("calibration {0} was rejected and cannot be made active")]
     Rejected(String),
+    #[error("calibration {0} is the active one; roll back to another first")]
+    Active(String),
 }
 
 fn io<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -> StoreError + 'a {
@@ -199,6 +201,37 @@ impl Store {
         })?;
         write_atomically(&self.active_path(), &bytes)?;
         Ok(active)
+    }
+
+    /// Marks a result of the history as rejected by the operator (`by`), with
+    /// its status before; nothing is deleted. The active calibration cannot be
+    /// rejected: roll back to another first.
+    pub fn reject(&self, id: &str, now: &str, by: &str) -> Result<Value, StoreError> {
+        let mut entry = self.get(id)?;
+        let active = self.active()?;
+        if active
+            .as_ref()
+            .and_then(|a| a.get("id"))
+            .and_then(Value::as_str)
+            == Some(id)
+        {
+            return Err(StoreError::Active(id.to_string()));
+        }
+        if let Value::Object(map) = &mut entry {
+            let previous = map.get("status").cloned().unwrap_or(Value::Null);
+            map.insert("status".into(), Value::String("rejected".into()));
+            map.insert(
+                "operator_rejection".into(),
+                serde_json::json!({ "at": now, "by": by, "status_before": previous }),
+            );
+        }
+        let path = self.entry_path(id)?;
+        let bytes = serde_json::to_vec_pretty(&entry).map_err(|e| StoreError::Invalid {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        write_atomically(&path, &bytes)?;
+        Ok(entry)
     }
 
     /// The history, newest first.

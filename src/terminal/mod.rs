@@ -31,7 +31,7 @@ use crate::config::Config;
 use crate::hardware::{self, Selection};
 use crate::schedule::Schedule;
 use crate::session::{self, Event};
-use crate::store::{write_atomically, Store, StoreError};
+use crate::store::{Store, StoreError};
 
 /// The page, embedded: no CDN, works offline.
 pub const PAGE: &str = include_str!("page.html");
@@ -263,7 +263,9 @@ impl IntoResponse for ApiError {
 fn store_error(e: StoreError) -> ApiError {
     match e {
         StoreError::NotFound(_) => ApiError(StatusCode::NOT_FOUND, e.to_string()),
-        StoreError::Rejected(_) => ApiError(StatusCode::CONFLICT, e.to_string()),
+        StoreError::Rejected(_) | StoreError::Active(_) => {
+            ApiError(StatusCode::CONFLICT, e.to_string())
+        }
         _ => ApiError(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }
@@ -313,9 +315,9 @@ pub fn router(state: AppState) -> Router {
         .route("/api/calibrations", get(get_history).post(post_start))
         .route("/api/calibrations/current/abort", post(post_abort))
         .route("/api/calibrations/{id}", get(get_calibration))
-        .route("/api/calibrations/{id}/accept", post(post_accept))
+        .route("/api/calibrations/{id}/accept", post(post_activate))
         .route("/api/calibrations/{id}/reject", post(post_reject))
-        .route("/api/rollback/{id}", post(post_rollback))
+        .route("/api/rollback/{id}", post(post_activate))
         .route("/api/active", get(get_active))
         .fallback(|| async {
             ApiError(
@@ -411,21 +413,8 @@ async fn get_active(State(state): State<AppState>) -> Result<Json<Value>, ApiErr
     }
 }
 
-async fn post_accept(
-    State(state): State<AppState>,
-    headers: HeaderMap,
-    UrlPath(id): UrlPath<String>,
-) -> Result<Json<Value>, ApiError> {
-    authorize(&state, &headers)?;
-    state
-        .0
-        .store
-        .activate(&id, &now())
-        .map(Json)
-        .map_err(store_error)
-}
-
-async fn post_rollback(
+/// Accept a result, or roll back to an earlier one: both make it active.
+async fn post_activate(
     State(state): State<AppState>,
     headers: HeaderMap,
     UrlPath(id): UrlPath<String>,
@@ -446,37 +435,12 @@ async fn post_reject(
     UrlPath(id): UrlPath<String>,
 ) -> Result<Json<Value>, ApiError> {
     authorize(&state, &headers)?;
-    let store = &state.0.store;
-    let mut entry = store.get(&id).map_err(store_error)?;
-    let active = store.active().map_err(store_error)?;
-    if active
-        .as_ref()
-        .and_then(|a| a.get("id"))
-        .and_then(Value::as_str)
-        == Some(id.as_str())
-    {
-        return Err(ApiError(
-            StatusCode::CONFLICT,
-            format!("calibration {id} is the active one; roll back to another first"),
-        ));
-    }
-    if let Value::Object(map) = &mut entry {
-        let previous = map.get("status").cloned().unwrap_or(Value::Null);
-        map.insert("status".into(), Value::String("rejected".into()));
-        map.insert(
-            "operator_rejection".into(),
-            json!({ "at": now(), "by": client_name(&headers, addr), "status_before": previous }),
-        );
-    }
-    // The store's documented layout: history/<id>.json (the id was checked by get).
-    let path = store
-        .active_path()
-        .with_file_name("history")
-        .join(format!("{id}.json"));
-    let bytes = serde_json::to_vec_pretty(&entry)
-        .map_err(|e| ApiError(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()))?;
-    write_atomically(&path, &bytes).map_err(store_error)?;
-    Ok(Json(entry))
+    state
+        .0
+        .store
+        .reject(&id, &now(), &client_name(&headers, addr))
+        .map(Json)
+        .map_err(store_error)
 }
 
 async fn post_abort(
