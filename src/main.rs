@@ -85,6 +85,10 @@ enum Command {
         /// Motions take duration / X (50: fifty times faster than real time).
         #[arg(long, value_name = "X", default_value_t = 1.0)]
         time_scale: f64,
+        /// Play this recording's robot back: accept only its poses, exactly as
+        /// commanded, and report its feet.
+        #[arg(long, value_name = "DIR")]
+        replay: Option<PathBuf>,
     },
     /// The daemon for the phone/pad terminal: HTTP API and page, sd_notify.
     Serve {
@@ -204,7 +208,8 @@ fn run(args: Args) -> ExitStatus {
             listen,
             seed,
             time_scale,
-        } => cli::sim_robot::run(&listen, seed, time_scale),
+            replay,
+        } => cli::sim_robot::run(&listen, seed, time_scale, replay.as_deref()),
         Command::Serve {
             config,
             robot,

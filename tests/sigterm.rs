@@ -2,7 +2,8 @@
 //! then HOME, the process exits cleanly with the reason, and the recording is
 //! valid up to the last pose completed.
 
-use std::io::{BufRead, BufReader};
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -32,30 +33,10 @@ fn sigterm_at_pose_20_halts_then_homes_and_keeps_a_valid_recording() {
     let receipts = temp("receipts.jsonl");
     let record = temp("recording");
     let _ = std::fs::remove_dir_all(&record);
-    let mut robot = Command::new(env!("CARGO_BIN_EXE_groundcal"))
-        .args([
-            "sim-robot",
-            "--listen",
-            "127.0.0.1:0",
-            "--seed",
-            "5",
-            "--time-scale",
-            "50",
-        ])
-        .env("GROUNDCAL_SIM_RECEIPTS", &receipts)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(robot.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let address = line
-        .trim()
-        .strip_prefix("listening on ")
-        .expect("the address")
-        .to_string();
+    let (robot, address) = common::spawn_sim_robot(
+        &["--seed", "5", "--time-scale", "50"],
+        &[("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str())],
+    );
 
     // The simulation configuration, talking to the separate lower computer.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -108,8 +89,7 @@ fn sigterm_at_pose_20_halts_then_homes_and_keeps_a_valid_recording() {
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 
-    signal(robot.id(), "TERM");
-    let _ = robot.wait();
+    common::stop_sim_robot(robot);
     let log = std::fs::read_to_string(&receipts).unwrap();
     let kinds: Vec<(String, String)> = log
         .lines()

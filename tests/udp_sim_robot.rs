@@ -10,11 +10,13 @@
 //! The same scenarios also run against the simulated lower computer on a
 //! thread of this process, with its own runtime and socket.
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::{BufRead, BufReader, Read};
+use std::ffi::OsStr;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Child;
 use std::time::{Duration, Instant};
 
 use groundcal::schedule::{Limits, Schedule};
@@ -56,35 +58,15 @@ enum Robot {
 impl Robot {
     /// `groundcal sim-robot` on a free loopback port.
     fn process(faults: &str, receipts: &Path) -> (Self, SocketAddr) {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_groundcal"))
-            .args(["sim-robot", "--listen", "127.0.0.1:0", "--seed"])
-            .arg(SEED.to_string())
-            .arg("--time-scale")
-            .arg(TIME_SCALE.to_string())
-            .env(FAULTS_ENV, faults)
-            .env(RECEIPTS_ENV, receipts)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("groundcal sim-robot starts");
-        let stdout = child.stdout.take().expect("stdout is piped");
-        let mut line = String::new();
-        BufReader::new(stdout)
-            .read_line(&mut line)
-            .expect("sim-robot writes its address");
-        let address = match line.trim().strip_prefix("listening on ") {
-            Some(a) => a.parse().expect("an address"),
-            None => {
-                let mut stderr = String::new();
-                if let Some(mut e) = child.stderr.take() {
-                    let _ = e.read_to_string(&mut stderr);
-                }
-                let _ = child.kill();
-                panic!("sim-robot said {line:?} on stdout, stderr: {stderr}");
-            }
-        };
-        (Robot::Process(child), address)
+        let (seed, time_scale) = (SEED.to_string(), TIME_SCALE.to_string());
+        let (child, address) = common::spawn_sim_robot(
+            &["--seed", &seed, "--time-scale", &time_scale],
+            &[
+                (FAULTS_ENV, OsStr::new(faults)),
+                (RECEIPTS_ENV, receipts.as_os_str()),
+            ],
+        );
+        (Robot::Process(child), address.parse().expect("an address"))
     }
 
     /// The same server on a thread with its own runtime.
@@ -122,19 +104,7 @@ impl Robot {
     fn stop(self) {
         match self {
             Robot::Process(child) => {
-                let status = Command::new("kill")
-                    .args(["-TERM", &child.id().to_string()])
-                    .status()
-                    .expect("kill runs");
-                assert!(status.success());
-                let output = child.wait_with_output().expect("sim-robot exits");
-                let stderr = String::from_utf8_lossy(&output.stderr);
-                assert!(
-                    output.status.success(),
-                    "sim-robot exited with {}: {stderr}",
-                    output.status
-                );
-                assert!(stderr.contains("sim-robot: stats {"), "{stderr}");
+                common::stop_sim_robot(child);
             }
             Robot::Thread { stop, thread } => {
                 let _ = stop.send(());

@@ -12,7 +12,7 @@ use crate::hardware::{self, Selection};
 use crate::pipeline::PoseSettings;
 use crate::recording::Recording;
 use crate::schedule::Schedule;
-use crate::session::{self, Event, Plan, SessionError};
+use crate::session::{self, Event, Plan, RecordedPose, SessionError};
 
 /// The command's options.
 #[derive(Debug, Clone, Default)]
@@ -77,6 +77,7 @@ pub fn plan(
             .div_f64(scale.max(1.0))
             .max(Duration::from_millis(5)),
         motion_slack: Duration::from_secs(5),
+        recorded_poses: None,
     };
     if let Some(recording) = replay {
         plan.schedule = Schedule {
@@ -91,6 +92,17 @@ pub fn plan(
             .max()
             .unwrap_or(1)
             .max(1);
+        plan.recorded_poses = Some(
+            recording
+                .poses
+                .iter()
+                .map(|p| RecordedPose {
+                    // Recording poses count from 1 and fit a u16 (recording.md).
+                    id: u16::try_from(p.index).unwrap_or(u16::MAX),
+                    frames: p.depth_frames.len(),
+                })
+                .collect(),
+        );
         plan.tilt_deg = recording.session.kinect.tilt_deg;
         plan.nominal_mount = recording.session.nominal_mount.or(plan.nominal_mount);
     }

@@ -1,6 +1,9 @@
-//! `groundcal sim-robot --listen ADDR [--seed N] [--time-scale X]`: the
-//! simulated lower computer (`shared/spec/hexapod-udp.md`) as its own
-//! process, for tests and demos of the UDP link.
+//! `groundcal sim-robot --listen ADDR [--seed N] [--time-scale X] [--replay
+//! DIR]`: the simulated lower computer (`shared/spec/hexapod-udp.md`) as its
+//! own process, for tests and demos of the UDP link. With `--replay DIR` it
+//! plays a recording's robot back instead of simulating one: it accepts only
+//! the recorded poses, exactly as commanded, and reports the recorded feet
+//! (`groundcal_hal::sim::replayed`).
 //!
 //! It prints one line `listening on IP:PORT` on stdout once the socket is
 //! bound (so that `--listen 127.0.0.1:0` can be used and found), serves until
@@ -10,16 +13,20 @@
 //! `GROUNDCAL_SIM_RECEIPTS`; see `groundcal_hal::udp::sim_server`): they are
 //! for tests, not for operators.
 
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::net::{SocketAddr, ToSocketAddrs};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use groundcal_hal::sim::replayed::{RecordedStance, ReplayScript};
 use groundcal_hal::udp::sim_server::{self, FaultInjection, SimOptions, RECEIPTS_ENV};
+
+use crate::recording::Recording;
 
 use super::ExitStatus;
 
 /// Runs the simulated lower computer until a signal.
-pub fn run(listen: &str, seed: u64, time_scale: f64) -> ExitStatus {
+pub fn run(listen: &str, seed: u64, time_scale: f64, replay: Option<&Path>) -> ExitStatus {
     let usage = |message: String| {
         eprintln!("groundcal: sim-robot: {message}");
         ExitStatus::BadInput
@@ -37,9 +44,14 @@ pub fn run(listen: &str, seed: u64, time_scale: f64) -> ExitStatus {
         Ok(f) => f,
         Err(e) => return usage(e),
     };
+    let replay = match replay.map(|dir| script_of(dir, time_scale)).transpose() {
+        Ok(r) => r,
+        Err(e) => return usage(format!("--replay: {e}")),
+    };
     let options = SimOptions {
         faults,
         receipts: std::env::var_os(RECEIPTS_ENV).map(PathBuf::from),
+        replay,
         ..SimOptions::new(seed, time_scale)
     };
     let served = sim_server::run_until_signal(address, options, |bound| {
@@ -63,6 +75,40 @@ pub fn run(listen: &str, seed: u64, time_scale: f64) -> ExitStatus {
     }
 }
 
+/// A recording's robot as a script for the replayed lower computer.
+fn script_of(dir: &Path, time_scale: f64) -> Result<ReplayScript, String> {
+    let recording = Recording::open(dir).map_err(|e| e.to_string())?;
+    let feet = |feet: &[[f64; 3]], what: &str| -> Result<[[f64; 3]; 6], String> {
+        <[[f64; 3]; 6]>::try_from(feet)
+            .map_err(|_| format!("{}: {what} has {} feet, not 6", dir.display(), feet.len()))
+    };
+    let home = RecordedStance {
+        commanded: recording.session.home.commanded,
+        feet_body_mm: feet(&recording.session.home.feet_body_mm, "the home stance")?,
+    };
+    let mut poses = BTreeMap::new();
+    for pose in &recording.poses {
+        let id = u16::try_from(pose.index).map_err(|_| {
+            format!(
+                "{}: pose {} has an index beyond what the link carries (65535)",
+                dir.display(),
+                pose.index
+            )
+        })?;
+        let stance = RecordedStance {
+            commanded: pose.commanded,
+            feet_body_mm: feet(&pose.feet_body_mm, &format!("pose {id}"))?,
+        };
+        poses.insert(id, stance);
+    }
+    Ok(ReplayScript {
+        home,
+        poses,
+        time_scale,
+        firmware: format!("groundcal-replay 1 ({})", dir.display()),
+    })
+}
+
 /// `host:port` to one socket address, IPv4 preferred.
 fn resolve(listen: &str) -> Result<SocketAddr, String> {
     let addresses: Vec<SocketAddr> = listen
@@ -83,9 +129,26 @@ mod tests {
 
     #[test]
     fn bad_flags_are_usage_errors() {
-        assert_eq!(run("nonsense", 1, 1.0), ExitStatus::BadInput);
-        assert_eq!(run("127.0.0.1:0", 1, 0.0), ExitStatus::BadInput);
-        assert_eq!(run("127.0.0.1:0", 1, f64::NAN), ExitStatus::BadInput);
+        assert_eq!(run("nonsense", 1, 1.0, None), ExitStatus::BadInput);
+        assert_eq!(run("127.0.0.1:0", 1, 0.0, None), ExitStatus::BadInput);
+        assert_eq!(run("127.0.0.1:0", 1, f64::NAN, None), ExitStatus::BadInput);
+        let nowhere = Path::new("/nonexistent/recording");
+        assert_eq!(
+            run("127.0.0.1:0", 1, 1.0, Some(nowhere)),
+            ExitStatus::BadInput
+        );
+    }
+
+    #[test]
+    fn a_recording_becomes_a_script_of_its_poses() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/sample-12");
+        let script = script_of(&dir, 50.0).unwrap();
+        let recording = Recording::open(&dir).unwrap();
+        assert_eq!(script.poses.len(), recording.poses.len());
+        let first = &recording.poses[0];
+        let stance = &script.poses[&(first.index as u16)];
+        assert_eq!(stance.commanded, first.commanded);
+        assert_eq!(stance.feet_body_mm.to_vec(), first.feet_body_mm);
     }
 
     #[test]

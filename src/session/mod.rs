@@ -51,9 +51,36 @@ pub struct Plan {
     pub poll: Duration,
     /// How long a motion may take beyond its nominal duration.
     pub motion_slack: Duration,
+    /// For each pose of the schedule, the pose id sent and the frames
+    /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
+    /// recording's own, so that the session asks for what was recorded.
+    pub recorded_poses: Option<Vec<RecordedPose>>,
+}
+
+/// A pose as a recording has it: its id and how many frames it holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecordedPose {
+    pub id: u16,
+    pub frames: usize,
 }
 
 impl Plan {
+    /// The pose id sent for the `k`-th pose of the schedule (from 0).
+    pub fn pose_id(&self, k: usize) -> u16 {
+        self.recorded_poses
+            .as_ref()
+            .and_then(|r| r.get(k))
+            .map_or_else(|| u16::try_from(k + 1).unwrap_or(u16::MAX), |r| r.id)
+    }
+
+    /// The frames to capture at the `k`-th pose of the schedule.
+    pub fn frames_at(&self, k: usize) -> usize {
+        self.recorded_poses
+            .as_ref()
+            .and_then(|r| r.get(k))
+            .map_or(self.frames_per_pose, |r| r.frames)
+    }
+
     /// The longest a motion of `duration` may take before it is a failure.
     pub fn motion_deadline(&self, duration: Duration) -> Duration {
         duration * 3 + self.motion_slack

@@ -311,7 +311,8 @@ async fn body<S: DepthSensor, C: BodyController>(
     // 3. The poses.
     let mut reported = 0;
     for (k, commanded) in schedule.poses.iter().enumerate() {
-        let index = (k + 1) as u16;
+        let index = plan.pose_id(k);
+        let frame_count = plan.frames_at(k);
         send(
             events,
             Event::Moving {
@@ -347,9 +348,9 @@ async fn body<S: DepthSensor, C: BodyController>(
         }
         send(events, Event::Capturing { index, of });
         sensor.begin_pose(index);
-        let mut frames = Vec::with_capacity(plan.frames_per_pose);
-        let mut names = Vec::with_capacity(plan.frames_per_pose);
-        for _ in 0..plan.frames_per_pose {
+        let mut frames = Vec::with_capacity(frame_count);
+        let mut names = Vec::with_capacity(frame_count);
+        for _ in 0..frame_count {
             let frame = sensor.next_frame().await.map_err(SessionError::sensor)?;
             if let Some(w) = writer.as_mut() {
                 let image = DepthImage {

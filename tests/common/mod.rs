@@ -1,8 +1,10 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+use std::ffi::OsStr;
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, Stdio};
 
 /// `shared/` beside the project (CI clones main with shared/ beside it).
 pub fn shared() -> PathBuf {
@@ -49,6 +51,57 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temporary directory");
     dir
+}
+
+/// `groundcal sim-robot --listen 127.0.0.1:0 ARGS…` in its own process, with
+/// these environment variables (faults, receipts); returns the process and
+/// the address it printed.
+pub fn spawn_sim_robot(args: &[&str], env: &[(&str, &OsStr)]) -> (Child, String) {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_groundcal"));
+    command
+        .args(["sim-robot", "--listen", "127.0.0.1:0"])
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    for (name, value) in env {
+        command.env(name, value);
+    }
+    let mut child = command.spawn().expect("groundcal sim-robot starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout is piped"))
+        .read_line(&mut line)
+        .expect("sim-robot writes its address");
+    match line.trim().strip_prefix("listening on ") {
+        Some(address) => (child, address.to_string()),
+        None => {
+            let mut stderr = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                let _ = e.read_to_string(&mut stderr);
+            }
+            let _ = child.kill();
+            panic!("sim-robot said {line:?} on stdout, stderr: {stderr}");
+        }
+    }
+}
+
+/// Stops a `sim-robot` process with SIGTERM; asserts it exits 0 with its
+/// stats line and returns its stderr.
+pub fn stop_sim_robot(child: Child) -> String {
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let output = child.wait_with_output().expect("sim-robot exits");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(
+        output.status.success(),
+        "sim-robot exited with {}: {stderr}",
+        output.status
+    );
+    assert!(stderr.contains("sim-robot: stats {"), "{stderr}");
+    stderr
 }
 
 /// Debian's Chromium, which Playwright drives.

@@ -8,6 +8,7 @@
 //! the pose from the feet, as on the robot.
 
 pub mod kinect;
+pub mod replayed;
 pub mod robot;
 pub mod world;
 

@@ -43,6 +43,7 @@ use super::proto::{self, kind, Message};
 use super::server::{Server, ServerConfig, ServerCounters};
 use crate::controller::MotionState;
 use crate::geometry::Transform;
+use crate::sim::replayed::{ReplayScript, ReplayTally, ReplayedRobot};
 use crate::sim::robot::{SimRobot, SimRobotConfig};
 use crate::sim::TruePose;
 
@@ -158,6 +159,9 @@ pub struct SimOptions {
     pub receipts: Option<PathBuf>,
     /// Share the body's true pose (e.g. with a simulated Kinect).
     pub true_pose: Option<TruePose>,
+    /// Play a recorded session back instead of simulating the body
+    /// ([`ReplayedRobot`]).
+    pub replay: Option<ReplayScript>,
 }
 
 impl SimOptions {
@@ -168,6 +172,7 @@ impl SimOptions {
             faults: FaultInjection::default(),
             receipts: None,
             true_pose: None,
+            replay: None,
         }
     }
 }
@@ -190,6 +195,9 @@ pub struct SimStats {
     pub lives: Vec<ServerCounters>,
     pub faults: FaultCounters,
     pub restarts: u32,
+    /// What a replayed lower computer was asked (`--replay` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub replay: Option<ReplayTally>,
 }
 
 impl SimStats {
@@ -407,20 +415,33 @@ impl SimServer {
     }
 
     /// Serves until `shutdown` completes.
-    pub async fn run(mut self, shutdown: impl Future<Output = ()>) -> io::Result<SimStats> {
-        let seed = self.options.seed;
-        let time_scale = self.options.time_scale;
+    pub async fn run(self, shutdown: impl Future<Output = ()>) -> io::Result<SimStats> {
         let epoch = now();
-        let true_pose = self
-            .options
-            .true_pose
-            .clone()
-            .unwrap_or_else(|| TruePose::new(Transform::identity()));
-        let mut robot = SimRobot::new(
-            SimRobotConfig::reference(seed, time_scale),
-            true_pose,
-            epoch,
-        );
+        match self.options.replay.clone() {
+            Some(script) => {
+                let robot = ReplayedRobot::new(script, epoch);
+                self.serve(robot, epoch, shutdown).await
+            }
+            None => {
+                let true_pose = self
+                    .options
+                    .true_pose
+                    .clone()
+                    .unwrap_or_else(|| TruePose::new(Transform::identity()));
+                let config = SimRobotConfig::reference(self.options.seed, self.options.time_scale);
+                let robot = SimRobot::new(config, true_pose, epoch);
+                self.serve(robot, epoch, shutdown).await
+            }
+        }
+    }
+
+    async fn serve<B: ServedBody>(
+        mut self,
+        mut robot: B,
+        epoch: Instant,
+        shutdown: impl Future<Output = ()>,
+    ) -> io::Result<SimStats> {
+        let seed = self.options.seed;
         let mut life: u32 = 0;
         let server_config = |life: u32| ServerConfig {
             seed: seed ^ (u64::from(life) << 48) ^ 0x5e55_1017,
@@ -517,6 +538,7 @@ impl SimServer {
         }
         stats.lives.push(*server.counters());
         stats.faults = impairment.counters;
+        stats.replay = robot.replay_tally();
         #[derive(Serialize)]
         struct StatsLine<'a> {
             event: &'a str,
@@ -548,8 +570,42 @@ impl SimServer {
     }
 }
 
-fn robot_moving(robot: &mut SimRobot, now: Instant) -> bool {
-    crate::udp::server::Body::motion(robot, now) == MotionState::Moving
+/// A body the simulated lower computer can serve: the simulated hexapod or a
+/// replayed recording.
+trait ServedBody: super::server::Body {
+    /// Brings the motion up to `now`.
+    fn advance(&mut self, now: Instant);
+    /// A lower computer restart (fault injection).
+    fn restart(&mut self, now: Instant);
+    /// What a replayed body was asked, if it is one.
+    fn replay_tally(&self) -> Option<ReplayTally> {
+        None
+    }
+}
+
+impl ServedBody for SimRobot {
+    fn advance(&mut self, now: Instant) {
+        SimRobot::advance(self, now);
+    }
+    fn restart(&mut self, now: Instant) {
+        SimRobot::restart(self, now);
+    }
+}
+
+impl ServedBody for ReplayedRobot {
+    fn advance(&mut self, now: Instant) {
+        ReplayedRobot::advance(self, now);
+    }
+    fn restart(&mut self, now: Instant) {
+        ReplayedRobot::restart(self, now);
+    }
+    fn replay_tally(&self) -> Option<ReplayTally> {
+        Some(self.tally().clone())
+    }
+}
+
+fn robot_moving(robot: &mut impl ServedBody, now: Instant) -> bool {
+    robot.motion(now) == MotionState::Moving
 }
 
 /// Whether a datagram moves the body away from `pose`: a SET_POSE of another
