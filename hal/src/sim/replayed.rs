@@ -7,7 +7,8 @@
 //! DIR` finds.
 //!
 //! "Exactly" is over the link: SET_POSE carries f32 (`hexapod-udp.md`), so a
-//! pose matches when each received value is the recorded one rounded to f32.
+//! pose matches when each received value and the recorded one round to the
+//! same f32.
 //! A pose that does not match, or a pose id the recording does not have, is
 //! refused (ACK 2) and counted in [`ReplayTally`]: the upper computer is not
 //! doing what it did when the recording was made.
@@ -151,7 +152,7 @@ impl ReplayedRobot {
     }
 }
 
-/// Why `received` is not `recorded` as it crosses an f32 link, if it is not.
+/// Why `received` is not `recorded` as an f32 link carries them, if it is not.
 fn difference(recorded: &PoseDegMm, received: &PoseDegMm) -> Option<String> {
     let pairs = [
         ("alpha_deg", recorded.alpha_deg, received.alpha_deg),
@@ -163,7 +164,7 @@ fn difference(recorded: &PoseDegMm, received: &PoseDegMm) -> Option<String> {
     ];
     let differing: Vec<String> = pairs
         .iter()
-        .filter(|(_, a, b)| f64::from(*a as f32) != *b)
+        .filter(|(_, a, b)| *a as f32 != *b as f32)
         .map(|(name, a, b)| format!("{name} {b} (recorded {a})"))
         .collect();
     (!differing.is_empty()).then(|| differing.join(", "))
