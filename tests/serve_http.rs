@@ -2,16 +2,19 @@
 //! with the built-in simulated robot and Kinect, spoken to with hand-written
 //! HTTP/1.1 requests.
 
+mod common;
+
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
 
 use groundcal::config::Config;
 use groundcal::hardware::Selection;
 use groundcal::terminal::{serve, AppState};
 use serde_json::Value;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::TcpStream;
 
 const TOKEN: &str = "s3cret-token";
 
@@ -23,30 +26,18 @@ fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
-/// One request on its own connection; returns the status code and the body as JSON.
+/// One request on its own connection (`common::http`, off the runtime).
 async fn request(addr: SocketAddr, method: &str, path: &str, token: Option<&str>) -> (u16, Value) {
-    let mut stream = TcpStream::connect(addr).await.unwrap();
-    let auth = token
-        .map(|t| format!("Authorization: Bearer {t}\r\n"))
-        .unwrap_or_default();
-    let text = format!(
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nX-Groundcal-Client: test\r\n{auth}Content-Length: 0\r\nConnection: close\r\n\r\n"
+    let (method, path, token) = (
+        method.to_string(),
+        path.to_string(),
+        token.map(str::to_string),
     );
-    stream.write_all(text.as_bytes()).await.unwrap();
-    let mut response = Vec::new();
-    stream.read_to_end(&mut response).await.unwrap();
-    let response = String::from_utf8_lossy(&response).into_owned();
-    let code: u16 = response
-        .split(' ')
-        .nth(1)
-        .and_then(|c| c.parse().ok())
-        .unwrap_or_else(|| panic!("bad response: {response}"));
-    let body = response
-        .split_once("\r\n\r\n")
-        .map(|(_, b)| b)
-        .unwrap_or("");
-    let json = serde_json::from_str(body).unwrap_or(Value::String(body.to_string()));
-    (code, json)
+    tokio::task::spawn_blocking(move || {
+        common::http(&addr.to_string(), &method, &path, token.as_deref())
+    })
+    .await
+    .expect("the request ran")
 }
 
 async fn wait_idle(addr: SocketAddr) -> Value {

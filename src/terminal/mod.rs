@@ -14,7 +14,7 @@ use std::future::Future;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::SystemTime;
+use std::time::{Duration, Instant, SystemTime};
 
 use axum::extract::{ConnectInfo, Path as UrlPath, State};
 use axum::http::{HeaderMap, StatusCode};
@@ -171,6 +171,8 @@ struct Shared {
     abort: Mutex<Option<oneshot::Sender<String>>>,
     worker: Mutex<Option<std::thread::JoinHandle<()>>>,
     shutdown: watch::Sender<bool>,
+    /// When the running session's loop last beat (None: no session).
+    heartbeat: Mutex<Option<Instant>>,
 }
 
 /// The daemon's state, shared by every request.
@@ -201,6 +203,7 @@ impl AppState {
                 ..Status::default()
             }),
             events,
+            heartbeat: Mutex::new(None),
             abort: Mutex::new(None),
             worker: Mutex::new(None),
             shutdown,
@@ -328,6 +331,20 @@ pub fn router(state: AppState) -> Router {
         .with_state(state)
 }
 
+/// Whether the watchdog may be fed: no session is running, or the running
+/// session's loop beat within `within`. A session stuck (a blocked call, a
+/// deadlock) stops the feeding, and systemd restarts the service.
+fn session_alive(last_beat: Option<Instant>, now: Instant, within: Duration) -> bool {
+    last_beat.is_none_or(|beat| now.saturating_duration_since(beat) <= within)
+}
+
+/// How often the session's loop beats: twice per watchdog feeding interval
+/// (itself half of `WatchdogSec`), at most every 500 ms.
+fn heartbeat_period() -> Duration {
+    let most = Duration::from_millis(500);
+    crate::systemd::watchdog_interval().map_or(most, |every| (every / 2).min(most))
+}
+
 /// Serves until `shutdown` completes; then aborts a running session, waits
 /// for it to stop the robot, and returns. Notifies systemd (READY, WATCHDOG,
 /// STOPPING) when it is listening.
@@ -340,12 +357,20 @@ pub async fn serve(
     let address = listener.local_addr()?;
     notifier.ready(&format!("listening on {address}"));
     let watchdog = crate::systemd::watchdog_interval().map(|every| {
+        let state = state.clone();
         tokio::spawn(async move {
             let notifier = crate::systemd::Notifier::from_env();
             let mut tick = tokio::time::interval(every);
             loop {
                 tick.tick().await;
-                notifier.watchdog();
+                let last_beat = *lock(&state.0.heartbeat);
+                if session_alive(last_beat, Instant::now(), every * 2) {
+                    notifier.watchdog();
+                } else {
+                    // systemd restarts the service after WatchdogSec; the lower
+                    // computer halts the robot once polling stops (1 s).
+                    tracing::error!("the session loop is stuck; not feeding the watchdog");
+                }
             }
         })
     });
@@ -617,9 +642,23 @@ fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
                 publish(&state, EventJson::from(&e));
             }
         };
-        let (result, ()) = tokio::join!(session, forward);
+        // The session's own runtime beats while it runs: if that runtime is
+        // blocked, the beat stops and so does the systemd watchdog.
+        let beat = async {
+            let mut tick = tokio::time::interval(heartbeat_period());
+            loop {
+                tick.tick().await;
+                *lock(&state.0.heartbeat) = Some(Instant::now());
+            }
+        };
+        let run = async { tokio::join!(session, forward).0 };
+        let result = tokio::select! {
+            result = run => result,
+            never = beat => never,
+        };
         result.map_err(|e| e.to_string())
     });
+    *lock(&state.0.heartbeat) = None;
     let result = outcome.and_then(|o| {
         serde_json::to_value(&o.result).map_err(|e| format!("cannot encode the result: {e}"))
     });
@@ -675,5 +714,27 @@ fn finish(state: &AppState, result: Result<Value, String>) {
             }
             publish(state, EventJson::Failed { error });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stuck_session_stops_the_watchdog_feeding() {
+        let now = Instant::now();
+        let within = Duration::from_secs(10);
+        assert!(session_alive(None, now, within), "idle: fed");
+        assert!(session_alive(
+            Some(now - Duration::from_secs(3)),
+            now,
+            within
+        ));
+        assert!(!session_alive(
+            Some(now - Duration::from_secs(11)),
+            now,
+            within
+        ));
     }
 }

@@ -104,6 +104,102 @@ pub fn stop_sim_robot(child: Child) -> String {
     stderr
 }
 
+/// `groundcal serve` as systemd would run it: the binary, on the simulation
+/// configuration copied into `dir` (token `token`, state in `dir/state`),
+/// listening on 127.0.0.1:0, with these environment variables. Returns the
+/// process and the address it printed once listening.
+pub fn spawn_serve(dir: &Path, token: &str, env: &[(&str, &OsStr)]) -> (Child, String) {
+    let text = std::fs::read_to_string(root().join("config/sim.toml"))
+        .expect("config/sim.toml")
+        .replace(
+            "schedule = \"schedules/octopus-52.toml\"",
+            &format!(
+                "schedule = \"{}\"",
+                root().join("config/schedules/octopus-52.toml").display()
+            ),
+        );
+    let config = dir.join("groundcal.toml");
+    std::fs::write(&config, text).expect("config written");
+    std::fs::write(dir.join("token.sim"), format!("{token}\n")).expect("token written");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_groundcal"));
+    command
+        .args(["serve", "--config"])
+        .arg(&config)
+        .args(["--listen", "127.0.0.1:0"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    for (name, value) in env {
+        command.env(name, value);
+    }
+    let mut child = command.spawn().expect("groundcal serve starts");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout is piped"))
+        .read_line(&mut line)
+        .expect("serve writes its address");
+    match line.trim().strip_prefix("listening on ") {
+        Some(address) => (child, address.to_string()),
+        None => {
+            let mut stderr = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                let _ = e.read_to_string(&mut stderr);
+            }
+            let _ = child.kill();
+            panic!("serve said {line:?} on stdout, stderr: {stderr}");
+        }
+    }
+}
+
+/// Sends SIGTERM to a child process and waits for it; returns (exit code,
+/// stderr).
+pub fn terminate(child: Child) -> (i32, String) {
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let output = child.wait_with_output().expect("the process exits");
+    (
+        output.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}
+
+/// One HTTP/1.1 request on its own connection, by hand (the server must
+/// speak plain HTTP, not only to one client library); returns the status
+/// code and the body as JSON (a string when it is not JSON).
+pub fn http(
+    address: &str,
+    method: &str,
+    path: &str,
+    token: Option<&str>,
+) -> (u16, serde_json::Value) {
+    use std::io::Write;
+    let mut stream = std::net::TcpStream::connect(address).expect("the server accepts");
+    let auth = token
+        .map(|t| format!("Authorization: Bearer {t}\r\n"))
+        .unwrap_or_default();
+    let text = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {address}\r\nX-Groundcal-Client: test\r\n{auth}Content-Length: 0\r\nConnection: close\r\n\r\n"
+    );
+    stream.write_all(text.as_bytes()).expect("request sent");
+    let mut response = Vec::new();
+    stream.read_to_end(&mut response).expect("response read");
+    let response = String::from_utf8_lossy(&response).into_owned();
+    let code: u16 = response
+        .split(' ')
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("bad response: {response}"));
+    let body = response
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b)
+        .unwrap_or("");
+    let json =
+        serde_json::from_str(body).unwrap_or_else(|_| serde_json::Value::String(body.to_string()));
+    (code, json)
+}
+
 /// Debian's Chromium, which Playwright drives.
 pub const CHROMIUM: &str = "/usr/bin/chromium";
 /// What the project's test script runs before the browser tests.
