@@ -1,9 +1,9 @@
 //! The `groundcal serve` terminal page in a real browser: headless Chromium,
 //! driven by Playwright (`tests/browser/serve.mjs`), types the token, presses
 //! Calibrate, sees progress and the verdict, presses Accept; then the store's
-//! `active.json` must hold the result. The server runs in process on
-//! 127.0.0.1:0 with the built-in simulated robot and Kinect. Screenshots land
-//! in `target/test-screenshots/serve-*.png`.
+//! `active.json` must hold the result. The server is the `groundcal serve`
+//! binary on 127.0.0.1:0 with `config/sim.toml` (simulated robot and Kinect).
+//! Screenshots land in `target/test-screenshots/serve-*.png`.
 //!
 //! Needs Node.js ≥ 20, `npm ci` in `tests/browser` and Debian's chromium. Under
 //! `CI=true` a missing one fails the test; elsewhere the test warns and returns.
@@ -12,36 +12,19 @@ mod common;
 
 use std::fs;
 use std::process::Command;
-use std::time::Duration;
-
-use groundcal::config::Config;
-use groundcal::hardware::Selection;
-use groundcal::terminal::{serve, AppState};
 
 const TOKEN: &str = "browser-token";
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn terminal_page_calibrates_and_accepts_in_chromium() {
+#[test]
+fn terminal_page_calibrates_and_accepts_in_chromium() {
     if !common::browser_ready("serve_browser") {
         return;
     }
 
     let dir = common::temp_dir("serve-browser");
-    let state_dir = dir.join("state");
-    let (config, schedule) = Config::embedded_sim();
-    let state = AppState::new(
-        config,
-        schedule,
-        Selection::default(),
-        TOKEN.to_string(),
-        &state_dir,
-    );
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
+    // config/sim.toml keeps its store in state.sim beside the configuration.
+    let state_dir = dir.join("state.sim");
+    let (server, addr) = common::spawn_serve(&dir, TOKEN, &[]);
 
     let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");
@@ -50,19 +33,14 @@ async fn terminal_page_calibrates_and_accepts_in_chromium() {
     }
     let url = format!("http://{addr}/");
     let script = common::root().join("tests/browser/serve.mjs");
-    let shots_arg = shots.clone();
-    let out = tokio::task::spawn_blocking(move || {
-        Command::new("node")
-            .arg(script)
-            .arg(url)
-            .arg(TOKEN)
-            .arg(shots_arg)
-            .current_dir(common::root())
-            .output()
-    })
-    .await
-    .unwrap()
-    .expect("node runs");
+    let out = Command::new("node")
+        .arg(script)
+        .arg(url)
+        .arg(TOKEN)
+        .arg(&shots)
+        .current_dir(common::root())
+        .output()
+        .expect("node runs");
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -74,6 +52,15 @@ async fn terminal_page_calibrates_and_accepts_in_chromium() {
         .unwrap_or_else(|e| panic!("serve.mjs printed no JSON ({e}): {stdout}"));
     assert_eq!(seen["seen"]["verdict"], "Accepted", "{seen}");
     assert!(seen["seen"]["points"].as_u64().unwrap() > 6, "{seen}");
+    // The chart filled in while the poses went by, from a provisional solve.
+    assert!(seen["seen"]["livePoints"].as_u64().unwrap() >= 6, "{seen}");
+    assert!(
+        seen["seen"]["liveLabel"]
+            .as_str()
+            .unwrap()
+            .starts_with("so far"),
+        "{seen}"
+    );
     assert_eq!(seen["seen"]["storedToken"], TOKEN, "{seen}");
 
     let active: serde_json::Value = serde_json::from_str(
@@ -98,11 +85,7 @@ async fn terminal_page_calibrates_and_accepts_in_chromium() {
             "serve-{step}.png is not a PNG with content"
         );
     }
-    let _ = stop.send(());
-    tokio::time::timeout(Duration::from_secs(30), server)
-        .await
-        .unwrap()
-        .unwrap()
-        .unwrap();
+    let (code, stderr) = common::terminate(server);
+    assert_eq!(code, 0, "groundcal serve at SIGTERM: {stderr}");
     let _ = fs::remove_dir_all(&dir);
 }

@@ -149,6 +149,16 @@ fn show_progress(
                         Err(e) => format!("pose {index}/{of}: {e}"),
                     }
                 }
+                Event::Provisional { poses } => {
+                    let used = poses.iter().filter(|p| p.used);
+                    let (theta, e_d) = used.fold((0.0f64, 0.0f64), |(t, e), p| {
+                        (t.max(p.theta_deg), e.max(p.e_d_mm))
+                    });
+                    format!(
+                        "so far over {} poses: θ max {theta:.3}°, e_d max {e_d:.2} mm",
+                        poses.len()
+                    )
+                }
                 Event::Solving => "back home; solving".into(),
                 Event::Finished { accepted } => format!(
                     "finished: {}",

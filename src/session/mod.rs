@@ -112,12 +112,28 @@ pub enum Event {
         of: usize,
         outcome: Result<PoseFit, String>,
     },
+    /// A provisional solve over the poses fitted so far, for the live chart
+    /// of θ and e_d: each pose against the mount those poses give. It moves
+    /// as poses arrive; only the final result counts.
+    Provisional { poses: Vec<ProvisionalPose> },
     /// All poses visited; back home; solving.
     Solving,
     /// The session ended; see [`SessionOutcome`].
     Finished { accepted: bool },
     /// The session was aborted; the robot was halted and sent home.
     Aborted { reason: String },
+}
+
+/// One pose in a provisional solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProvisionalPose {
+    pub index: u16,
+    /// The paper's θ, degrees.
+    pub theta_deg: f64,
+    /// The paper's e_d, mm.
+    pub e_d_mm: f64,
+    /// Whether the solve used it (false: set aside as an outlier).
+    pub used: bool,
 }
 
 /// A pose's fitted ground, for the live chart.

@@ -12,7 +12,7 @@ use tokio::sync::mpsc::UnboundedSender;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::{Event, Plan, PoseFit};
+use super::{Event, Plan, PoseFit, ProvisionalPose};
 use crate::calib::sensor::PointCloud;
 use crate::calib::solve::Observation;
 use crate::depth_image::DepthImage;
@@ -165,14 +165,48 @@ fn fit_pose(
         .map_err(|e| format!("no ground found: {e}"))
 }
 
-/// Reports the fits that have finished, in pose order.
+/// The fewest fitted poses a provisional solve is tried on: below that the
+/// six parameters are not all observable by any schedule.
+const PROVISIONAL_MIN_POSES: usize = 6;
+
+/// Solves over the poses fitted so far and reports θ and e_d per pose (about
+/// a millisecond for 52 poses; a schedule that does not pin every parameter
+/// down yet gives nothing).
+fn report_provisional(pending: &[PendingFit], plan: &Plan, events: &UnboundedSender<Event>) {
+    let observations: Vec<Observation> = pending
+        .iter()
+        .filter_map(|fit| fit.done.as_ref()?.as_ref().ok().cloned())
+        .collect();
+    if observations.len() < PROVISIONAL_MIN_POSES {
+        return;
+    }
+    let Ok(calibration) = crate::calib::solve::solve(&observations, &plan.solve) else {
+        return;
+    };
+    let poses = calibration
+        .poses
+        .iter()
+        .map(|p| ProvisionalPose {
+            index: u16::try_from(p.index).unwrap_or(u16::MAX),
+            theta_deg: p.theta.to_degrees(),
+            e_d_mm: p.e_d * 1000.0,
+            used: p.used,
+        })
+        .collect();
+    send(events, Event::Provisional { poses });
+}
+
+/// Reports the fits that have finished, in pose order; after new ones
+/// (while poses are still being visited), a provisional solve.
 async fn report_finished(
     pending: &mut [PendingFit],
     reported: &mut usize,
     of: usize,
     events: &UnboundedSender<Event>,
     all: bool,
+    plan: &Plan,
 ) {
+    let before = *reported;
     while let Some(fit) = pending.get_mut(*reported) {
         if !all && !fit.handle.is_finished() {
             break;
@@ -198,6 +232,9 @@ async fn report_finished(
             },
         );
         *reported += 1;
+    }
+    if !all && *reported > before {
+        report_provisional(pending, plan, events);
     }
 }
 
@@ -387,7 +424,7 @@ async fn body<S: DepthSensor, C: BodyController>(
             handle: fit,
             done: None,
         });
-        report_finished(pending, &mut reported, of, events, false).await;
+        report_finished(pending, &mut reported, of, events, false, plan).await;
     }
 
     // 4. Home, then the solve.
@@ -405,7 +442,7 @@ async fn body<S: DepthSensor, C: BodyController>(
     .await?;
     let _ = sensor.set_led(Led::Green).await;
     send(events, Event::Solving);
-    report_finished(pending, &mut reported, of, events, true).await;
+    report_finished(pending, &mut reported, of, events, true, plan).await;
     let mut observations = Vec::new();
     let mut failed = Vec::new();
     for mut fit in pending.drain(..) {

@@ -70,6 +70,10 @@ pub enum EventJson {
         plane: Option<[f64; 4]>,
         error: Option<String>,
     },
+    /// θ and e_d per pose against the mount the poses so far give.
+    Provisional {
+        poses: Vec<ProvisionalPoseJson>,
+    },
     Solving,
     Finished {
         accepted: bool,
@@ -86,6 +90,15 @@ pub enum EventJson {
     Failed {
         error: String,
     },
+}
+
+/// One pose of a provisional solve.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProvisionalPoseJson {
+    pub index: u16,
+    pub theta_deg: f64,
+    pub e_d_mm: f64,
+    pub used: bool,
 }
 
 impl From<&Event> for EventJson {
@@ -128,6 +141,17 @@ impl From<&Event> for EventJson {
                     error: Some(e.clone()),
                 },
             },
+            Event::Provisional { poses } => EventJson::Provisional {
+                poses: poses
+                    .iter()
+                    .map(|p| ProvisionalPoseJson {
+                        index: p.index,
+                        theta_deg: p.theta_deg,
+                        e_d_mm: p.e_d_mm,
+                        used: p.used,
+                    })
+                    .collect(),
+            },
             Event::Solving => EventJson::Solving,
             Event::Finished { accepted } => EventJson::Finished {
                 accepted: *accepted,
@@ -158,6 +182,9 @@ pub struct Status {
     pub result_id: Option<String>,
     /// Why the last session produced no result.
     pub error: Option<String>,
+    /// The latest provisional θ and e_d per pose of a running session (kept
+    /// here rather than among the recent events: it is replaced, not added).
+    pub provisional: Option<Vec<ProvisionalPoseJson>>,
 }
 
 struct Shared {
@@ -588,8 +615,11 @@ fn publish(state: &AppState, event: EventJson) {
             }
             EventJson::Aborted { reason } => status.robot = format!("aborted: {reason}"),
             EventJson::Stored { .. } | EventJson::Failed { .. } => {}
+            EventJson::Provisional { poses } => status.provisional = Some(poses.clone()),
         }
-        status.recent_events.push_back(event.clone());
+        if !matches!(event, EventJson::Provisional { .. }) {
+            status.recent_events.push_back(event.clone());
+        }
         while status.recent_events.len() > RECENT {
             status.recent_events.pop_front();
         }

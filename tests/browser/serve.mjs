@@ -3,9 +3,10 @@
 //
 //   node tests/browser/serve.mjs URL TOKEN SCREENSHOT_DIR
 //
-// Types the token, presses Calibrate, watches "pose i of N", waits for the
-// verdict, presses Accept. Checks: no console error, no page error, no request
-// leaving the server (the page works offline). Saves serve-1-idle.png,
+// Types the token, presses Calibrate, watches "pose i of N" and the live
+// θ/e_d chart fill in, waits for the verdict, presses Accept. Checks: no
+// console error, no page error, no request leaving the server (the page works
+// offline). Saves serve-1-idle.png,
 // serve-2-progress.png, serve-3-verdict.png and serve-4-accepted.png. Prints
 // one JSON line of what it saw; exits 0 when every check passes, 1 otherwise,
 // 2 on bad usage.
@@ -75,6 +76,12 @@ try {
   await page.waitForFunction(() => /pose [1-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
   seen.progress = await page.locator('#progress').innerText();
   seen.robot = await page.locator('#robot').innerText();
+  // The live chart: θ and e_d of the provisional solve while poses go by.
+  await page.waitForFunction(() => Number(document.getElementById('theta').dataset.points || 0) >= 6
+    && document.getElementById('verdict').textContent === '', null, { timeout: 60_000 });
+  seen.livePoints = await page.$$eval('#theta circle', (n) => n.length);
+  seen.liveProgress = await page.locator('#progress').innerText();
+  seen.liveLabel = await page.locator('#theta text').textContent();
   await shot(page, '2-progress');
 
   await page.waitForFunction(() => ['Accepted', 'Rejected'].includes(document.getElementById('verdict').textContent), null, { timeout: 180_000 });
