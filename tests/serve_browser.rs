@@ -24,7 +24,7 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     let dir = common::temp_dir("serve-browser");
     // config/sim.toml keeps its store in state.sim beside the configuration.
     let state_dir = dir.join("state.sim");
-    let (server, addr) = common::spawn_serve(&dir, TOKEN, &[]);
+    let (server, addr) = common::spawn_serve(&dir, TOKEN, &[], &[]);
 
     let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");

@@ -15,6 +15,25 @@ const TOKEN: &str = "notify-token";
 /// `WatchdogSec=0.4s`: groundcal feeds it every 200 ms.
 const WATCHDOG_USEC: &str = "400000";
 
+/// systemd's side of `NOTIFY_SOCKET`: a Unix datagram socket in `dir`.
+fn fake_systemd(dir: &std::path::Path) -> (UnixDatagram, std::path::PathBuf) {
+    let path = dir.join("notify.sock");
+    let socket = UnixDatagram::bind(&path).expect("the fake systemd socket");
+    socket
+        .set_read_timeout(Some(Duration::from_millis(50)))
+        .unwrap();
+    (socket, path)
+}
+
+/// Waits (at most 10 s) for the first notification.
+fn first_notification(socket: &UnixDatagram, into: &mut Vec<(Instant, String)>) -> String {
+    let start = Instant::now();
+    while into.is_empty() && start.elapsed() < Duration::from_secs(10) {
+        drain(socket, into);
+    }
+    into.first().expect("a notification within 10 s").1.clone()
+}
+
 /// The notifications received so far, one string per datagram.
 fn drain(socket: &UnixDatagram, into: &mut Vec<(Instant, String)>) {
     let mut buffer = [0u8; 4096];
@@ -48,15 +67,12 @@ fn longest_gap(feedings: &[Instant], from: Instant, until: Instant) -> Duration 
 #[test]
 fn ready_once_listening_watchdog_fed_through_a_calibration_stopping_at_sigterm() {
     let dir = temp_dir("serve-notify");
-    let socket_path = dir.join("notify.sock");
-    let socket = UnixDatagram::bind(&socket_path).expect("the fake systemd socket");
-    socket
-        .set_read_timeout(Some(Duration::from_millis(50)))
-        .unwrap();
+    let (socket, socket_path) = fake_systemd(&dir);
 
     let (server, address) = spawn_serve(
         &dir,
         TOKEN,
+        &[],
         &[
             ("NOTIFY_SOCKET", socket_path.as_os_str()),
             ("WATCHDOG_USEC", std::ffi::OsStr::new(WATCHDOG_USEC)),
@@ -66,17 +82,21 @@ fn ready_once_listening_watchdog_fed_through_a_calibration_stopping_at_sigterm()
     // READY=1 comes first, naming the address HTTP listens on, and the
     // address answers.
     let mut messages = Vec::new();
-    let start = Instant::now();
-    while messages.is_empty() && start.elapsed() < Duration::from_secs(10) {
-        drain(&socket, &mut messages);
-    }
-    let first = &messages.first().expect("a notification within 10 s").1;
+    let first = first_notification(&socket, &mut messages);
     assert!(
         first.starts_with("READY=1\n") && first.contains(&format!("STATUS=listening on {address}")),
         "{first:?}"
     );
     let (code, status) = http(&address, "GET", "/api/status", None);
     assert_eq!((code, status["state"].as_str()), (200, Some("idle")));
+    // The hardware was opened (and closed) before READY.
+    assert!(
+        status["hardware"]
+            .as_str()
+            .unwrap()
+            .starts_with("ready: sim"),
+        "{status}"
+    );
 
     // Fed while idle: about every 200 ms.
     let idle_from = Instant::now();
@@ -127,5 +147,35 @@ fn ready_once_listening_watchdog_fed_through_a_calibration_stopping_at_sigterm()
         messages.iter().any(|(_, m)| m == "STOPPING=1"),
         "{messages:?}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A Kinect that does not open does not stop the service: READY still comes
+/// (the page must stay up to say what is wrong), and the status says why.
+#[test]
+fn a_missing_kinect_is_reported_not_fatal() {
+    let dir = temp_dir("serve-notify-no-kinect");
+    let (socket, socket_path) = fake_systemd(&dir);
+    let (server, address) = spawn_serve(
+        &dir,
+        TOKEN,
+        &[
+            "--sensor",
+            "kinect",
+            "--freenect-lib",
+            "/nonexistent/libfreenect.so.0.5",
+        ],
+        &[("NOTIFY_SOCKET", socket_path.as_os_str())],
+    );
+    let first = first_notification(&socket, &mut Vec::new());
+    assert!(first.starts_with("READY=1"), "{first:?}");
+    let (_, status) = http(&address, "GET", "/api/status", None);
+    let hardware = status["hardware"].as_str().unwrap();
+    assert!(
+        hardware.starts_with("not ready:") && hardware.contains("libfreenect"),
+        "{status}"
+    );
+    let (code, stderr) = terminate(server);
+    assert_eq!(code, 0, "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }

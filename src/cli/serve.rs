@@ -1,14 +1,15 @@
 //! `groundcal serve --config FILE`: the daemon for the phone/pad terminal
-//! (`crate::terminal`). Prints `listening on ADDR` on stdout once HTTP
-//! listens; SIGTERM or SIGINT aborts a running session (the robot is halted
-//! and sent home) and then stops.
+//! (`crate::terminal`). Binds HTTP, opens the hardware once to check it (and
+//! closes it), then tells systemd READY; prints `listening on ADDR` on stdout
+//! once HTTP listens; SIGTERM or SIGINT aborts a running session (the robot
+//! is halted and sent home) and then stops.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use super::ExitStatus;
 use crate::config::Config;
-use crate::hardware::Selection;
+use crate::hardware::{self, Selection};
 use crate::terminal::{self, AppState};
 
 /// The command's options.
@@ -86,6 +87,30 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
                 return ExitStatus::RuntimeFailure;
             }
         }
+        // The hardware, opened once before READY: a missing Kinect or an
+        // unresolvable lower computer shows on the page and in the journal at
+        // once, not only when the operator presses Calibrate. It is closed
+        // again (each calibration opens it), and a failure does not stop the
+        // service: the page must stay up to say what is wrong.
+        let hardware = match hardware::open(&config, &options.selection).await {
+            Ok(opened) => {
+                drop(opened);
+                format!(
+                    "ready: {} and lower computer {}",
+                    hardware::sensor_source(&config, &options.selection),
+                    options
+                        .selection
+                        .robot
+                        .as_deref()
+                        .unwrap_or(&config.robot.address)
+                )
+            }
+            Err(e) => {
+                tracing::warn!("the hardware did not open: {e}");
+                eprintln!("groundcal serve: the hardware did not open: {e}");
+                format!("not ready: {e}")
+            }
+        };
         let state = AppState::new(
             config,
             schedule,
@@ -93,6 +118,7 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
             token,
             &state_dir,
         );
+        state.set_hardware(hardware);
         match terminal::serve(listener, state, stop_signal()).await {
             Ok(()) => ExitStatus::Success,
             Err(e) => {

@@ -127,6 +127,44 @@ async fn wait_for<C: BodyController>(
     }
 }
 
+/// Writes a pose's frames and then its line to the recording on a blocking
+/// worker (files and fsync: slow on an SD card, and the session's runtime
+/// also drives the UDP link and the watchdog heartbeat); returns the writer.
+async fn record_pose(
+    mut writer: RecordingWriter,
+    frames: &[DepthFrame],
+    mut record: PoseRecord,
+) -> Result<RecordingWriter, SessionError> {
+    let images: Vec<(f64, u32, DepthImage)> = frames
+        .iter()
+        .map(|f| {
+            let image = DepthImage {
+                width: f.width,
+                height: f.height,
+                pixels: f.raw.clone(),
+            };
+            (f.time_s, f.timestamp, image)
+        })
+        .collect();
+    let written = tokio::task::spawn_blocking(move || {
+        let result = images
+            .iter()
+            .map(|(time_s, timestamp, image)| writer.write_depth_frame(*time_s, *timestamp, image))
+            .collect::<Result<Vec<String>, WriteError>>()
+            .and_then(|names| {
+                record.depth_frames = names;
+                writer.write_pose(&record)
+            });
+        (writer, result)
+    })
+    .await;
+    match written {
+        Ok((writer, Ok(()))) => Ok(writer),
+        Ok((_, Err(e))) => Err(e.into()),
+        Err(e) => Err(SessionError::Recording(format!("the writer failed: {e}"))),
+    }
+}
+
 /// A pose whose ground is being fitted on a worker thread.
 struct PendingFit {
     index: u16,
@@ -386,28 +424,19 @@ async fn body<S: DepthSensor, C: BodyController>(
         send(events, Event::Capturing { index, of });
         sensor.begin_pose(index);
         let mut frames = Vec::with_capacity(frame_count);
-        let mut names = Vec::with_capacity(frame_count);
         for _ in 0..frame_count {
-            let frame = sensor.next_frame().await.map_err(SessionError::sensor)?;
-            if let Some(w) = writer.as_mut() {
-                let image = DepthImage {
-                    width: frame.width,
-                    height: frame.height,
-                    pixels: frame.raw.clone(),
-                };
-                names.push(w.write_depth_frame(frame.time_s, frame.timestamp, &image)?);
-            }
-            frames.push(frame);
+            frames.push(sensor.next_frame().await.map_err(SessionError::sensor)?);
         }
         let feet_mm: Vec<[f64; 3]> = settled.feet_mm.to_vec();
-        if let Some(w) = writer.as_mut() {
-            w.write_pose(&PoseRecord {
+        if let Some(w) = writer.take() {
+            let record = PoseRecord {
                 index: u32::from(index),
                 commanded: *commanded,
                 feet_body_mm: feet_mm.clone(),
-                depth_frames: names,
+                depth_frames: Vec::new(),
                 line: 0,
-            })?;
+            };
+            writer = Some(record_pose(w, &frames, record).await?);
         }
         let fit = match processor.body_pose(commanded, &feet_mm) {
             Ok(body) => {

@@ -182,6 +182,9 @@ pub struct Status {
     pub result_id: Option<String>,
     /// Why the last session produced no result.
     pub error: Option<String>,
+    /// Whether the hardware opened when the service started, in words (it
+    /// is opened again for each calibration).
+    pub hardware: String,
     /// The latest provisional θ and e_d per pose of a running session (kept
     /// here rather than among the recent events: it is replaced, not added).
     pub provisional: Option<Vec<ProvisionalPoseJson>>,
@@ -240,6 +243,11 @@ impl AppState {
     /// A snapshot of the status.
     pub fn status(&self) -> Status {
         lock(&self.0.status).clone()
+    }
+
+    /// Records how the hardware check at start went (shown on the page).
+    pub fn set_hardware(&self, words: String) {
+        lock(&self.0.status).hardware = words;
     }
 
     /// Aborts a running session (if any) and waits until it has stopped the robot.
@@ -548,6 +556,7 @@ async fn post_start(
             by: Some(by.clone()),
             started: Some(now()),
             robot: "opening the hardware".into(),
+            hardware: std::mem::take(&mut status.hardware),
             ..Status::default()
         };
         *lock(&state.0.abort) = Some(abort_tx);

@@ -106,9 +106,14 @@ pub fn stop_sim_robot(child: Child) -> String {
 
 /// `groundcal serve` as systemd would run it: the binary, on the simulation
 /// configuration copied into `dir` (token `token`, state in `dir/state`),
-/// listening on 127.0.0.1:0, with these environment variables. Returns the
-/// process and the address it printed once listening.
-pub fn spawn_serve(dir: &Path, token: &str, env: &[(&str, &OsStr)]) -> (Child, String) {
+/// listening on 127.0.0.1:0, with these further arguments and environment
+/// variables. Returns the process and the address it printed once listening.
+pub fn spawn_serve(
+    dir: &Path,
+    token: &str,
+    args: &[&str],
+    env: &[(&str, &OsStr)],
+) -> (Child, String) {
     let text = std::fs::read_to_string(root().join("config/sim.toml"))
         .expect("config/sim.toml")
         .replace(
@@ -126,6 +131,7 @@ pub fn spawn_serve(dir: &Path, token: &str, env: &[(&str, &OsStr)]) -> (Child, S
         .args(["serve", "--config"])
         .arg(&config)
         .args(["--listen", "127.0.0.1:0"])
+        .args(args)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
