@@ -79,12 +79,14 @@ fn fakenect_frame_of_the_sample_recording_matches_its_truth() {
     assert!((p["d_m"].as_f64().unwrap() - t[3]).abs() < 0.001);
 }
 
-/// With the up direction pointing at the wall's normal instead, the floor must
-/// not be reported: the prior excludes it, and no other plane qualifies.
+/// With the expected up direction along the camera's x axis instead, 70° from
+/// the floor's normal, the floor must not be reported: the prior excludes it,
+/// no other plane in this frame qualifies, and the command says so (exit 1)
+/// in words that name the prior.
 #[test]
-fn a_prior_that_excludes_the_floor_finds_no_ground_or_another_plane() {
+fn a_prior_that_excludes_the_floor_finds_no_ground() {
     let file = shared().join("data/real/pcl_floor_tilted_frame_20121214T142255.814212_depth.tiff");
-    let (code, stdout, _) = common::groundcal(&[
+    let (code, stdout, stderr) = common::groundcal(&[
         "plane",
         file.to_str().unwrap(),
         "--json",
@@ -97,12 +99,25 @@ fn a_prior_that_excludes_the_floor_finds_no_ground_or_another_plane() {
         "--up-tolerance",
         "20",
     ]);
-    if code == 0 {
-        let result: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-        let p = &result["plane_optical"];
-        let normal = ["a", "b", "c"].map(|k| p[k].as_f64().unwrap());
-        assert!(angle_deg(normal, [1.0, 0.0, 0.0]) <= 20.0 + 1e-9);
-    } else {
-        assert_eq!(code, 1);
-    }
+    assert_eq!(code, 1, "stdout: {stdout}\nstderr: {stderr}");
+    assert!(stdout.is_empty(), "no plane is printed: {stdout}");
+    assert!(
+        stderr.contains("no plane in view matches the expected ground")
+            && stderr.contains("within 20°"),
+        "{stderr}"
+    );
+    // The same frame with the floor's side of the prior finds the floor.
+    let (code, _, stderr) = common::groundcal(&[
+        "plane",
+        file.to_str().unwrap(),
+        "--fx",
+        "525",
+        "--fy",
+        "525",
+        "--up",
+        "0,-1,-1",
+        "--up-tolerance",
+        "20",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
 }

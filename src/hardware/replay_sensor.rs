@@ -36,6 +36,8 @@ pub struct ReplaySensor {
     recording: Recording,
     /// Pose id → its line in the recording.
     poses: HashMap<u16, usize>,
+    /// Dump file name → (Kinect timestamp, seconds), from the INDEX.
+    times: HashMap<String, (u32, f64)>,
     current: Option<(u16, usize)>,
     tilt_deg: f64,
 }
@@ -49,10 +51,16 @@ impl ReplaySensor {
             .enumerate()
             .filter_map(|(k, p)| u16::try_from(p.index).ok().map(|id| (id, k)))
             .collect();
+        let times = recording
+            .index
+            .iter()
+            .map(|e| (e.name.clone(), (e.timestamp, e.time)))
+            .collect();
         let tilt_deg = recording.session.kinect.tilt_deg;
         Self {
             recording,
             poses,
+            times,
             current: None,
             tilt_deg,
         }
@@ -117,12 +125,12 @@ impl DepthSensor for ReplaySensor {
                 pose: pose_id,
                 recorded: record.depth_frames.len(),
             })?;
-        let entry = self.recording.index.iter().find(|e| &e.name == name);
+        let (timestamp, time_s) = self.times.get(name).copied().unwrap_or((0, 0.0));
         let (image, _) = self.recording.read_depth_frame(name)?;
         self.current = Some((pose_id, served + 1));
         Ok(DepthFrame {
-            timestamp: entry.map_or(0, |e| e.timestamp),
-            time_s: entry.map_or(0.0, |e| e.time),
+            timestamp,
+            time_s,
             width: image.width,
             height: image.height,
             raw: image.pixels,

@@ -53,6 +53,37 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// A fresh directory of its own (as [`temp_dir`]), removed on drop.
+pub struct TempDir(pub PathBuf);
+
+impl TempDir {
+    pub fn new(tag: &str) -> Self {
+        Self(temp_dir(tag))
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A system package or tool a test needs is missing: under `CI=true` that is
+/// a failure (CI must install it); elsewhere the test says loudly that it did
+/// not run, on the stream itself (the harness swallows what a passing test
+/// prints with `eprintln!`), and the caller returns.
+pub fn prerequisite_missing(test: &str, message: &str) {
+    if std::env::var("CI").as_deref() == Ok("true") {
+        panic!("{message}");
+    }
+    use std::io::Write;
+    let bar = "!".repeat(78);
+    let _ = writeln!(
+        std::io::stderr(),
+        "\n{bar}\nWARNING: {test} NOT RUN: {message}\n{bar}\n"
+    );
+}
+
 /// `groundcal sim-robot --listen 127.0.0.1:0 ARGS…` in its own process, with
 /// these environment variables (faults, receipts); returns the process and
 /// the address it printed.
@@ -67,11 +98,16 @@ pub fn spawn_sim_robot(args: &[&str], env: &[(&str, &OsStr)]) -> (Child, String)
     for (name, value) in env {
         command.env(name, value);
     }
-    let mut child = command.spawn().expect("groundcal sim-robot starts");
+    listening(command.spawn().expect("groundcal sim-robot starts"))
+}
+
+/// Reads the `listening on ADDR` line a server prints once it is bound;
+/// returns the process and the address, or kills it and says what it said.
+fn listening(mut child: Child) -> (Child, String) {
     let mut line = String::new();
     BufReader::new(child.stdout.take().expect("stdout is piped"))
         .read_line(&mut line)
-        .expect("sim-robot writes its address");
+        .expect("the server writes its address");
     match line.trim().strip_prefix("listening on ") {
         Some(address) => (child, address.to_string()),
         None => {
@@ -80,7 +116,7 @@ pub fn spawn_sim_robot(args: &[&str], env: &[(&str, &OsStr)]) -> (Child, String)
                 let _ = e.read_to_string(&mut stderr);
             }
             let _ = child.kill();
-            panic!("sim-robot said {line:?} on stdout, stderr: {stderr}");
+            panic!("the server said {line:?} on stdout, stderr: {stderr}");
         }
     }
 }
@@ -138,22 +174,7 @@ pub fn spawn_serve(
     for (name, value) in env {
         command.env(name, value);
     }
-    let mut child = command.spawn().expect("groundcal serve starts");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().expect("stdout is piped"))
-        .read_line(&mut line)
-        .expect("serve writes its address");
-    match line.trim().strip_prefix("listening on ") {
-        Some(address) => (child, address.to_string()),
-        None => {
-            let mut stderr = String::new();
-            if let Some(mut e) = child.stderr.take() {
-                let _ = e.read_to_string(&mut stderr);
-            }
-            let _ = child.kill();
-            panic!("serve said {line:?} on stdout, stderr: {stderr}");
-        }
-    }
+    listening(command.spawn().expect("groundcal serve starts"))
 }
 
 /// Sends SIGTERM to a child process and waits for it; returns (exit code,
@@ -256,12 +277,6 @@ pub fn browser_ready(test: &str) -> bool {
         "the browser test cannot run; missing: {}. The setup the test script runs: {BROWSER_SETUP}",
         missing.join("; ")
     );
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!("{message}");
-    }
-    eprintln!(
-        "\n{0}\nWARNING: SKIPPED {test}: {message}\n{0}\n",
-        "!".repeat(78)
-    );
+    prerequisite_missing(test, &message);
     false
 }
