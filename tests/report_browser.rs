@@ -10,7 +10,6 @@
 mod common;
 
 use std::fs;
-use std::process::Command;
 
 use groundcal::calib::solve::{solve, SolveSettings};
 use groundcal::output::ResultJson;
@@ -40,23 +39,7 @@ fn report_opens_cleanly_in_chromium_on_a_phone_and_a_laptop() {
     let png = shots.join("report.png");
     let _ = fs::remove_file(&png);
 
-    let out = Command::new("node")
-        .arg(common::root().join("tests/browser/report.mjs"))
-        .arg(&html)
-        .arg(&png)
-        .current_dir(common::root())
-        .output()
-        .expect("node runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "the report failed in Chromium ({}):\n{stderr}\n{stdout}",
-        out.status
-    );
-
-    let seen: serde_json::Value = serde_json::from_str(stdout.trim())
-        .unwrap_or_else(|e| panic!("report.mjs printed no JSON ({e}): {stdout}"));
+    let seen = common::run_browser_script("report.mjs", &[html.as_os_str(), png.as_os_str()]);
     let views = seen["seen"].as_array().expect("views");
     assert_eq!(views.len(), 2, "{seen}");
     for view in views {

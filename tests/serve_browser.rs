@@ -10,8 +10,8 @@
 
 mod common;
 
+use std::ffi::OsStr;
 use std::fs;
-use std::process::Command;
 
 const TOKEN: &str = "browser-token";
 
@@ -32,24 +32,10 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
         let _ = fs::remove_file(shots.join(format!("serve-{step}.png")));
     }
     let url = format!("http://{addr}/");
-    let script = common::root().join("tests/browser/serve.mjs");
-    let out = Command::new("node")
-        .arg(script)
-        .arg(url)
-        .arg(TOKEN)
-        .arg(&shots)
-        .current_dir(common::root())
-        .output()
-        .expect("node runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.success(),
-        "the terminal page failed in Chromium ({}):\n{stderr}\n{stdout}",
-        out.status
+    let seen = common::run_browser_script(
+        "serve.mjs",
+        &[OsStr::new(&url), OsStr::new(TOKEN), shots.as_os_str()],
     );
-    let seen: serde_json::Value = serde_json::from_str(stdout.trim())
-        .unwrap_or_else(|e| panic!("serve.mjs printed no JSON ({e}): {stdout}"));
     assert_eq!(seen["seen"]["verdict"], "Accepted", "{seen}");
     assert!(seen["seen"]["points"].as_u64().unwrap() > 6, "{seen}");
     // The chart filled in while the poses went by, from a provisional solve.

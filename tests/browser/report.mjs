@@ -10,25 +10,11 @@
 // SCREENSHOT-desktop.png (1280×900). Prints one JSON line of what it saw on
 // stdout; exits 0 when every check passes, 1 when one fails, 2 on bad usage.
 
-import { chromium } from 'playwright-core';
-import { mkdtempSync, rmSync, statSync } from 'node:fs';
-import { tmpdir } from 'node:os';
-import { join, resolve } from 'node:path';
+import { statSync } from 'node:fs';
+import { resolve } from 'node:path';
 import { pathToFileURL } from 'node:url';
 
-const CHROMIUM = '/usr/bin/chromium';
-// Without the background-networking flags Chromium keeps trying to reach
-// Google's hosts, which this machine's closed network refuses.
-const ARGS = [
-  '--headless',
-  '--no-sandbox',
-  '--disable-gpu',
-  '--disable-quic',
-  '--no-first-run',
-  '--disable-background-networking',
-  '--disable-component-update',
-  '--disable-sync',
-];
+import { deadline, launch } from './chromium.mjs';
 
 const VIEWPORTS = [
   { name: 'phone', viewport: { width: 390, height: 844 }, isMobile: true, hasTouch: true, deviceScaleFactor: 2 },
@@ -43,24 +29,12 @@ if (!htmlArg || !pngArg) {
 const url = pathToFileURL(resolve(htmlArg)).href;
 const screenshotFor = (name) => (name === 'phone' ? resolve(pngArg) : resolve(pngArg).replace(/(\.png)?$/, `-${name}.png`));
 
-// A hung browser must not hang the test run.
-setTimeout(() => {
-  console.error('report.mjs: timed out after 120 s');
-  process.exit(1);
-}, 120_000).unref();
+deadline('report.mjs', 120);
 
 /** Opens the report in one viewport and returns what was seen and what went wrong. */
 async function visit({ name, ...options }) {
   const problems = [];
-  // A fresh profile every time: nothing from an earlier run can affect this one.
-  const userDataDir = mkdtempSync(join(tmpdir(), 'groundcal-chromium-'));
-  const context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: CHROMIUM,
-    headless: true,
-    args: ARGS,
-    timeout: 60_000,
-    ...options,
-  });
+  const { context, close } = await launch(options);
   try {
     await context.route('**/*', (route) => {
       const requested = route.request().url();
@@ -108,8 +82,7 @@ async function visit({ name, ...options }) {
 
     return { seen: { viewport: name, verdict, svgs: svgs.length, rendered, overflow, screenshot, bytes }, problems };
   } finally {
-    await context.close();
-    rmSync(userDataDir, { recursive: true, force: true });
+    await close();
   }
 }
 

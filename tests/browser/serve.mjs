@@ -11,50 +11,30 @@
 // one JSON line of what it saw; exits 0 when every check passes, 1 otherwise,
 // 2 on bad usage.
 
-import { chromium } from 'playwright-core';
-import { mkdtempSync, rmSync } from 'node:fs';
-import { tmpdir } from 'node:os';
-import { join, resolve } from 'node:path';
+import { resolve } from 'node:path';
 
-const CHROMIUM = '/usr/bin/chromium';
-const ARGS = [
-  '--headless',
-  '--no-sandbox',
-  '--disable-gpu',
-  '--disable-quic',
-  '--no-first-run',
-  '--disable-background-networking',
-  '--disable-component-update',
-  '--disable-sync',
-];
+import { deadline, launch } from './chromium.mjs';
 
 const [url, token, shotDir] = process.argv.slice(2);
 if (!url || !token || !shotDir) {
   console.error('usage: node serve.mjs URL TOKEN SCREENSHOT_DIR');
   process.exit(2);
 }
-setTimeout(() => {
-  console.error('serve.mjs: timed out after 240 s');
-  process.exit(1);
-}, 240_000).unref();
+deadline('serve.mjs', 240);
 
 const origin = new URL(url).origin;
 const problems = [];
 const seen = {};
-const userDataDir = mkdtempSync(join(tmpdir(), 'groundcal-chromium-'));
 const shot = (page, name) => page.screenshot({ path: resolve(shotDir, `serve-${name}.png`), fullPage: true });
-let context;
+let browser;
 try {
-  context = await chromium.launchPersistentContext(userDataDir, {
-    executablePath: CHROMIUM,
-    headless: true,
-    args: ARGS,
-    timeout: 60_000,
+  browser = await launch({
     viewport: { width: 390, height: 844 },
     isMobile: true,
     hasTouch: true,
     deviceScaleFactor: 2,
   });
+  const { context } = browser;
   await context.route('**/*', (route) => {
     const requested = route.request().url();
     if (requested.startsWith(origin) || requested.startsWith('data:')) return route.continue();
@@ -99,8 +79,7 @@ try {
 } catch (error) {
   problems.push(`the browser failed: ${error.stack ?? error}`);
 } finally {
-  if (context) await context.close();
-  rmSync(userDataDir, { recursive: true, force: true });
+  if (browser) await browser.close();
 }
 console.log(JSON.stringify({ url, seen, problems }));
 for (const problem of problems) console.error(`serve.mjs: ${problem}`);

@@ -84,6 +84,26 @@ pub fn prerequisite_missing(test: &str, message: &str) {
     );
 }
 
+/// Runs `node tests/browser/SCRIPT ARGS…` (Playwright driving Chromium);
+/// asserts it succeeded and returns the JSON line it printed.
+pub fn run_browser_script(script: &str, args: &[&OsStr]) -> serde_json::Value {
+    let out = Command::new("node")
+        .arg(root().join("tests/browser").join(script))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("node runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "{script} failed in Chromium ({}):\n{stderr}\n{stdout}",
+        out.status
+    );
+    serde_json::from_str(stdout.trim())
+        .unwrap_or_else(|e| panic!("{script} printed no JSON ({e}): {stdout}"))
+}
+
 /// `groundcal sim-robot --listen 127.0.0.1:0 ARGS…` in its own process, with
 /// these environment variables (faults, receipts); returns the process and
 /// the address it printed.
