@@ -5,9 +5,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{groundcal, groundcal_json};
+use common::{distance, groundcal, groundcal_json, mount_of};
 use groundcal::calib::geometry::PoseDegMm;
-use nalgebra::Rotation3;
 
 fn sim_config() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim.toml")
@@ -20,29 +19,6 @@ fn true_mount() -> PoseDegMm {
         .sim
         .unwrap()
         .mount
-}
-
-fn mount_of(result: &serde_json::Value) -> PoseDegMm {
-    serde_json::from_value(serde_json::json!({
-        "alpha_deg": result["robot_from_sensor"]["alpha_deg"],
-        "beta_deg": result["robot_from_sensor"]["beta_deg"],
-        "gamma_deg": result["robot_from_sensor"]["gamma_deg"],
-        "px_mm": result["robot_from_sensor"]["px_mm"],
-        "py_mm": result["robot_from_sensor"]["py_mm"],
-        "pz_mm": result["robot_from_sensor"]["pz_mm"],
-    }))
-    .unwrap()
-}
-
-/// Rotation angle (degrees) and translation distance (mm) between two mounts.
-fn distance(a: &PoseDegMm, b: &PoseDegMm) -> (f64, f64) {
-    let (pa, pb) = (a.to_params(), b.to_params());
-    let ra = Rotation3::from_matrix_unchecked(pa.rotation_matrix());
-    let rb = Rotation3::from_matrix_unchecked(pb.rotation_matrix());
-    (
-        (ra.inverse() * rb).angle().to_degrees(),
-        (pa.translation - pb.translation).norm() * 1e3,
-    )
 }
 
 /// A copy of sim.toml with another world, its schedule path made absolute.
@@ -129,4 +105,19 @@ fn an_invalid_schedule_is_refused_before_anything_moves() {
         stderr.contains("pose 1") && stderr.contains("tilt limit"),
         "{stderr}"
     );
+}
+
+/// The comparison itself: zero for one mount, and the right angle for a
+/// small turn (acos of the trace would give NaN or lose the small angle).
+#[test]
+fn mount_distance_is_exact_near_zero() {
+    let mount = true_mount();
+    assert_eq!(distance(&mount, &mount), (0.0, 0.0));
+    let turned = PoseDegMm {
+        beta_deg: mount.beta_deg + 1e-7,
+        ..mount
+    };
+    let (angle, offset) = distance(&mount, &turned);
+    assert!((angle - 1e-7).abs() < 1e-12, "{angle}");
+    assert_eq!(offset, 0.0);
 }

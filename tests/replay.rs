@@ -5,12 +5,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{groundcal, groundcal_json, shared};
+use common::{distance, groundcal, groundcal_json, mount_of, shared};
 use groundcal::calib::geometry::PoseDegMm;
 use groundcal::pipeline::BodyPoseSource;
 use groundcal::recording::Recording;
 use groundcal::replay::{replay, ReplayOptions};
-use nalgebra::Rotation3;
 
 fn sample() -> PathBuf {
     shared().join("data/sample-12")
@@ -20,30 +19,6 @@ fn truth() -> PoseDegMm {
     let text = std::fs::read_to_string(shared().join("data/sample-12.truth.json")).unwrap();
     let value: serde_json::Value = serde_json::from_str(&text).unwrap();
     serde_json::from_value(value["extrinsics"].clone()).unwrap()
-}
-
-/// Rotation angle (degrees) and translation distance (mm) between two mounts.
-fn distance(a: &PoseDegMm, b: &PoseDegMm) -> (f64, f64) {
-    let (pa, pb) = (a.to_params(), b.to_params());
-    let ra = Rotation3::from_matrix_unchecked(pa.rotation_matrix());
-    let rb = Rotation3::from_matrix_unchecked(pb.rotation_matrix());
-    (
-        (ra.inverse() * rb).angle().to_degrees(),
-        (pa.translation - pb.translation).norm() * 1e3,
-    )
-}
-
-fn mount_of(result: &serde_json::Value) -> PoseDegMm {
-    let m = &result["robot_from_sensor"];
-    let get = |k: &str| m[k].as_f64().unwrap();
-    PoseDegMm {
-        alpha_deg: get("alpha_deg"),
-        beta_deg: get("beta_deg"),
-        gamma_deg: get("gamma_deg"),
-        px_mm: get("px_mm"),
-        py_mm: get("py_mm"),
-        pz_mm: get("pz_mm"),
-    }
 }
 
 #[test]

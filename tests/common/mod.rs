@@ -53,6 +53,46 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// The `robot_from_sensor` of a result JSON (cli.md).
+pub fn mount_of(result: &serde_json::Value) -> groundcal::calib::geometry::PoseDegMm {
+    let m = &result["robot_from_sensor"];
+    let get = |k: &str| {
+        m[k].as_f64()
+            .unwrap_or_else(|| panic!("robot_from_sensor.{k} in {result}"))
+    };
+    groundcal::calib::geometry::PoseDegMm {
+        alpha_deg: get("alpha_deg"),
+        beta_deg: get("beta_deg"),
+        gamma_deg: get("gamma_deg"),
+        px_mm: get("px_mm"),
+        py_mm: get("py_mm"),
+        pz_mm: get("pz_mm"),
+    }
+}
+
+/// Rotation angle (degrees) and translation distance (mm) between two mounts.
+pub fn distance(
+    a: &groundcal::calib::geometry::PoseDegMm,
+    b: &groundcal::calib::geometry::PoseDegMm,
+) -> (f64, f64) {
+    let (pa, pb) = (a.to_params(), b.to_params());
+    let r = pa.rotation_matrix().transpose() * pb.rotation_matrix();
+    // atan2(sin θ, cos θ) from the skew part and the trace: exact near zero,
+    // where acos of the trace alone loses precision or, just past 1, is NaN.
+    let sin = 0.5
+        * nalgebra::Vector3::new(
+            r[(2, 1)] - r[(1, 2)],
+            r[(0, 2)] - r[(2, 0)],
+            r[(1, 0)] - r[(0, 1)],
+        )
+        .norm();
+    let cos = 0.5 * (r.trace() - 1.0);
+    (
+        sin.atan2(cos).to_degrees(),
+        (pa.translation - pb.translation).norm() * 1e3,
+    )
+}
+
 /// A fresh directory of its own (as [`temp_dir`]), removed on drop.
 pub struct TempDir(pub PathBuf);
 
