@@ -11,7 +11,7 @@ mod common;
 
 use std::collections::BTreeMap;
 use std::ffi::OsStr;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::{groundcal_json, root, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
 use groundcal::recording::Recording;
@@ -24,7 +24,12 @@ const FAULTS: &str = "loss=0.2,dup=0.05,reorder=0.05,delay_ms=20,seed=3";
 fn config_for(address: &str, dir: &Path) -> std::path::PathBuf {
     let text = std::fs::read_to_string(root().join("config/sim.toml"))
         .unwrap()
-        .replace("address = \"sim\"", &format!("address = \"{address}\""))
+        // 30 retries: at 20 % loss each way, a request and its reply both
+        // get through with p = 0.64; 31 attempts all failing is ~1e-14.
+        .replace(
+            "\naddress = \"sim\"\n",
+            &format!("\naddress = \"{address}\"\nretries = 30\n"),
+        )
         .replace("settle_ms = 300", "settle_ms = 30")
         .replace(
             "schedule = \"schedules/octopus-52.toml\"",
@@ -163,23 +168,14 @@ fn the_sample_recording_runs_live_over_a_lossy_link_to_the_replay_result() {
 /// pose) is asked for by its own ids, not renumbered.
 #[test]
 fn a_recording_with_gaps_in_its_pose_ids_is_asked_for_by_its_own_ids() {
-    let sample = shared().join("data/sample-12");
-    let dir = temp_dir("replay-link-gaps-recording");
-    std::fs::copy(sample.join("session.json"), dir.join("session.json")).unwrap();
-    std::os::unix::fs::symlink(
-        sample.join("kinect").canonicalize().unwrap(),
-        dir.join("kinect"),
-    )
-    .unwrap();
-    let text = std::fs::read_to_string(sample.join("poses.jsonl")).unwrap();
-    let kept: Vec<&str> = text
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .enumerate()
-        .filter(|(k, _)| *k != 4)
-        .map(|(_, l)| l)
-        .collect();
-    std::fs::write(dir.join("poses.jsonl"), kept.join("\n") + "\n").unwrap();
+    let dir = sample_with_poses("replay-link-gaps-recording", |lines| {
+        lines
+            .into_iter()
+            .enumerate()
+            .filter(|(k, _)| *k != 4)
+            .map(|(_, l)| l)
+            .collect()
+    });
     let ids: Vec<u32> = Recording::open(&dir)
         .unwrap()
         .poses
@@ -189,4 +185,49 @@ fn a_recording_with_gaps_in_its_pose_ids_is_asked_for_by_its_own_ids() {
     assert!(!ids.contains(&5) && ids.contains(&6), "{ids:?}");
     live_session_matches_the_replay("replay-link-gaps", &dir);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A recording whose pose ids do not fit the link's 16 bits is refused
+/// before anything moves, with the pose named.
+#[test]
+fn a_pose_id_beyond_the_link_is_refused_before_moving() {
+    let dir = sample_with_poses("replay-link-big-id", |mut lines| {
+        let last = lines.pop().unwrap();
+        lines.push(last.replacen("\"index\": 12,", "\"index\": 70000,", 1));
+        lines
+    });
+    assert_eq!(
+        Recording::open(&dir).unwrap().poses.last().unwrap().index,
+        70000
+    );
+    let sensor = format!("replay:{}", dir.display());
+    let (code, stdout, stderr) =
+        common::groundcal(&["calibrate", "--robot", "sim", "--sensor", &sensor, "--json"]);
+    assert_eq!(code, 2, "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("pose 70000") && stderr.contains("65535"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A copy of the shared sample (its frames linked, not copied) with
+/// `poses.jsonl`'s lines edited.
+fn sample_with_poses(tag: &str, edit: impl FnOnce(Vec<String>) -> Vec<String>) -> PathBuf {
+    let sample = shared().join("data/sample-12");
+    let dir = temp_dir(tag);
+    std::fs::copy(sample.join("session.json"), dir.join("session.json")).unwrap();
+    std::os::unix::fs::symlink(
+        sample.join("kinect").canonicalize().unwrap(),
+        dir.join("kinect"),
+    )
+    .unwrap();
+    let lines: Vec<String> = std::fs::read_to_string(sample.join("poses.jsonl"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(str::to_owned)
+        .collect();
+    std::fs::write(dir.join("poses.jsonl"), edit(lines).join("\n") + "\n").unwrap();
+    dir
 }

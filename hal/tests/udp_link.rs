@@ -130,9 +130,11 @@ async fn a_lossy_network_and_a_restart_are_recovered() {
     )
     .unwrap();
     let sim = Sim::start(100.0, faults).await;
-    let mut c = UdpBodyController::connect(&LinkConfig::new(sim.address))
-        .await
-        .unwrap();
+    // 30 retries: at 20 % loss each way the default 10 would lose the link
+    // now and then (p = 0.36 per attempt).
+    let mut link = LinkConfig::new(sim.address);
+    link.client.retry_limit = 30;
+    let mut c = UdpBodyController::connect(&link).await.unwrap();
     c.hello().await.unwrap();
     visit(&mut c, &poses()).await;
     let client = c.link().stats();

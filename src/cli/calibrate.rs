@@ -43,13 +43,14 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
 }
 
 /// The session plan from the configuration; a replayed sensor brings its
-/// recording's schedule, frames per pose, tilt and nominal mount.
+/// recording's schedule, pose ids, frames per pose, tilt and nominal mount
+/// (refused when a pose id does not fit the link's 16 bits).
 pub fn plan(
     config: &Config,
     schedule: Schedule,
     replay: Option<&Recording>,
     record: Option<PathBuf>,
-) -> Plan {
+) -> Result<Plan, String> {
     let c = &config.calibration;
     // Simulated hardware runs faster than real time: so do the waits.
     let scale = match (&config.sim, config.robot.address.as_str()) {
@@ -92,21 +93,29 @@ pub fn plan(
             .max()
             .unwrap_or(1)
             .max(1);
-        plan.recorded_poses = Some(
-            recording
-                .poses
-                .iter()
-                .map(|p| RecordedPose {
-                    // Recording poses count from 1 and fit a u16 (recording.md).
-                    id: u16::try_from(p.index).unwrap_or(u16::MAX),
+        let recorded = recording
+            .poses
+            .iter()
+            .map(|p| {
+                let id = u16::try_from(p.index).map_err(|_| {
+                    format!(
+                        "{}: pose {} (poses.jsonl line {}): the link's pose ids stop at 65535",
+                        recording.dir.display(),
+                        p.index,
+                        p.line
+                    )
+                })?;
+                Ok(RecordedPose {
+                    id,
                     frames: p.depth_frames.len(),
                 })
-                .collect(),
-        );
+            })
+            .collect::<Result<Vec<_>, String>>()?;
+        plan.recorded_poses = Some(recorded);
         plan.tilt_deg = recording.session.kinect.tilt_deg;
         plan.nominal_mount = recording.session.nominal_mount.or(plan.nominal_mount);
     }
-    plan
+    Ok(plan)
 }
 
 /// Prints progress as it happens.
@@ -231,7 +240,13 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             hardware::Sensor::Replay(r) => Some(r.recording().clone()),
             _ => None,
         };
-        let plan = plan(&config, schedule, replay.as_ref(), options.record.clone());
+        let plan = match plan(&config, schedule, replay.as_ref(), options.record.clone()) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("groundcal calibrate: {e}");
+                return ExitStatus::BadInput;
+            }
+        };
         let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
         let progress = show_progress(receiver);
         let outcome =

@@ -21,15 +21,22 @@ pub struct ServeOptions {
     pub listen: Option<String>,
 }
 
-async fn stop_signal() {
+/// SIGTERM or SIGINT, with the handlers installed now (when called, inside
+/// the runtime) rather than when first polled: a signal while the hardware
+/// is being checked still stops the service cleanly.
+fn stop_signal() -> impl std::future::Future<Output = ()> + Send + 'static {
     use tokio::signal::unix::{signal, SignalKind};
-    match signal(SignalKind::terminate()) {
-        Ok(mut term) => tokio::select! {
-            _ = tokio::signal::ctrl_c() => {}
-            _ = term.recv() => {}
-        },
-        Err(_) => {
-            let _ = tokio::signal::ctrl_c().await;
+    let terminate = signal(SignalKind::terminate());
+    let interrupt = signal(SignalKind::interrupt());
+    async move {
+        match (terminate, interrupt) {
+            (Ok(mut term), Ok(mut int)) => tokio::select! {
+                _ = term.recv() => {}
+                _ = int.recv() => {}
+            },
+            _ => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
         }
     }
 }
@@ -70,6 +77,7 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
         }
     };
     runtime.block_on(async {
+        let stop = stop_signal();
         let listener = match tokio::net::TcpListener::bind(&listen).await {
             Ok(l) => l,
             Err(e) => {
@@ -95,8 +103,10 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
         let hardware = match hardware::open(&config, &options.selection).await {
             Ok(opened) => {
                 drop(opened);
+                // The link only binds its socket: the lower computer is first
+                // spoken to (HELLO) when a calibration starts.
                 format!(
-                    "ready: {} and lower computer {}",
+                    "opened: {}; lower computer at {} (first contacted at Calibrate)",
                     hardware::sensor_source(&config, &options.selection),
                     options
                         .selection
@@ -108,7 +118,7 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
             Err(e) => {
                 tracing::warn!("the hardware did not open: {e}");
                 eprintln!("groundcal serve: the hardware did not open: {e}");
-                format!("not ready: {e}")
+                format!("not opened: {e}")
             }
         };
         let state = AppState::new(
@@ -119,7 +129,7 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
             &state_dir,
         );
         state.set_hardware(hardware);
-        match terminal::serve(listener, state, stop_signal()).await {
+        match terminal::serve(listener, state, stop).await {
             Ok(()) => ExitStatus::Success,
             Err(e) => {
                 eprintln!("groundcal serve: {e}");

@@ -652,37 +652,41 @@ fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
     };
     let outcome = runtime.block_on(async {
         let shared = &state.0;
-        let (mut sensor, mut controller) = hardware::open(&shared.config, &shared.selection)
-            .await
-            .map_err(|e| e.to_string())?;
-        let replay = match &sensor {
-            hardware::Sensor::Replay(r) => Some(r.recording().clone()),
-            _ => None,
-        };
-        let plan = crate::cli::calibrate::plan(
-            &shared.config,
-            shared.schedule.clone(),
-            replay.as_ref(),
-            None,
-        );
-        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
-        let abort = async move {
-            abort
+        let work = async {
+            let (mut sensor, mut controller) = hardware::open(&shared.config, &shared.selection)
                 .await
-                .unwrap_or_else(|_| "the service went away".to_string())
+                .map_err(|e| e.to_string())?;
+            let replay = match &sensor {
+                hardware::Sensor::Replay(r) => Some(r.recording().clone()),
+                _ => None,
+            };
+            let plan = crate::cli::calibrate::plan(
+                &shared.config,
+                shared.schedule.clone(),
+                replay.as_ref(),
+                None,
+            )?;
+            let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
+            let abort = async move {
+                abort
+                    .await
+                    .unwrap_or_else(|_| "the service went away".to_string())
+            };
+            let session = async {
+                let r = session::run(&mut sensor, &mut controller, &plan, &tx, abort).await;
+                drop(tx);
+                r
+            };
+            let forward = async {
+                while let Some(e) = rx.recv().await {
+                    publish(&state, EventJson::from(&e));
+                }
+            };
+            tokio::join!(session, forward).0.map_err(|e| e.to_string())
         };
-        let session = async {
-            let r = session::run(&mut sensor, &mut controller, &plan, &tx, abort).await;
-            drop(tx);
-            r
-        };
-        let forward = async {
-            while let Some(e) = rx.recv().await {
-                publish(&state, EventJson::from(&e));
-            }
-        };
-        // The session's own runtime beats while it runs: if that runtime is
-        // blocked, the beat stops and so does the systemd watchdog.
+        // The session's own runtime beats from the moment it opens the
+        // hardware: if that runtime is blocked (a stuck device call, a
+        // deadlock), the beat stops and so does the systemd watchdog.
         let beat = async {
             let mut tick = tokio::time::interval(heartbeat_period());
             loop {
@@ -690,12 +694,10 @@ fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
                 *lock(&state.0.heartbeat) = Some(Instant::now());
             }
         };
-        let run = async { tokio::join!(session, forward).0 };
-        let result = tokio::select! {
-            result = run => result,
+        tokio::select! {
+            result = work => result,
             never = beat => never,
-        };
-        result.map_err(|e| e.to_string())
+        }
     });
     *lock(&state.0.heartbeat) = None;
     let result = outcome.and_then(|o| {
@@ -706,6 +708,8 @@ fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
 
 fn finish(state: &AppState, result: Result<Value, String>) {
     lock(&state.0.abort).take();
+    // The provisional charts end with the session: the result replaces them.
+    lock(&state.0.status).provisional = None;
     match result {
         Ok(value) => {
             let status_text = value
