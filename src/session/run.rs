@@ -319,18 +319,7 @@ async fn body<S: DepthSensor, C: BodyController>(
     );
 
     // 2. Home stance and its feet; the Kinect tilted and still.
-    controller
-        .home(millis(plan.motion))
-        .await
-        .map_err(SessionError::robot)?;
-    let home = wait_for(
-        controller,
-        plan,
-        plan.motion_deadline(plan.motion),
-        "the home stance",
-        |s| s.state == MotionState::Idle,
-    )
-    .await?;
+    let home = go_home(controller, plan).await?;
     send(events, Event::AtHome);
     sensor
         .set_tilt(plan.tilt_deg)
@@ -457,18 +446,7 @@ async fn body<S: DepthSensor, C: BodyController>(
     }
 
     // 4. Home, then the solve.
-    controller
-        .home(millis(plan.motion))
-        .await
-        .map_err(SessionError::robot)?;
-    wait_for(
-        controller,
-        plan,
-        plan.motion_deadline(plan.motion),
-        "the home stance",
-        |s| s.state == MotionState::Idle,
-    )
-    .await?;
+    go_home(controller, plan).await?;
     let _ = sensor.set_led(Led::Green).await;
     send(events, Event::Solving);
     report_finished(pending, &mut reported, of, events, true, plan).await;
@@ -497,6 +475,34 @@ async fn body<S: DepthSensor, C: BodyController>(
     Ok(SessionOutcome { result, recording })
 }
 
+/// Sends the body home and waits until it stands there; its state then
+/// (the home feet).
+async fn go_home<C: BodyController>(
+    controller: &mut C,
+    plan: &Plan,
+) -> Result<BodyState, SessionError> {
+    controller
+        .home(millis(plan.motion))
+        .await
+        .map_err(SessionError::robot)?;
+    wait_until_home(controller, plan).await
+}
+
+/// Waits until the body reports the home stance (idle).
+async fn wait_until_home<C: BodyController>(
+    controller: &mut C,
+    plan: &Plan,
+) -> Result<BodyState, SessionError> {
+    wait_for(
+        controller,
+        plan,
+        plan.motion_deadline(plan.motion),
+        "the home stance",
+        |s| s.state == MotionState::Idle,
+    )
+    .await
+}
+
 /// Halts the body, then sends it home and waits until it is there (or the
 /// link is lost). Returns a description of how the robot was left.
 async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> String {
@@ -506,15 +512,7 @@ async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> Stri
     if let Err(e) = controller.home(millis(plan.motion)).await {
         return format!("halted, but could not send it home ({e})");
     }
-    match wait_for(
-        controller,
-        plan,
-        plan.motion_deadline(plan.motion),
-        "the home stance",
-        |s| s.state == MotionState::Idle,
-    )
-    .await
-    {
+    match wait_until_home(controller, plan).await {
         Ok(_) => "halted and sent home; it stands at the home stance".to_string(),
         Err(e) => format!("halted and sent home, but it did not report the home stance: {e}"),
     }
