@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
-use common::{groundcal_json, root, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
+use common::{groundcal_json, mount_of, root, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
 use groundcal::recording::Recording;
 use serde_json::Value;
 
@@ -41,19 +41,6 @@ fn config_for(address: &str, dir: &Path) -> std::path::PathBuf {
     let path = dir.join("groundcal.toml");
     std::fs::write(&path, text).unwrap();
     path
-}
-
-fn mount(result: &Value) -> [f64; 6] {
-    let m = &result["robot_from_sensor"];
-    [
-        "alpha_deg",
-        "beta_deg",
-        "gamma_deg",
-        "px_mm",
-        "py_mm",
-        "pz_mm",
-    ]
-    .map(|k| m[k].as_f64().unwrap_or_else(|| panic!("{k} in {result}")))
 }
 
 /// Runs the live session on `recording` and checks it against the replay.
@@ -89,7 +76,7 @@ fn live_session_matches_the_replay(tag: &str, recording: &Path) {
     assert_eq!(live["status"], replayed["status"]);
 
     // The same mount, to what f32 feet allow.
-    let (a, b) = (mount(&live), mount(&replayed));
+    let (a, b) = (mount_of(&live).values(), mount_of(&replayed).values());
     for k in 0..3 {
         assert!(
             (a[k] - b[k]).abs() < 0.001,

@@ -148,17 +148,25 @@ pub fn run_browser_script(script: &str, args: &[&OsStr]) -> serde_json::Value {
 /// these environment variables (faults, receipts); returns the process and
 /// the address it printed.
 pub fn spawn_sim_robot(args: &[&str], env: &[(&str, &OsStr)]) -> (Child, String) {
+    let mut full = vec!["sim-robot", "--listen", "127.0.0.1:0"];
+    full.extend_from_slice(args);
+    spawn_server(&full, env)
+}
+
+/// The `groundcal` binary with these arguments and environment variables,
+/// once it has printed `listening on ADDR`; returns it and the address.
+fn spawn_server(args: &[&str], env: &[(&str, &OsStr)]) -> (Child, String) {
     let mut command = Command::new(env!("CARGO_BIN_EXE_groundcal"));
     command
-        .args(["sim-robot", "--listen", "127.0.0.1:0"])
         .args(args)
+        .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    for (name, value) in env {
-        command.env(name, value);
-    }
-    listening(command.spawn().expect("groundcal sim-robot starts"))
+    let child = command
+        .spawn()
+        .unwrap_or_else(|e| panic!("groundcal {} does not start: {e}", args[0]));
+    listening(child)
 }
 
 /// Reads the `listening on ADDR` line a server prints once it is bound;
@@ -222,19 +230,10 @@ pub fn spawn_serve(
     let config = dir.join("groundcal.toml");
     std::fs::write(&config, text).expect("config written");
     std::fs::write(dir.join("token.sim"), format!("{token}\n")).expect("token written");
-    let mut command = Command::new(env!("CARGO_BIN_EXE_groundcal"));
-    command
-        .args(["serve", "--config"])
-        .arg(&config)
-        .args(["--listen", "127.0.0.1:0"])
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    for (name, value) in env {
-        command.env(name, value);
-    }
-    listening(command.spawn().expect("groundcal serve starts"))
+    let config = config.to_str().expect("a UTF-8 temporary path");
+    let mut full = vec!["serve", "--config", config, "--listen", "127.0.0.1:0"];
+    full.extend_from_slice(args);
+    spawn_server(&full, env)
 }
 
 /// Sends SIGTERM to a child process and waits for it; returns (exit code,
