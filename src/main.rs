@@ -10,6 +10,31 @@ use groundcal::cli::{self, plane::PlaneOptions, ExitStatus};
 use groundcal::depth_image::DepthUnits;
 use nalgebra::Vector3;
 
+/// Which hardware a session runs on, overriding the configuration
+/// (`calibrate` and `serve`).
+#[derive(Debug, clap::Args)]
+struct HardwareArgs {
+    /// The lower computer: host:port, or sim (simulated, in process).
+    #[arg(long)]
+    robot: Option<String>,
+    /// The depth sensor: kinect, sim, or replay:DIR.
+    #[arg(long)]
+    sensor: Option<String>,
+    /// The libfreenect library file (e.g. libfreenect's fakenect build).
+    #[arg(long, value_name = "PATH")]
+    freenect_lib: Option<PathBuf>,
+}
+
+impl From<HardwareArgs> for groundcal::hardware::Selection {
+    fn from(a: HardwareArgs) -> Self {
+        Self {
+            robot: a.robot,
+            sensor: a.sensor,
+            freenect_lib: a.freenect_lib,
+        }
+    }
+}
+
 #[derive(Debug, Parser)]
 #[command(
     name = "groundcal",
@@ -58,15 +83,8 @@ enum Command {
         /// The configuration (default: built-in simulation with --robot sim, else /etc/groundcal/groundcal.toml).
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
-        /// The lower computer: host:port, or sim (simulated, in process).
-        #[arg(long)]
-        robot: Option<String>,
-        /// The depth sensor: kinect, sim, or replay:DIR.
-        #[arg(long)]
-        sensor: Option<String>,
-        /// The libfreenect library file (e.g. libfreenect's fakenect build).
-        #[arg(long, value_name = "PATH")]
-        freenect_lib: Option<PathBuf>,
+        #[command(flatten)]
+        hardware: HardwareArgs,
         /// Write everything as a recording into this new directory, as it goes.
         #[arg(long, value_name = "DIR")]
         record: Option<PathBuf>,
@@ -94,14 +112,8 @@ enum Command {
     Serve {
         #[arg(long)]
         config: PathBuf,
-        /// The lower computer: host:port, or sim.
-        #[arg(long)]
-        robot: Option<String>,
-        /// The depth sensor: kinect, sim, or replay:DIR.
-        #[arg(long)]
-        sensor: Option<String>,
-        #[arg(long, value_name = "PATH")]
-        freenect_lib: Option<PathBuf>,
+        #[command(flatten)]
+        hardware: HardwareArgs,
         /// Overrides serve.listen (HOST:PORT; port 0 picks one).
         #[arg(long)]
         listen: Option<String>,
@@ -186,19 +198,13 @@ fn run(args: Args) -> ExitStatus {
         }
         Command::Calibrate {
             config,
-            robot,
-            sensor,
-            freenect_lib,
+            hardware,
             record,
             json,
         } => {
             let options = cli::calibrate::CalibrateOptions {
                 config,
-                selection: groundcal::hardware::Selection {
-                    robot,
-                    sensor,
-                    freenect_lib,
-                },
+                selection: hardware.into(),
                 record,
                 json,
             };
@@ -212,17 +218,11 @@ fn run(args: Args) -> ExitStatus {
         } => cli::sim_robot::run(&listen, seed, time_scale, replay.as_deref()),
         Command::Serve {
             config,
-            robot,
-            sensor,
-            freenect_lib,
+            hardware,
             listen,
         } => cli::serve::run(&cli::serve::ServeOptions {
             config,
-            selection: groundcal::hardware::Selection {
-                robot,
-                sensor,
-                freenect_lib,
-            },
+            selection: hardware.into(),
             listen,
         }),
         Command::CheckConfig { file } => match groundcal::config::Config::load(&file) {
