@@ -85,6 +85,8 @@ enum Phase {
 #[derive(Debug)]
 pub struct ReplayedRobot {
     script: ReplayScript,
+    /// Announced in WELCOME and checked at every SET_POSE: worked out once.
+    limits: BodyLimits,
     epoch: Instant,
     phase: Phase,
     /// The pose the feet are reported for (0: home).
@@ -98,6 +100,7 @@ impl ReplayedRobot {
     /// Standing at the recorded home stance at `now`.
     pub fn new(script: ReplayScript, now: Instant) -> Self {
         Self {
+            limits: script.limits(),
             script,
             epoch: now,
             phase: Phase::Idle,
@@ -172,7 +175,7 @@ fn difference(recorded: &PoseDegMm, received: &PoseDegMm) -> Option<String> {
 
 impl Body for ReplayedRobot {
     fn limits(&self) -> BodyLimits {
-        self.script.limits()
+        self.limits
     }
 
     fn firmware(&self) -> String {
