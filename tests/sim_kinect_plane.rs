@@ -19,16 +19,7 @@ const TRUE_MOUNT: [f64; 6] = [4.5, -30.7, -2.0, 491.3, 331.6, 8.7];
 const NOMINAL_MOUNT: [f64; 6] = [0.0, -35.0, 0.0, 520.0, 360.0, 0.0];
 
 fn pose(values: [f64; 6]) -> Transform {
-    PoseDegMm {
-        alpha_deg: values[0],
-        beta_deg: values[1],
-        gamma_deg: values[2],
-        px_mm: values[3],
-        py_mm: values[4],
-        pz_mm: values[5],
-    }
-    .to_params()
-    .to_transform()
+    PoseDegMm::from_values(values).to_params().to_transform()
 }
 
 /// Body poses of octopus-52 spanning its range, and the home stance.

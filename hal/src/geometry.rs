@@ -197,6 +197,18 @@ impl PoseDegMm {
         ]
     }
 
+    /// From `[α, β, γ, x, y, z]` (degrees, mm): the inverse of [`Self::values`].
+    pub fn from_values(v: [f64; 6]) -> Self {
+        Self {
+            alpha_deg: v[0],
+            beta_deg: v[1],
+            gamma_deg: v[2],
+            px_mm: v[3],
+            py_mm: v[4],
+            pz_mm: v[5],
+        }
+    }
+
     /// Whether every value is a finite number.
     pub fn is_finite(&self) -> bool {
         self.values().iter().all(|v| v.is_finite())

@@ -11,6 +11,7 @@ use std::time::Duration;
 use groundcal_hal::depth::{DepthModel, Intrinsics, RAW_NO_READING};
 use groundcal_hal::geometry::{ground_in_sensor, sensor_from_optical, PoseDegMm, Transform};
 use groundcal_hal::sim::kinect::{DepthRenderer, SimKinect, SimKinectConfig};
+use groundcal_hal::sim::robot::REFERENCE_HOME;
 use groundcal_hal::sim::world::{Ground, Surface, World};
 use groundcal_hal::sim::TruePose;
 use groundcal_hal::DepthSensor;
@@ -576,18 +577,7 @@ fn box_edges_cast_the_emitters_shadow_on_the_ground() {
 }
 
 fn level_kinect(config: SimKinectConfig) -> (SimKinect, TruePose) {
-    let pose = TruePose::new(
-        PoseDegMm {
-            alpha_deg: 0.0,
-            beta_deg: 0.0,
-            gamma_deg: 0.0,
-            px_mm: 0.0,
-            py_mm: 600.0,
-            pz_mm: 0.0,
-        }
-        .to_params()
-        .to_transform(),
-    );
+    let pose = TruePose::new(REFERENCE_HOME.to_params().to_transform());
     let level_mount = PoseDegMm {
         alpha_deg: 0.0,
         beta_deg: 0.0,
@@ -626,12 +616,8 @@ async fn accelerometer_and_tilt_follow_the_true_pose() {
     // The body rolls right by 10°: the accelerometer sees it.
     pose.set(
         PoseDegMm {
-            alpha_deg: 0.0,
-            beta_deg: 0.0,
             gamma_deg: 10.0,
-            px_mm: 0.0,
-            py_mm: 600.0,
-            pz_mm: 0.0,
+            ..REFERENCE_HOME
         }
         .to_params()
         .to_transform(),
@@ -710,12 +696,8 @@ async fn a_session_of_frames_is_deterministic_and_changes_with_the_pose() {
     assert_ne!(fa.raw, fa2.raw);
     // The frames follow the true pose.
     let tilted = PoseDegMm {
-        alpha_deg: 0.0,
         beta_deg: 10.0,
-        gamma_deg: 0.0,
-        px_mm: 0.0,
-        py_mm: 600.0,
-        pz_mm: 0.0,
+        ..REFERENCE_HOME
     }
     .to_params()
     .to_transform();
