@@ -1,12 +1,15 @@
 //! Criterion benchmarks of the two hot paths: the ground fit of one 640×480
-//! raw frame (pixels to plane, including the conversion to points) and the
-//! 52-pose solve. Figures are recorded in docs/performance.md.
+//! raw frame (pixels to plane, including the conversion; in inverse depth and
+//! the paper's fit side by side) and the 52-pose solve. Figures are recorded in docs/performance.md.
 
 use std::path::PathBuf;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use groundcal::calib::disparity::InverseDepthImage;
 use groundcal::calib::geometry::{sensor_from_optical, PoseParams};
-use groundcal::calib::plane::{fit_ground, GroundPrior, PlaneFitSettings};
+use groundcal::calib::plane::{
+    fit_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
+};
 use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use groundcal::calib::solve::{predict, solve, Observation, SolveSettings};
 use groundcal::depth_image::{read_depth_image, DepthUnits};
@@ -43,21 +46,36 @@ fn ground_fit(c: &mut Criterion) {
         sensor_from_optical() * Vector3::new(0.0, -1.0, 0.0),
         60f64.to_radians(),
     );
-    let settings = PlaneFitSettings::default();
-    // As in a streaming capture, the point buffers are reused from frame to frame.
-    let mut cloud = camera.points(&pixels);
-    c.bench_function("ground fit, one 640x480 raw frame (pixels to plane)", |b| {
-        b.iter(|| {
-            camera.points_into(black_box(&pixels), &mut cloud);
-            fit_ground(&[&cloud], &prior, &settings).unwrap()
-        })
+    // As in a streaming capture, the buffers are reused from frame to frame.
+    let mut buffers = FitBuffers::default();
+    for method in [GroundFitMethod::Disparity, GroundFitMethod::Paper] {
+        let settings = PlaneFitSettings {
+            method,
+            ..Default::default()
+        };
+        c.bench_function(
+            &format!("ground fit ({method}), one 640x480 raw frame (pixels to plane)"),
+            |b| {
+                b.iter(|| {
+                    fit_ground(
+                        &[black_box(&pixels)],
+                        &camera,
+                        &prior,
+                        &settings,
+                        &mut buffers,
+                    )
+                    .unwrap()
+                })
+            },
+        );
+    }
+    let mut image = InverseDepthImage::default();
+    c.bench_function("raw frame to inverse depth only", |b| {
+        b.iter(|| camera.inverse_depth_into(black_box(&pixels), &mut image))
     });
+    let mut cloud = camera.points(&pixels);
     c.bench_function("raw frame to points only", |b| {
         b.iter(|| camera.points_into(black_box(&pixels), &mut cloud))
-    });
-    let cloud = camera.points(&pixels);
-    c.bench_function("ground fit only (points to plane)", |b| {
-        b.iter(|| fit_ground(&[black_box(&cloud)], &prior, &settings).unwrap())
     });
 }
 

@@ -91,6 +91,10 @@ pub struct CalibrationConfig {
     /// A foot farther than this from where it was planted has slipped.
     #[serde(default = "default_slip_mm")]
     pub slip_threshold_mm: f64,
+    /// The fit that refines the ground: `disparity` (in inverse depth, the
+    /// default) or `paper` (the paper's eigenvector fit in metres).
+    #[serde(default)]
+    pub ground_fit: crate::calib::plane::GroundFitMethod,
 }
 
 fn default_slip_mm() -> f64 {
@@ -107,7 +111,7 @@ pub struct SimConfig {
     /// The simulated robot's true `robot_from_sensor`: what a calibration
     /// should find.
     pub mount: crate::calib::geometry::PoseDegMm,
-    /// `flat`, `boxes-and-wall` or `uneven`.
+    /// `flat`, `boxes-and-wall`, `uneven` or `corridor`.
     pub world: String,
 }
 
@@ -272,10 +276,13 @@ impl Config {
                     "has a value that is not a finite number".into(),
                 ));
             }
-            if !["flat", "boxes-and-wall", "uneven"].contains(&sim.world.as_str()) {
+            if !["flat", "boxes-and-wall", "uneven", "corridor"].contains(&sim.world.as_str()) {
                 return Err(bad(
                     "sim.world",
-                    format!("\"{}\" is not flat, boxes-and-wall or uneven", sim.world),
+                    format!(
+                        "\"{}\" is not flat, boxes-and-wall, uneven or corridor",
+                        sim.world
+                    ),
                 ));
             }
         } else if self.robot.address == "sim" || self.sensor.source == "sim" {

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use groundcal::calib::plane::GroundFitMethod;
 use groundcal::calib::solve::SolveSettings;
 use groundcal::cli::{self, plane::PlaneOptions, ExitStatus};
 use groundcal::depth_image::DepthUnits;
@@ -70,6 +71,10 @@ enum Command {
         /// Worker threads (default: every core). The result does not depend on it.
         #[arg(long)]
         threads: Option<usize>,
+        /// The ground fit: disparity (least squares in inverse depth, unbiased)
+        /// or paper (the paper's eigenvector fit in metres, to compare).
+        #[arg(long, value_name = "disparity|paper", default_value = "disparity")]
+        ground_fit: GroundFitMethod,
     },
     /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
     Export {
@@ -90,6 +95,9 @@ enum Command {
         record: Option<PathBuf>,
         #[arg(long)]
         json: bool,
+        /// The ground fit, overriding calibration.ground_fit: disparity or paper.
+        #[arg(long, value_name = "disparity|paper")]
+        ground_fit: Option<GroundFitMethod>,
     },
     /// The simulated lower computer (hexapod-udp.md) on a UDP socket, until SIGINT or SIGTERM.
     SimRobot {
@@ -164,6 +172,10 @@ enum Command {
         /// Largest angle between the ground's normal and --up, degrees.
         #[arg(long, default_value_t = 60.0)]
         up_tolerance: f64,
+        /// The ground fit: disparity (least squares in inverse depth, unbiased)
+        /// or paper (the paper's eigenvector fit in metres, to compare).
+        #[arg(long, value_name = "disparity|paper", default_value = "disparity")]
+        ground_fit: GroundFitMethod,
     },
 }
 
@@ -181,6 +193,7 @@ fn run(args: Args) -> ExitStatus {
             nominal_mount,
             report,
             threads,
+            ground_fit,
         } => {
             let nominal_mount = match nominal_mount
                 .map(|m| cli::parse_numbers::<6>("--nominal-mount", &m))
@@ -189,11 +202,12 @@ fn run(args: Args) -> ExitStatus {
                 Some(Ok(values)) => Some(groundcal::pipeline::nominal_mount_from_values(values)),
                 Some(Err(e)) => return usage_error(e),
             };
-            let options = groundcal::replay::ReplayOptions {
+            let mut options = groundcal::replay::ReplayOptions {
                 nominal_mount,
                 threads,
                 ..Default::default()
             };
+            options.pose.plane.method = ground_fit;
             cli::replay::run(&dir, json, report.as_deref(), &options)
         }
         Command::Calibrate {
@@ -201,12 +215,14 @@ fn run(args: Args) -> ExitStatus {
             hardware,
             record,
             json,
+            ground_fit,
         } => {
             let options = cli::calibrate::CalibrateOptions {
                 config,
                 selection: hardware.into(),
                 record,
                 json,
+                ground_fit,
             };
             cli::calibrate::run(&options)
         }
@@ -263,6 +279,7 @@ fn run(args: Args) -> ExitStatus {
             cy,
             up,
             up_tolerance,
+            ground_fit,
         } => {
             let units = match units.as_deref().map(|u| DepthUnits::parse(u).ok_or(u)) {
                 None => None,
@@ -288,6 +305,7 @@ fn run(args: Args) -> ExitStatus {
                 cy,
                 up_optical: up,
                 up_tolerance_deg: up_tolerance,
+                ground_fit,
             };
             cli::plane::run(&file, json, &options)
         }

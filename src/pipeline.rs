@@ -8,10 +8,8 @@ use nalgebra::Vector3;
 
 use crate::calib::body::{Feet, GroundFrame};
 use crate::calib::geometry::{PoseDegMm, Transform};
-use crate::calib::plane::{fit_ground, GroundPrior, PlaneFitSettings};
-use crate::calib::sensor::{
-    DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics, PointCloud,
-};
+use crate::calib::plane::{fit_ground, FitBuffers, GroundPrior, PlaneFitSettings};
+use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::calib::solve::Observation;
 use crate::recording::session::NominalMount;
 
@@ -163,16 +161,18 @@ impl PoseProcessor {
         }
     }
 
-    /// The observation of one pose from its body pose and the points of its
-    /// frames (all frames of the pose appended into one cloud).
+    /// The observation of one pose from its body pose and its frames (raw
+    /// values), reusing `buffers` from pose to pose.
     pub fn observe(
         &self,
         index: u32,
         body: &BodyEstimate,
-        cloud: &PointCloud,
+        frames: &[&[u16]],
+        buffers: &mut FitBuffers,
     ) -> Result<Observation, String> {
         let prior = self.prior(&body.ground_from_robot);
-        let fit = fit_ground(&[cloud], &prior, &self.settings.plane).map_err(|e| e.to_string())?;
+        let fit = fit_ground(frames, &self.camera, &prior, &self.settings.plane, buffers)
+            .map_err(|e| e.to_string())?;
         Ok(Observation {
             index,
             ground_from_robot: body.ground_from_robot,

@@ -10,7 +10,7 @@
 use rayon::prelude::*;
 use sha2::{Digest, Sha256};
 
-use crate::calib::sensor::PointCloud;
+use crate::calib::plane::FitBuffers;
 use crate::calib::solve::{Observation, SolveSettings};
 use crate::output::ResultJson;
 use crate::pipeline::{PoseProcessor, PoseSettings};
@@ -39,9 +39,9 @@ pub struct Replay {
 }
 
 thread_local! {
-    /// Each worker's point buffer, reused from pose to pose: a pose's points
+    /// Each worker's fit buffers, reused from pose to pose: a pose's frames
     /// take a few megabytes, and fresh memory costs page faults every time.
-    static CLOUD: std::cell::RefCell<PointCloud> = std::cell::RefCell::new(PointCloud::default());
+    static BUFFERS: std::cell::RefCell<FitBuffers> = std::cell::RefCell::new(FitBuffers::default());
 }
 
 /// What one pose gave.
@@ -55,7 +55,7 @@ fn process_pose(
     recording: &Recording,
     processor: &PoseProcessor,
     pose: &crate::recording::poses::PoseRecord,
-    cloud: &mut PointCloud,
+    buffers: &mut FitBuffers,
 ) -> Result<PoseOutcome, InputError> {
     let poses_path = recording.dir.join("poses.jsonl");
     let failed = |reason: String| PoseOutcome {
@@ -77,15 +77,16 @@ fn process_pose(
                 format!("pose {}: feet: {e}", pose.index),
             )
         })?;
-    cloud.clear();
     let mut frame_digests = Vec::with_capacity(pose.depth_frames.len());
+    let mut images = Vec::with_capacity(pose.depth_frames.len());
     for name in &pose.depth_frames {
         let (image, bytes) = recording.read_depth_frame(name)?;
         frame_digests.push(Sha256::digest(&bytes).into());
-        processor.camera().append_points(&image.pixels, cloud);
+        images.push(image);
     }
+    let frames: Vec<&[u16]> = images.iter().map(|i| i.pixels.as_slice()).collect();
     let observation = processor
-        .observe(pose.index, &body, cloud)
+        .observe(pose.index, &body, &frames, buffers)
         .map_err(|e| format!("no ground found: {e}"));
     Ok(PoseOutcome {
         index: pose.index,
@@ -114,7 +115,8 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             .par_iter()
             .with_max_len(1)
             .map(|pose| {
-                CLOUD.with_borrow_mut(|cloud| process_pose(recording, &processor, pose, cloud))
+                BUFFERS
+                    .with_borrow_mut(|buffers| process_pose(recording, &processor, pose, buffers))
             })
             .collect()
     };

@@ -64,6 +64,27 @@ impl DepthModel {
         (z.is_finite() && z > 0.0).then_some(z)
     }
 
+    /// The inverse depth as an affine function of the raw value,
+    /// `1/z_m = a + b·raw`, exact for both models: the Kinect measures
+    /// disparity, and both models are a disparity-to-depth conversion.
+    /// The ground fit works in this domain, where the sensor's noise is the
+    /// same for every pixel (`docs/method.md`).
+    pub fn inverse_depth_affine(&self) -> (f64, f64) {
+        match *self {
+            DepthModel::ZeroPlane {
+                reference_distance_mm: r,
+                reference_pixel_size_mm: p,
+                emitter_distance_cm: e,
+                const_shift: c,
+            } => {
+                // z = 0.01·R·E / (E − s), s = P·raw/4 − P·(C + 0.375).
+                let scale = 0.01 * r * e;
+                ((e + p * (c + 0.375)) / scale, -p / (4.0 * scale))
+            }
+            DepthModel::InverseLinear { a, b } => (a, b),
+        }
+    }
+
     /// Whether the model's constants are usable numbers.
     pub fn validate(&self) -> Result<(), String> {
         let values: Vec<f64> = match *self {
@@ -183,9 +204,12 @@ pub fn depth_sigma_m(z: f64) -> f64 {
     (1.0e-6 + quadratic * quadratic).sqrt()
 }
 
-/// The raw value whose depth is nearest `z` metres, or `None` outside the
-/// model's range: the inverse of [`DepthModel::depth_m`], used to render
-/// simulated frames. Depth grows with the raw value, so a bisection finds it.
+/// The raw value whose disparity is nearest that of depth `z` metres, or
+/// `None` outside the model's range: the inverse of [`DepthModel::depth_m`],
+/// used to render simulated frames. The Kinect measures disparity and rounds
+/// it to its raw steps, so the nearest raw value is the nearest in `1/z`
+/// (both models are affine there). Depth grows with the raw value, so a
+/// bisection finds it.
 pub fn raw_for_depth(model: &DepthModel, z: f64) -> Option<u16> {
     let depth = |raw: u16| model.depth_m(raw);
     // The lowest raw value with a depth, and the highest.
@@ -205,11 +229,14 @@ pub fn raw_for_depth(model: &DepthModel, z: f64) -> Option<u16> {
         }
     }
     let (zl, zh) = (depth(lo)?, depth(hi)?);
-    Some(if (z - zl).abs() <= (zh - z).abs() {
-        lo
-    } else {
-        hi
-    })
+    // Ties go to the raw value below.
+    Some(
+        if (1.0 / zl - 1.0 / z).abs() <= (1.0 / z - 1.0 / zh).abs() {
+            lo
+        } else {
+            hi
+        },
+    )
 }
 
 #[cfg(test)]
@@ -233,6 +260,19 @@ mod tests {
         assert!((z - 1.0 / (3.3309495161 - 0.0030711016 * 800.0)).abs() < 1e-12);
         // Values past the model's pole give no depth rather than a negative one.
         assert_eq!(model.depth_m(1100), None);
+    }
+
+    #[test]
+    fn inverse_depth_is_affine_in_the_raw_value_for_both_models() {
+        for model in [DepthModel::default(), DepthModel::inverse_linear_default()] {
+            let (a, b) = model.inverse_depth_affine();
+            for raw in (350u16..1090).step_by(7) {
+                if let Some(z) = model.depth_m(raw) {
+                    let w = a + b * f64::from(raw);
+                    assert!((1.0 / z - w).abs() < 1e-12, "{model:?} raw {raw}");
+                }
+            }
+        }
     }
 
     #[test]

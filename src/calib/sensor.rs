@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::disparity::{InverseDepthConverter, InverseDepthImage, PixelGrid};
+
 pub use groundcal_hal::depth::{depth_sigma_m, DepthModel, Intrinsics, RAW_NO_READING};
 
 /// What the 16-bit values of an image mean, with the model that converts them.
@@ -47,6 +49,9 @@ pub struct DepthCamera {
     ray_right: Vec<f32>,
     /// `-(v - cy) / fy` per row (sensor Y is up, image rows go down).
     ray_up: Vec<f32>,
+    /// The same frames in inverse depth, for the ground fit.
+    inverse_depth: InverseDepthConverter,
+    grid: PixelGrid,
 }
 
 /// Points in the sensor frame V, stored as separate coordinate arrays so that the
@@ -179,7 +184,20 @@ impl DepthCamera {
             table,
             ray_right,
             ray_up,
+            inverse_depth: InverseDepthConverter::new(encoding, &intrinsics, range),
+            grid: PixelGrid::new(intrinsics, range),
         }
+    }
+
+    /// Converts a frame to inverse depth (`1/z`, the Kinect's noise domain)
+    /// into `image`, reusing its memory.
+    pub fn inverse_depth_into(&self, pixels: &[u16], image: &mut InverseDepthImage) {
+        self.inverse_depth.convert_into(pixels, image);
+    }
+
+    /// The pixel offsets the ground fit works with.
+    pub fn grid(&self) -> &PixelGrid {
+        &self.grid
     }
 
     /// The camera's intrinsics.

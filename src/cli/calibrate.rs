@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use super::{print_json, ExitStatus};
+use crate::calib::plane::{GroundFitMethod, PlaneFitSettings};
 use crate::config::Config;
 use crate::hardware::{self, Selection};
 use crate::pipeline::PoseSettings;
@@ -21,6 +22,8 @@ pub struct CalibrateOptions {
     pub selection: Selection,
     pub record: Option<PathBuf>,
     pub json: bool,
+    /// Overrides `calibration.ground_fit`.
+    pub ground_fit: Option<GroundFitMethod>,
 }
 
 /// Where the configuration comes from: the file given; the built-in
@@ -67,6 +70,10 @@ pub fn plan(
         nominal_mount: c.nominal_mount,
         pose: PoseSettings {
             slip_threshold_m: c.slip_threshold_mm / 1000.0,
+            plane: PlaneFitSettings {
+                method: c.ground_fit,
+                ..Default::default()
+            },
             ..PoseSettings::default()
         },
         solve: crate::calib::solve::SolveSettings {
@@ -211,13 +218,16 @@ async fn stop_signal() -> String {
 
 /// Runs the command.
 pub fn run(options: &CalibrateOptions) -> ExitStatus {
-    let (config, schedule) = match load_config(options) {
+    let (mut config, schedule) = match load_config(options) {
         Ok(c) => c,
         Err(e) => {
             eprintln!("groundcal calibrate: {e}");
             return ExitStatus::BadInput;
         }
     };
+    if let Some(method) = options.ground_fit {
+        config.calibration.ground_fit = method;
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

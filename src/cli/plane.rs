@@ -7,7 +7,9 @@ use serde::Serialize;
 
 use super::{print_json, ExitStatus};
 use crate::calib::geometry::{sensor_from_optical, Plane};
-use crate::calib::plane::{fit_ground, GroundFit, GroundPrior, PlaneFitSettings};
+use crate::calib::plane::{
+    fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitSettings,
+};
 use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::depth_image::{read_depth_image, DepthUnits};
 use crate::output::PlaneJson;
@@ -24,6 +26,7 @@ pub struct PlaneOptions {
     /// Expected up direction in the optical frame.
     pub up_optical: Vector3<f64>,
     pub up_tolerance_deg: f64,
+    pub ground_fit: GroundFitMethod,
 }
 
 impl Default for PlaneOptions {
@@ -37,6 +40,7 @@ impl Default for PlaneOptions {
             cy: None,
             up_optical: Vector3::new(0.0, -1.0, 0.0),
             up_tolerance_deg: 60.0,
+            ground_fit: GroundFitMethod::Disparity,
         }
     }
 }
@@ -114,10 +118,20 @@ pub fn fit_file(file: &Path, options: &PlaneOptions) -> Result<GroundFit, (ExitS
         },
     };
     let camera = DepthCamera::new(encoding, intrinsics, DepthRange::default());
-    let cloud = camera.points(&image.pixels);
     let up_sensor = sensor_from_optical() * options.up_optical.normalize();
     let prior = GroundPrior::up_only(up_sensor, options.up_tolerance_deg.to_radians());
-    fit_ground(&[&cloud], &prior, &PlaneFitSettings::default()).map_err(|e| {
+    let settings = PlaneFitSettings {
+        method: options.ground_fit,
+        ..Default::default()
+    };
+    fit_ground(
+        &[&image.pixels],
+        &camera,
+        &prior,
+        &settings,
+        &mut FitBuffers::default(),
+    )
+    .map_err(|e| {
         (
             ExitStatus::RuntimeFailure,
             format!("{}: {e}", file.display()),

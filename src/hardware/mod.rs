@@ -170,6 +170,7 @@ fn world(sim: &SimConfig) -> World {
     match sim.world.as_str() {
         "boxes-and-wall" => World::boxes_and_wall(sim.seed),
         "uneven" => World::uneven(sim.seed, 0.01),
+        "corridor" => World::corridor(sim.seed),
         _ => World::flat(),
     }
 }

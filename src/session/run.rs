@@ -13,7 +13,7 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::{Event, Plan, PoseFit, ProvisionalPose};
-use crate::calib::sensor::PointCloud;
+use crate::calib::plane::FitBuffers;
 use crate::calib::solve::Observation;
 use crate::depth_image::DepthImage;
 use crate::output::ResultJson;
@@ -194,12 +194,9 @@ fn fit_pose(
     body: BodyEstimate,
     frames: Vec<DepthFrame>,
 ) -> Result<Observation, String> {
-    let mut cloud = PointCloud::default();
-    for frame in &frames {
-        processor.camera().append_points(&frame.raw, &mut cloud);
-    }
+    let raw: Vec<&[u16]> = frames.iter().map(|f| f.raw.as_slice()).collect();
     processor
-        .observe(u32::from(index), &body, &cloud)
+        .observe(u32::from(index), &body, &raw, &mut FitBuffers::default())
         .map_err(|e| format!("no ground found: {e}"))
 }
 

@@ -4,7 +4,8 @@
 //! The calibration must find `robot_from_sensor` from what a real Kinect would
 //! deliver, so the simulator renders what a real Kinect delivers: raw values of
 //! the configured [`DepthModel`] (quantised in disparity, so that a raw step is
-//! ~3 mm at 1 m and ~27 mm at 3 m), Gaussian noise growing as `z²`, scattered
+//! ~3 mm at 1 m and ~27 mm at 3 m), Gaussian noise in disparity (so growing
+//! as `z²` in depth, along each ray), scattered
 //! dropouts and more of them at grazing angles, the shadows the 7.5 cm
 //! emitter–camera baseline makes boxes and walls cast, the dead columns at the
 //! right border, and "no reading" (2047) outside 0.5–5 m. Everything random is
@@ -42,6 +43,10 @@ use crate::sensor::{DepthFrame, DepthSensor, Led, SensorInfo, TiltState};
 use crate::sim::world::{RayHints, Surface, World};
 use crate::sim::TruePose;
 
+/// The Kinect's depth noise in disparity, 1/m: constant over the image, it is
+/// `σ(z) = 1.4·10⁻³·z²` m in depth (conventions.md), about half a raw step.
+pub const DISPARITY_SIGMA: f64 = 1.4e-3;
+
 /// Accelerometer counts per g (recording.md).
 pub const ACCELEROMETER_COUNTS_PER_G: f64 = 819.0;
 
@@ -64,7 +69,8 @@ pub struct SimKinectConfig {
     /// [`DepthSensor::info`] reports it.
     pub depth_model: DepthModel,
     pub intrinsics: Intrinsics,
-    /// Multiplies the depth noise `σ = 1.4·10⁻³·z²` m (conventions.md); 0 renders
+    /// Multiplies the depth noise, drawn in disparity: `σ = 1.4·10⁻³` /m of
+    /// `1/z`, which is `1.4·10⁻³·z²` m in depth (conventions.md); 0 renders
     /// exact depths, quantised.
     pub noise_scale: f64,
     /// Fraction of pixels lost at random anywhere (real frames: about 1 %).
@@ -200,8 +206,9 @@ impl Error for SimKinectError {
 }
 
 /// Depth to raw values: every raw value the model maps to a depth, sorted by
-/// depth, with the midpoints between neighbours. The nearest raw of a depth
-/// is the one between the midpoints around it: the same answer as
+/// depth, with the midpoints in disparity (`1/z`, what the Kinect measures
+/// and rounds) between neighbours. The nearest raw of a depth is the one
+/// between the midpoints around it: the same answer as
 /// [`crate::depth::raw_for_depth`], found in constant time.
 ///
 /// Both models are linear in disparity (`1/z` is affine in the raw value), so
@@ -240,7 +247,11 @@ impl Quantiser {
                 "the depth model maps no raw value to a depth".into(),
             ));
         }
-        let midpoints: Vec<f64> = pairs.windows(2).map(|w| 0.5 * (w[0].0 + w[1].0)).collect();
+        // Halfway in disparity: 1/m = (1/z₀ + 1/z₁)/2.
+        let midpoints: Vec<f64> = pairs
+            .windows(2)
+            .map(|w| 2.0 * w[0].0 * w[1].0 / (w[0].0 + w[1].0))
+            .collect();
         let disparity_low = 0.5 / max_depth_m;
         let disparity_high = 2.0 / min_depth_m;
         let width = (disparity_high - disparity_low) / QUANTISER_BINS as f64;
@@ -274,7 +285,7 @@ impl Quantiser {
             .map_or(self.max_depth_m, |&m| m.max(self.max_depth_m))
     }
 
-    /// The raw value nearest `z` in depth, or "no reading" outside the range.
+    /// The raw value nearest `z` in disparity, or "no reading" outside the range.
     fn raw(&self, z: f64) -> u16 {
         let disparity = 1.0 / z;
         // Outside the bins (and for NaN) the nearest raw is out of range: a
@@ -360,7 +371,12 @@ impl DepthRenderer {
         let emitter = ground_from_sensor * Point3::new(0.0, 0.0, c.emitter_baseline_m);
         // Past this depth even 5σ of noise cannot bring a reading into range.
         let far = self.quantiser.farthest_in_range();
-        let t_max = far + 5.0 * c.noise_scale * 1.4e-3 * far * far;
+        let near_enough = 1.0 / far - 5.0 * c.noise_scale * DISPARITY_SIGMA;
+        let t_max = if near_enough > 0.0 {
+            1.0 / near_enough
+        } else {
+            f64::INFINITY
+        };
         let live = width - c.dead_columns;
         let shadows = c.emitter_baseline_m > 0.0 && world.has_obstacles();
         // Where each obstacle can be in the image, seen from the camera and
@@ -407,8 +423,13 @@ impl DepthRenderer {
                     ground_height = Some(origin.y + direction.y * hit.t);
                 }
                 let z = hit.t;
-                let measured = z + c.noise_scale * 1.4e-3 * z * z * gaussian;
-                let quantised = self.quantiser.raw(measured);
+                // The noise is in disparity, as the Kinect's correlation
+                // measures it: constant in 1/z, σ(z) ≈ 1.4·10⁻³·z² in depth.
+                let disparity = 1.0 / z + c.noise_scale * DISPARITY_SIGMA * gaussian;
+                if disparity <= 0.0 {
+                    continue;
+                }
+                let quantised = self.quantiser.raw(1.0 / disparity);
                 if quantised == RAW_NO_READING {
                     continue;
                 }

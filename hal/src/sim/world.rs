@@ -560,6 +560,48 @@ impl World {
         }
     }
 
+    /// A corridor full of people: the floor is about a tenth of the view.
+    ///
+    /// Two walls 2.5 m high run along the body's X, 0.95–1.05 m to either
+    /// side, and five people-sized boxes (0.4–0.5 m wide, 0.25–0.35 m deep,
+    /// 1.65–1.9 m tall) stand 1.3–2.1 m ahead of the body's origin in two
+    /// ranks, the second covering the gaps of the first. From the sensor of
+    /// a hexapod (about 0.5 m ahead of the body, 0.9–1.1 m up, pitched
+    /// 25–45° down) the floor shows only in a strip at the bottom of the
+    /// image and between the people's feet: the test of a ground search
+    /// that must not need the floor to dominate the view.
+    pub fn corridor(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut walls = Vec::new();
+        for side in [-1.0, 1.0] {
+            let z = side * rng.gen_range(0.95..1.05);
+            walls.push(Wall {
+                start: Vector2::new(-2.0, z),
+                end: Vector2::new(8.0, z),
+                height: 2.5,
+            });
+        }
+        let mut boxes = Vec::new();
+        let ranks: [(f64, &[f64]); 2] = [(1.35, &[-0.55, 0.0, 0.55]), (1.9, &[-0.28, 0.28])];
+        for (x, lateral) in ranks {
+            for &z in lateral {
+                boxes.push(BoxObstacle {
+                    centre_x: x + rng.gen_range(-0.05..0.15),
+                    centre_z: z + rng.gen_range(-0.04..0.04),
+                    half_x: rng.gen_range(0.125..0.175),
+                    half_z: rng.gen_range(0.2..0.25),
+                    height: rng.gen_range(1.65..1.9),
+                    yaw: rng.gen_range(-0.3..0.3),
+                });
+            }
+        }
+        Self {
+            ground: Ground::Flat,
+            boxes,
+            walls,
+        }
+    }
+
     /// Uneven ground: a seeded [`HeightField`] within `±amplitude_m` of
     /// `y = 0` (a few millimetres to about 2 cm for real floors).
     pub fn uneven(seed: u64, amplitude_m: f64) -> Self {

@@ -1,0 +1,625 @@
+//! The ground in inverse depth: the Kinect's own noise domain.
+//!
+//! The Kinect measures disparity; both of its depth models (conventions.md)
+//! make the inverse depth `w = 1/z` an affine function of the raw value. Its
+//! noise is the same for every pixel in that domain (about half a raw step),
+//! where in metres it lies along each ray and grows as `z²`. A plane
+//! `n·p + d = 0` seen through the pixel's ray `(1, up, right)` is linear in
+//! inverse depth, `w = q·ray` with `q = −n/d`, and the ray is affine in the
+//! pixel's column `u` and row `v`, so in the image the ground is
+//!
+//! ```text
+//! w(u, v) = c0 + cu·(u − cx) + cv·(v − cy)
+//! ```
+//!
+//! a [`PixelPlane`]. Fitting it is ordinary linear least squares with one σ for
+//! the whole frame: the maximum-likelihood fit, unbiased, with a closed form
+//! from moment sums over the pixels ([`DisparityMoments`]), and no conversion
+//! of any pixel to metres. The same holds, as an approximation, for metric
+//! depth images (PNG/TIFF in millimetres), which are Kinect-class disparity
+//! converted to depth.
+//!
+//! This module holds the image in that domain ([`InverseDepthImage`]), the
+//! plane and the moment sums with their solve; the robust search for the
+//! ground and the rejection iterations are in [`super::plane`].
+
+use nalgebra::{Matrix3, Matrix4, Vector3};
+use wide::f32x8;
+
+use super::geometry::Plane;
+use super::sensor::{DepthEncoding, DepthRange, Intrinsics, RAW_NO_READING};
+
+/// One frame in inverse depth, 1/m, row-major; `+∞` where the pixel has no
+/// trusted reading (no reading, or outside the trusted depth range), so that
+/// no band test ever takes it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct InverseDepthImage {
+    pub width: usize,
+    pub height: usize,
+    pub w: Vec<f32>,
+    /// Pixels with a trusted reading.
+    pub valid: usize,
+}
+
+/// How a frame's stored values become inverse depth.
+#[derive(Debug, Clone)]
+enum Conversion {
+    /// Raw Kinect values: `w = a + b·raw` for `lo ≤ raw ≤ hi` (the trusted
+    /// range), computed without a table so that the loop vectorises.
+    Affine { a: f32, b: f32, lo: u16, hi: u16 },
+    /// Any other encoding: one entry per value (`+∞` = not trusted).
+    Table(Vec<f32>),
+}
+
+/// Converts frames to [`InverseDepthImage`]s: the encoding, the trusted range
+/// and the image's size, fixed once per camera.
+#[derive(Debug, Clone)]
+pub struct InverseDepthConverter {
+    conversion: Conversion,
+    width: usize,
+    height: usize,
+}
+
+impl InverseDepthConverter {
+    /// A converter for frames of `intrinsics`' size in `encoding`, trusting
+    /// depths in `range`.
+    pub fn new(encoding: DepthEncoding, intrinsics: &Intrinsics, range: DepthRange) -> Self {
+        let trusted = |z: Option<f64>| z.filter(|z| *z >= range.min_m && *z <= range.max_m);
+        let conversion = match encoding {
+            DepthEncoding::Raw11(model) => {
+                let (a, b) = model.inverse_depth_affine();
+                let valid: Vec<u16> = (0..RAW_NO_READING)
+                    .filter(|&raw| trusted(model.depth_m(raw)).is_some())
+                    .collect();
+                match (valid.first(), valid.last()) {
+                    // Depth is monotonic in the raw value, so the trusted
+                    // values are one run; the table covers any other case.
+                    (Some(&lo), Some(&hi)) if usize::from(hi - lo) + 1 == valid.len() => {
+                        Conversion::Affine {
+                            a: a as f32,
+                            b: b as f32,
+                            lo,
+                            hi,
+                        }
+                    }
+                    _ => Conversion::Table(
+                        (0..=u16::MAX)
+                            .map(|raw| match trusted(model.depth_m(raw)) {
+                                Some(z) => (1.0 / z) as f32,
+                                None => f32::INFINITY,
+                            })
+                            .collect(),
+                    ),
+                }
+            }
+            DepthEncoding::Metric { metres_per_unit } => Conversion::Table(
+                (0..=u16::MAX)
+                    .map(|value| {
+                        let z = (value > 0).then_some(f64::from(value) * metres_per_unit);
+                        match trusted(z) {
+                            Some(z) => (1.0 / z) as f32,
+                            None => f32::INFINITY,
+                        }
+                    })
+                    .collect(),
+            ),
+        };
+        Self {
+            conversion,
+            width: intrinsics.width,
+            height: intrinsics.height,
+        }
+    }
+
+    /// Converts a frame into `image`, reusing its memory. A frame of another
+    /// size than the intrinsics' is refused by the caller; here the rows that
+    /// both have are used, so nothing panics.
+    pub fn convert_into(&self, pixels: &[u16], image: &mut InverseDepthImage) {
+        let rows = (pixels.len() / self.width.max(1)).min(self.height);
+        let n = rows * self.width;
+        image.width = self.width;
+        image.height = rows;
+        image.w.clear();
+        image.w.resize(n, f32::INFINITY);
+        let mut valid = 0usize;
+        match &self.conversion {
+            Conversion::Affine { a, b, lo, hi } => {
+                for (out, &raw) in image.w.iter_mut().zip(&pixels[..n]) {
+                    let inside = raw >= *lo && raw <= *hi;
+                    *out = if inside {
+                        a + b * f32::from(raw)
+                    } else {
+                        f32::INFINITY
+                    };
+                    valid += usize::from(inside);
+                }
+            }
+            Conversion::Table(table) => {
+                for (out, &value) in image.w.iter_mut().zip(&pixels[..n]) {
+                    let w = table[usize::from(value)];
+                    *out = w;
+                    valid += usize::from(w.is_finite());
+                }
+            }
+        }
+        image.valid = valid;
+    }
+
+    /// Converts a frame to a new image.
+    pub fn convert(&self, pixels: &[u16]) -> InverseDepthImage {
+        let mut image = InverseDepthImage::default();
+        self.convert_into(pixels, &mut image);
+        image
+    }
+}
+
+/// A plane in inverse depth over the image:
+/// `w(u, v) = c0 + cu·(u − cx) + cv·(v − cy)`, 1/m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelPlane {
+    pub c0: f64,
+    pub cu: f64,
+    pub cv: f64,
+}
+
+impl PixelPlane {
+    /// The plane in the image of a plane in the sensor frame V.
+    pub fn from_plane(plane: &Plane, intrinsics: &Intrinsics) -> Self {
+        // w = q·(1, −(v − cy)/fy, (u − cx)/fx) with q = −n/d.
+        let q = -plane.normal / plane.d;
+        Self {
+            c0: q.x,
+            cu: q.z / intrinsics.fx,
+            cv: -q.y / intrinsics.fy,
+        }
+    }
+
+    /// `q = −n/d` of the plane in the sensor frame.
+    pub fn q(&self, intrinsics: &Intrinsics) -> Vector3<f64> {
+        Vector3::new(self.c0, -self.cv * intrinsics.fy, self.cu * intrinsics.fx)
+    }
+
+    /// The plane in the sensor frame (`d > 0`), or `None` for a plane through
+    /// the optical centre or with numbers that are not finite.
+    pub fn to_plane(&self, intrinsics: &Intrinsics) -> Option<Plane> {
+        let q = self.q(intrinsics);
+        let norm = q.norm();
+        if !(norm.is_finite() && norm > 1e-12) {
+            return None;
+        }
+        Some(Plane {
+            normal: -q / norm,
+            d: 1.0 / norm,
+        })
+    }
+
+    /// Inverse depth at pixel offsets `(u − cx, v − cy)`.
+    pub fn at(&self, du: f64, dv: f64) -> f64 {
+        self.c0 + self.cu * du + self.cv * dv
+    }
+
+    /// This plane moved by a least-squares correction.
+    fn corrected(&self, delta: &Vector3<f64>) -> Self {
+        Self {
+            c0: self.c0 + delta.x,
+            cu: self.cu + delta.y,
+            cv: self.cv + delta.z,
+        }
+    }
+
+    /// The largest difference of inverse depth between two planes over the
+    /// image's corners: how far apart they are where it matters.
+    pub fn largest_difference(&self, other: &PixelPlane, intrinsics: &Intrinsics) -> f64 {
+        let (u0, u1) = (
+            -intrinsics.cx,
+            intrinsics.width as f64 - 1.0 - intrinsics.cx,
+        );
+        let (v0, v1) = (
+            -intrinsics.cy,
+            intrinsics.height as f64 - 1.0 - intrinsics.cy,
+        );
+        [(u0, v0), (u0, v1), (u1, v0), (u1, v1)]
+            .iter()
+            .map(|&(u, v)| (self.at(u, v) - other.at(u, v)).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// Covariance of `(a, b, c, d)` of the plane in the sensor frame from the
+    /// covariance of `(c0, cu, cv)`.
+    pub fn plane_covariance(
+        &self,
+        intrinsics: &Intrinsics,
+        covariance: &Matrix3<f64>,
+    ) -> Option<Matrix4<f64>> {
+        let plane = self.to_plane(intrinsics)?;
+        // q = M·(c0, cu, cv).
+        let m = Matrix3::new(
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            -intrinsics.fy,
+            0.0,
+            intrinsics.fx,
+            0.0,
+        );
+        let covariance_q = m * covariance * m.transpose();
+        // n = −q/|q|, d = 1/|q|: ∂n/∂q = −d·(I − n·nᵀ), ∂d/∂q = d²·nᵀ.
+        let n = plane.normal;
+        let d = plane.d;
+        let dn = -(Matrix3::identity() - n * n.transpose()) * d;
+        let dd = n.transpose() * (d * d);
+        let mut jacobian = nalgebra::Matrix4x3::zeros();
+        jacobian.fixed_view_mut::<3, 3>(0, 0).copy_from(&dn);
+        jacobian.fixed_view_mut::<1, 3>(3, 0).copy_from(&dd);
+        Some(jacobian * covariance_q * jacobian.transpose())
+    }
+}
+
+/// Sums over pixels for the least-squares plane in inverse depth, with the
+/// pixel offsets `(u − cx, v − cy)` and the residuals `r = w − plane(u, v)` to
+/// the plane the pixels were chosen by. Sums over several frames (and several
+/// cells) add.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DisparityMoments {
+    pub count: f64,
+    pub su: f64,
+    pub sv: f64,
+    pub suu: f64,
+    pub suv: f64,
+    pub svv: f64,
+    pub sr: f64,
+    pub sur: f64,
+    pub svr: f64,
+    pub srr: f64,
+}
+
+/// The least-squares correction of a plane from its moments.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneCorrection {
+    /// The corrected plane.
+    pub plane: PixelPlane,
+    /// `(XᵀX)⁻¹` of `(c0, cu, cv)`: times σ², the plane's covariance.
+    pub inverse_information: Matrix3<f64>,
+    /// Residual sum of squares about the corrected plane, (1/m)².
+    pub rss: f64,
+}
+
+impl DisparityMoments {
+    /// Adds another set of sums (another frame, cell or row).
+    pub fn add(&mut self, other: &DisparityMoments) {
+        self.count += other.count;
+        self.su += other.su;
+        self.sv += other.sv;
+        self.suu += other.suu;
+        self.suv += other.suv;
+        self.svv += other.svv;
+        self.sr += other.sr;
+        self.sur += other.sur;
+        self.svr += other.svr;
+        self.srr += other.srr;
+    }
+
+    /// The sums of one row at offset `dv`, from its sums over columns.
+    fn add_row(&mut self, dv: f64, row: &[f64; 6]) {
+        let [n, su, suu, sr, sur, srr] = *row;
+        self.count += n;
+        self.su += su;
+        self.sv += dv * n;
+        self.suu += suu;
+        self.suv += dv * su;
+        self.svv += dv * dv * n;
+        self.sr += sr;
+        self.sur += sur;
+        self.svr += dv * sr;
+        self.srr += srr;
+    }
+
+    /// The same sums with residuals taken to `other` instead of `from`.
+    pub fn rebased(&self, from: &PixelPlane, other: &PixelPlane) -> DisparityMoments {
+        // r' = r + (from − other)(u, v) = r + e0 + eu·u + ev·v.
+        let (e0, eu, ev) = (from.c0 - other.c0, from.cu - other.cu, from.cv - other.cv);
+        let mut m = *self;
+        m.sr = self.sr + e0 * self.count + eu * self.su + ev * self.sv;
+        m.sur = self.sur + e0 * self.su + eu * self.suu + ev * self.suv;
+        m.svr = self.svr + e0 * self.sv + eu * self.suv + ev * self.svv;
+        m.srr = self.srr
+            + 2.0 * (e0 * self.sr + eu * self.sur + ev * self.svr)
+            + e0 * e0 * self.count
+            + eu * eu * self.suu
+            + ev * ev * self.svv
+            + 2.0 * (e0 * eu * self.su + e0 * ev * self.sv + eu * ev * self.suv);
+        m
+    }
+
+    /// The least-squares plane: `plane` (the one the residuals were taken to)
+    /// corrected. `None` when the pixels do not fix a plane.
+    pub fn solve(&self, plane: &PixelPlane) -> Option<PlaneCorrection> {
+        if self.count < 3.0 {
+            return None;
+        }
+        let information = Matrix3::new(
+            self.count, self.su, self.sv, self.su, self.suu, self.suv, self.sv, self.suv, self.svv,
+        );
+        let rhs = Vector3::new(self.sr, self.sur, self.svr);
+        let cholesky = information.cholesky()?;
+        let delta = cholesky.solve(&rhs);
+        if !delta.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let rss = (self.srr - delta.dot(&rhs)).max(0.0);
+        Some(PlaneCorrection {
+            plane: plane.corrected(&delta),
+            inverse_information: cholesky.inverse(),
+            rss,
+        })
+    }
+}
+
+/// Column offsets `u − cx` of an image and their squares, built once per
+/// camera so that the per-pixel loop only loads them, and the trusted range
+/// in inverse depth.
+#[derive(Debug, Clone)]
+pub struct PixelGrid {
+    pub intrinsics: Intrinsics,
+    du: Vec<f32>,
+    du2: Vec<f32>,
+    /// The trusted depth range as `1/z`: far end, near end.
+    trusted_w: (f64, f64),
+}
+
+impl PixelGrid {
+    pub fn new(intrinsics: Intrinsics, range: DepthRange) -> Self {
+        let du: Vec<f32> = (0..intrinsics.width)
+            .map(|u| (u as f64 - intrinsics.cx) as f32)
+            .collect();
+        let du2 = du.iter().map(|d| d * d).collect();
+        Self {
+            intrinsics,
+            du,
+            du2,
+            trusted_w: (1.0 / range.max_m, 1.0 / range.min_m),
+        }
+    }
+
+    /// The columns of row offset `dv` where `plane` lies within the trusted
+    /// range by at least `band` (in inverse depth), as `start..end`.
+    ///
+    /// Pixels are chosen by where the plane says they are, never by their
+    /// own reading: a reading near the range's ends is cut off by the noise
+    /// on one side only (by the sensor, or by the range check), and choosing
+    /// by the reading would bias the fit towards the middle of the range.
+    fn columns_in_range(&self, plane: &PixelPlane, dv: f64, band: f64) -> (usize, usize) {
+        let (lo, hi) = (self.trusted_w.0 + band, self.trusted_w.1 - band);
+        let base = plane.c0 + plane.cv * dv;
+        let width = self.du.len();
+        if lo >= hi {
+            return (0, 0);
+        }
+        if plane.cu.abs() < 1e-15 {
+            return if (lo..=hi).contains(&base) {
+                (0, width)
+            } else {
+                (0, 0)
+            };
+        }
+        // base + cu·du ∈ [lo, hi], du = u − cx.
+        let (a, b) = ((lo - base) / plane.cu, (hi - base) / plane.cu);
+        let (du_min, du_max) = if a <= b { (a, b) } else { (b, a) };
+        let cx = self.intrinsics.cx;
+        let start = (du_min + cx).ceil().clamp(0.0, width as f64) as usize;
+        let end = ((du_max + cx).floor() + 1.0).clamp(0.0, width as f64) as usize;
+        (start, end.max(start))
+    }
+
+    /// Row offset `v − cy`.
+    pub fn dv(&self, row: usize) -> f64 {
+        row as f64 - self.intrinsics.cy
+    }
+
+    /// The moments of the pixels of every `row_step`-th row (from `first_row`)
+    /// whose inverse depth lies within `band` of `plane`, among the pixels
+    /// where the plane is within the trusted range by at least `band`.
+    ///
+    /// Eight pixels at a time; sums over a row in f32 (residuals are small, so
+    /// nothing is lost), rows added in f64 in order: the result depends on the
+    /// input alone. Pixels without a reading are `+∞` and fail the band test.
+    pub fn moments_within(
+        &self,
+        image: &InverseDepthImage,
+        plane: &PixelPlane,
+        band: f64,
+        first_row: usize,
+        row_step: usize,
+    ) -> DisparityMoments {
+        let width = image.width.min(self.du.len());
+        let band_f64 = band;
+        let band = band as f32;
+        let band8 = f32x8::splat(band);
+        let cu = f32x8::splat(plane.cu as f32);
+        let mut total = DisparityMoments::default();
+        let load = |v: &[f32], at: usize| {
+            f32x8::from(<[f32; 8]>::try_from(&v[at..at + 8]).unwrap_or([f32::INFINITY; 8]))
+        };
+        for row in (first_row..image.height).step_by(row_step.max(1)) {
+            let dv = self.dv(row);
+            let (start, end) = self.columns_in_range(plane, dv, band_f64);
+            let end = end.min(width);
+            if start >= end {
+                continue;
+            }
+            let base = (plane.c0 + plane.cv * dv) as f32;
+            let base8 = f32x8::splat(base);
+            let pixels = &image.w[row * image.width..row * image.width + width];
+            let mut s = [f32x8::ZERO; 6];
+            let chunks = (end - start) / 8;
+            for k in 0..chunks {
+                let at = start + k * 8;
+                let w = load(pixels, at);
+                let du = load(&self.du, at);
+                let du2 = load(&self.du2, at);
+                let r = w - (base8 + cu * du);
+                let inside = r.abs().simd_lt(band8);
+                let r = r & inside;
+                s[0] += f32x8::ONE & inside;
+                s[1] += du & inside;
+                s[2] += du2 & inside;
+                s[3] += r;
+                s[4] += du * r;
+                s[5] += r * r;
+            }
+            let mut row_sums: [f64; 6] =
+                std::array::from_fn(|i| s[i].to_array().iter().map(|&v| f64::from(v)).sum());
+            // The columns past the last full eight.
+            for u in start + chunks * 8..end {
+                let r = pixels[u] - (base + plane.cu as f32 * self.du[u]);
+                if r.abs() < band {
+                    let (du, r) = (f64::from(self.du[u]), f64::from(r));
+                    row_sums[0] += 1.0;
+                    row_sums[1] += du;
+                    row_sums[2] += du * du;
+                    row_sums[3] += r;
+                    row_sums[4] += du * r;
+                    row_sums[5] += r * r;
+                }
+            }
+            total.add_row(dv, &row_sums);
+        }
+        total
+    }
+}
+
+/// The variance of a standard normal variable kept only within `±b`, relative
+/// to the untruncated variance: `1 − 2b·φ(b) / (2Φ(b) − 1)`.
+///
+/// The rejection keeps the pixels within a band of the plane; the RMS of
+/// what it keeps underestimates the noise by this factor, and the paper's
+/// rule ("2σ" with σ the RMS of the kept points) settles at ±1.5 true σ.
+/// Dividing it out makes `k·σ` mean what it says.
+pub fn truncated_variance_factor(b: f64) -> f64 {
+    if b > 8.0 {
+        return 1.0;
+    }
+    let phi = (-0.5 * b * b).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let mass = erf(b / std::f64::consts::SQRT_2);
+    if mass <= 1e-12 {
+        // Vanishing band: the variance of a uniform slice, b²/3.
+        return (b * b / 3.0).max(1e-12);
+    }
+    (1.0 - 2.0 * b * phi / mass).max(1e-12)
+}
+
+/// The error function (Abramowitz and Stegun 7.1.26, |error| < 1.5·10⁻⁷).
+fn erf(x: f64) -> f64 {
+    let sign = x.signum();
+    let x = x.abs();
+    let t = 1.0 / (1.0 + 0.327_591_1 * x);
+    let poly = t
+        * (0.254_829_592
+            + t * (-0.284_496_736
+                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    sign * (1.0 - poly * (-x * x).exp())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::sensor::DepthModel;
+
+    fn intrinsics() -> Intrinsics {
+        Intrinsics::default()
+    }
+
+    #[test]
+    fn pixel_planes_round_trip_to_sensor_planes() {
+        let plane = Plane::from_coefficients(-0.55, 0.78, -0.3, 0.99).unwrap();
+        let pixel = PixelPlane::from_plane(&plane, &intrinsics());
+        let back = pixel.to_plane(&intrinsics()).unwrap();
+        assert!((back.normal - plane.normal).norm() < 1e-12);
+        assert!((back.d - plane.d).abs() < 1e-12);
+        // A point of the plane, seen through its pixel, has the predicted w.
+        let (u, v) = (100.0, 400.0);
+        let i = intrinsics();
+        let ray = Vector3::new(1.0, -(v - i.cy) / i.fy, (u - i.cx) / i.fx);
+        let z = -plane.d / plane.normal.dot(&ray);
+        assert!((pixel.at(u - i.cx, v - i.cy) - 1.0 / z).abs() < 1e-12);
+    }
+
+    #[test]
+    fn raw_frames_convert_exactly_and_untrusted_pixels_are_infinite() {
+        for model in [DepthModel::default(), DepthModel::inverse_linear_default()] {
+            let i = Intrinsics {
+                width: 4,
+                height: 1,
+                ..intrinsics()
+            };
+            let converter =
+                InverseDepthConverter::new(DepthEncoding::Raw11(model), &i, DepthRange::default());
+            let image = converter.convert(&[800, RAW_NO_READING, 100, 1000]);
+            assert_eq!(image.valid, 2);
+            let z = model.depth_m(800).unwrap();
+            assert!((f64::from(image.w[0]) - 1.0 / z).abs() < 1e-6);
+            assert!(image.w[1].is_infinite() && image.w[2].is_infinite());
+        }
+    }
+
+    #[test]
+    fn moments_solve_a_plane_exactly_and_rebase() {
+        let i = Intrinsics {
+            width: 37,
+            height: 11,
+            ..intrinsics()
+        };
+        let truth = PixelPlane {
+            c0: 0.8,
+            cu: 1e-4,
+            cv: -3e-4,
+        };
+        let mut image = InverseDepthImage {
+            width: i.width,
+            height: i.height,
+            w: Vec::new(),
+            valid: 0,
+        };
+        for v in 0..i.height {
+            for u in 0..i.width {
+                image
+                    .w
+                    .push(truth.at(u as f64 - i.cx, v as f64 - i.cy) as f32);
+            }
+        }
+        let grid = PixelGrid::new(
+            i,
+            DepthRange {
+                min_m: 0.1,
+                max_m: 100.0,
+            },
+        );
+        let start = PixelPlane {
+            c0: 0.81,
+            cu: 0.0,
+            cv: 0.0,
+        };
+        let m = grid.moments_within(&image, &start, 0.1, 0, 1);
+        assert_eq!(m.count, (i.width * i.height) as f64);
+        let fit = m.solve(&start).unwrap();
+        assert!((fit.plane.c0 - truth.c0).abs() < 1e-6, "{:?}", fit.plane);
+        assert!((fit.plane.cu - truth.cu).abs() < 1e-8);
+        assert!((fit.plane.cv - truth.cv).abs() < 1e-8);
+        // What is left is the f32 rounding of the sums (noise would give ~1e-3).
+        assert!(fit.rss < 1e-6, "{}", fit.rss);
+        // Rebasing the residuals to another plane gives the same solution.
+        let rebased = m.rebased(&start, &truth).solve(&truth).unwrap();
+        assert!((rebased.plane.c0 - fit.plane.c0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn truncation_factor_matches_known_values() {
+        // Var of N(0,1) truncated at ±2: 0.7737; at ±1.5: 0.5516.
+        assert!((truncated_variance_factor(2.0) - 0.7737).abs() < 1e-3);
+        assert!((truncated_variance_factor(1.5) - 0.5516).abs() < 1e-3);
+        assert!((truncated_variance_factor(20.0) - 1.0).abs() < 1e-12);
+        assert!((erf(1.0) - 0.842_700_79).abs() < 2e-7);
+    }
+}
