@@ -113,6 +113,19 @@ pub struct SimConfig {
     pub mount: crate::calib::geometry::PoseDegMm,
     /// `flat`, `boxes-and-wall`, `uneven` or `corridor`.
     pub world: String,
+    /// A foot that sinks into soft ground from a pose on (tests of slipped
+    /// feet): `{ foot = 3, from_pose = 30, depth_mm = 15.0 }`.
+    #[serde(default)]
+    pub sinking_foot: Option<SinkingFootConfig>,
+}
+
+/// `[sim] sinking_foot`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SinkingFootConfig {
+    pub foot: usize,
+    pub from_pose: u16,
+    pub depth_mm: f64,
 }
 
 /// The daemon's HTTP terminal.
@@ -284,6 +297,20 @@ impl Config {
                         sim.world
                     ),
                 ));
+            }
+            if let Some(sinking) = &sim.sinking_foot {
+                if !(1..=6).contains(&sinking.foot) {
+                    return Err(bad(
+                        "sim.sinking_foot.foot",
+                        format!("{} is not a foot (1–6)", sinking.foot),
+                    ));
+                }
+                if !(sinking.depth_mm.is_finite() && sinking.depth_mm.abs() <= 200.0) {
+                    return Err(bad(
+                        "sim.sinking_foot.depth_mm",
+                        format!("{} is not within ±200 mm", sinking.depth_mm),
+                    ));
+                }
             }
         } else if self.robot.address == "sim" || self.sensor.source == "sim" {
             return Err(bad(

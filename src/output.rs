@@ -100,6 +100,9 @@ pub struct PoseJson {
     /// The ground the result predicts (paper's "theoretical ground", Table 3).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub predicted_plane: Option<PlaneJson>,
+    /// A pose kept with a remark: a slipped foot left out of its body pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 impl PoseJson {
@@ -114,6 +117,7 @@ impl PoseJson {
             inliers: None,
             plane: None,
             predicted_plane: None,
+            note: None,
         }
     }
 }
@@ -129,6 +133,7 @@ impl From<&PoseOutcome> for PoseJson {
             inliers: p.inliers,
             plane: Some((&p.measured).into()),
             predicted_plane: Some((&p.predicted).into()),
+            note: p.note.clone(),
         }
     }
 }

@@ -67,8 +67,72 @@ pub struct PoseProcessor {
 #[derive(Debug, Clone, PartialEq)]
 pub struct BodyEstimate {
     pub ground_from_robot: Transform,
-    /// Why the pose must be set aside (a slipped foot), if it must.
+    /// Why the pose must be set aside (two feet that moved), if it must.
     pub set_aside: Option<String>,
+    /// A slipped foot left out of the body pose, in words.
+    pub note: Option<String>,
+}
+
+/// Follows the feet from pose to pose: the ground frame of the home stance,
+/// with a foot that slipped planted anew where it stays. Poses go through it
+/// in the order they were visited.
+#[derive(Debug, Clone)]
+pub struct FeetTracker {
+    ground_frame: GroundFrame,
+    slip_threshold_m: f64,
+    source: BodyPoseSource,
+}
+
+impl FeetTracker {
+    /// The real body pose from the feet reported at a pose (or the commanded
+    /// pose, if so configured).
+    ///
+    /// One foot that moved since it was planted is left out (five planted
+    /// feet fix the body exactly) and planted anew where it is; two feet that
+    /// moved set the pose aside.
+    pub fn body_pose(
+        &mut self,
+        commanded: &PoseDegMm,
+        feet_mm: &[[f64; 3]],
+    ) -> Result<BodyEstimate, String> {
+        let feet = feet_from_mm(feet_mm)?;
+        let from_feet = self
+            .ground_frame
+            .body_pose(&feet, self.slip_threshold_m)
+            .map_err(|e| e.to_string())?;
+        let limit_mm = self.slip_threshold_m * 1e3;
+        let (set_aside, note) = match (from_feet.slipped_foot, from_feet.second_slipped_foot) {
+            (Some((a, miss_a)), Some((b, miss_b))) => (
+                Some(format!(
+                    "feet {a} and {b} slipped: they are {:.1} and {:.1} mm from where they were planted (limit {limit_mm:.1} mm), so the feet do not fix the body pose",
+                    miss_a * 1e3,
+                    miss_b * 1e3
+                )),
+                None,
+            ),
+            (Some((foot, miss)), None) => {
+                self.ground_frame
+                    .replant(foot, &feet, &from_feet.ground_from_robot);
+                (
+                    None,
+                    Some(format!(
+                        "foot {foot} slipped ({:.1} mm from where it was planted, limit {limit_mm:.1} mm): the body pose is the other five feet's, and the foot counts from where it is now",
+                        miss * 1e3
+                    )),
+                )
+            }
+            _ => (None, None),
+        };
+        let ground_from_robot = match self.source {
+            BodyPoseSource::Feet => from_feet.ground_from_robot,
+            BodyPoseSource::Commanded => commanded.to_params().to_transform(),
+        };
+        Ok(BodyEstimate {
+            ground_from_robot,
+            set_aside,
+            note,
+        })
+    }
 }
 
 impl PoseProcessor {
@@ -110,33 +174,14 @@ impl PoseProcessor {
         })
     }
 
-    /// The real body pose from the feet reported at a pose (or the commanded
-    /// pose, if so configured).
-    pub fn body_pose(
-        &self,
-        commanded: &PoseDegMm,
-        feet_mm: &[[f64; 3]],
-    ) -> Result<BodyEstimate, String> {
-        let feet = feet_from_mm(feet_mm)?;
-        let from_feet = self
-            .ground_frame
-            .body_pose(&feet, self.settings.slip_threshold_m)
-            .map_err(|e| e.to_string())?;
-        let set_aside = from_feet.slipped_foot.map(|(foot, miss)| {
-            format!(
-                "foot {foot} slipped: it is {:.1} mm from where it was planted (limit {:.1} mm)",
-                miss * 1e3,
-                self.settings.slip_threshold_m * 1e3
-            )
-        });
-        let ground_from_robot = match self.settings.body_pose_source {
-            BodyPoseSource::Feet => from_feet.ground_from_robot,
-            BodyPoseSource::Commanded => commanded.to_params().to_transform(),
-        };
-        Ok(BodyEstimate {
-            ground_from_robot,
-            set_aside,
-        })
+    /// A tracker of the feet from the home stance on, for one pass over the
+    /// poses in the order they were visited.
+    pub fn feet_tracker(&self) -> FeetTracker {
+        FeetTracker {
+            ground_frame: self.ground_frame.clone(),
+            slip_threshold_m: self.settings.slip_threshold_m,
+            source: self.settings.body_pose_source,
+        }
     }
 
     /// Where the ground should be, in the sensor frame, at a body pose.
@@ -180,6 +225,7 @@ impl PoseProcessor {
             plane_covariance: Some(fit.covariance),
             inliers: Some(fit.inliers),
             set_aside: body.set_aside.clone(),
+            note: body.note.clone(),
         })
     }
 }

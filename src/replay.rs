@@ -13,7 +13,7 @@ use sha2::{Digest, Sha256};
 use crate::calib::plane::FitBuffers;
 use crate::calib::solve::{Observation, SolveSettings};
 use crate::output::ResultJson;
-use crate::pipeline::{PoseProcessor, PoseSettings};
+use crate::pipeline::{BodyEstimate, PoseProcessor, PoseSettings};
 use crate::recording::session::NominalMount;
 use crate::recording::{InputError, Recording};
 
@@ -55,6 +55,7 @@ fn process_pose(
     recording: &Recording,
     processor: &PoseProcessor,
     pose: &crate::recording::poses::PoseRecord,
+    body: &Result<BodyEstimate, String>,
     buffers: &mut FitBuffers,
 ) -> Result<PoseOutcome, InputError> {
     let poses_path = recording.dir.join("poses.jsonl");
@@ -68,15 +69,13 @@ fn process_pose(
             "no depth frames were captured at this pose: skipped".into(),
         ));
     }
-    let body = processor
-        .body_pose(&pose.commanded, &pose.feet_body_mm)
-        .map_err(|e| {
-            InputError::new(
-                &poses_path,
-                Some(pose.line),
-                format!("pose {}: feet: {e}", pose.index),
-            )
-        })?;
+    let body = body.as_ref().map_err(|e| {
+        InputError::new(
+            &poses_path,
+            Some(pose.line),
+            format!("pose {}: feet: {e}", pose.index),
+        )
+    })?;
     let mut frame_digests = Vec::with_capacity(pose.depth_frames.len());
     let mut images = Vec::with_capacity(pose.depth_frames.len());
     for name in &pose.depth_frames {
@@ -86,7 +85,7 @@ fn process_pose(
     }
     let frames: Vec<&[u16]> = images.iter().map(|i| i.pixels.as_slice()).collect();
     let observation = processor
-        .observe(pose.index, &body, &frames, buffers)
+        .observe(pose.index, body, &frames, buffers)
         .map_err(|e| format!("no ground found: {e}"));
     Ok(PoseOutcome {
         index: pose.index,
@@ -109,14 +108,24 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     )
     .map_err(|e| InputError::new(&session_path, None, e))?;
 
+    // The body poses first, in the order the poses were visited: a foot
+    // that slipped counts from where it stays at the following poses.
+    let mut feet = processor.feet_tracker();
+    let bodies: Vec<Result<BodyEstimate, String>> = recording
+        .poses
+        .iter()
+        .map(|pose| feet.body_pose(&pose.commanded, &pose.feet_body_mm))
+        .collect();
     let work = || -> Vec<Result<PoseOutcome, InputError>> {
         recording
             .poses
             .par_iter()
+            .zip(&bodies)
             .with_max_len(1)
-            .map(|pose| {
-                BUFFERS
-                    .with_borrow_mut(|buffers| process_pose(recording, &processor, pose, buffers))
+            .map(|(pose, body)| {
+                BUFFERS.with_borrow_mut(|buffers| {
+                    process_pose(recording, &processor, pose, body, buffers)
+                })
             })
             .collect()
     };

@@ -429,21 +429,36 @@ fn set_aside_section(page: &mut String, result: &ResultJson) {
     page.push_str("<section id=\"set-aside\"><h2>Poses set aside</h2>\n");
     let aside: Vec<&PoseJson> = result.poses.iter().filter(|p| !p.used).collect();
     if aside.is_empty() {
-        page.push_str("<p>None: every pose was used.</p>\n</section>\n");
-        return;
+        page.push_str("<p>None: every pose was used.</p>\n");
+    } else {
+        page.push_str("<div class=\"scroll\"><table class=\"aside\">\n<thead><tr><th>pose</th><th class=\"text\">why</th><th>θ (°)</th><th>e<sub>d</sub> (mm)</th></tr></thead>\n<tbody>\n");
+        for p in aside {
+            let _ = writeln!(
+                page,
+                "<tr><td>{}</td><td class=\"text reason\">{}</td><td>{}</td><td>{}</td></tr>",
+                p.index,
+                escape(p.reason.as_deref().unwrap_or("no reason given")),
+                opt(p.theta_deg, 3),
+                opt(p.e_d_mm, 2)
+            );
+        }
+        page.push_str("</tbody></table></div>\n");
     }
-    page.push_str("<div class=\"scroll\"><table class=\"aside\">\n<thead><tr><th>pose</th><th class=\"text\">why</th><th>θ (°)</th><th>e<sub>d</sub> (mm)</th></tr></thead>\n<tbody>\n");
-    for p in aside {
-        let _ = writeln!(
-            page,
-            "<tr><td>{}</td><td class=\"text reason\">{}</td><td>{}</td><td>{}</td></tr>",
-            p.index,
-            escape(p.reason.as_deref().unwrap_or("no reason given")),
-            opt(p.theta_deg, 3),
-            opt(p.e_d_mm, 2)
-        );
+    // Poses kept with a remark: a slipped foot left out of the body pose.
+    let noted: Vec<&PoseJson> = result.poses.iter().filter(|p| p.note.is_some()).collect();
+    if !noted.is_empty() {
+        page.push_str("<h3 id=\"noted\">Poses kept with a note</h3>\n<div class=\"scroll\"><table class=\"aside\">\n<thead><tr><th>pose</th><th class=\"text\">note</th></tr></thead>\n<tbody>\n");
+        for p in noted {
+            let _ = writeln!(
+                page,
+                "<tr><td>{}</td><td class=\"text reason\">{}</td></tr>",
+                p.index,
+                escape(p.note.as_deref().unwrap_or_default())
+            );
+        }
+        page.push_str("</tbody></table></div>\n");
     }
-    page.push_str("</tbody></table></div>\n</section>\n");
+    page.push_str("</section>\n");
 }
 
 fn poses_section(page: &mut String, result: &ResultJson) {

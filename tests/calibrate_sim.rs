@@ -23,18 +23,136 @@ fn true_mount() -> PoseDegMm {
 
 /// A copy of sim.toml with another world, its schedule path made absolute.
 fn config_with_world(world: &str) -> PathBuf {
-    let text = std::fs::read_to_string(sim_config()).unwrap();
+    config_with(
+        world,
+        &[(r#"world = "flat""#, &format!(r#"world = "{world}""#))],
+    )
+}
+
+/// A copy of sim.toml (named by `name`) with text replaced, its schedule path
+/// made absolute. Every replacement must take.
+fn config_with(name: &str, replacements: &[(&str, &str)]) -> PathBuf {
+    let mut text = std::fs::read_to_string(sim_config()).unwrap();
     let schedule = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/schedules/octopus-52.toml");
-    let text = text
-        .replace("world = \"flat\"", &format!("world = \"{world}\""))
-        .replace(
-            "schedule = \"schedules/octopus-52.toml\"",
-            &format!("schedule = \"{}\"", schedule.display()),
-        );
+    let absolute = format!("schedule = \"{}\"", schedule.display());
+    for (from, to) in [(
+        "schedule = \"schedules/octopus-52.toml\"",
+        absolute.as_str(),
+    )]
+    .iter()
+    .chain(replacements)
+    {
+        assert!(text.contains(from), "sim.toml has no {from}");
+        text = text.replace(from, to);
+    }
     let path =
-        std::env::temp_dir().join(format!("groundcal-sim-{world}-{}.toml", std::process::id()));
+        std::env::temp_dir().join(format!("groundcal-sim-{name}-{}.toml", std::process::id()));
     std::fs::write(&path, text).unwrap();
     path
+}
+
+const INVERSE_LINEAR: &str =
+    r#"depth_model = { kind = "inverse-linear", a = 3.3309495161, b = -0.0030711016 }"#;
+const ZERO_PLANE: &str = r#"depth_model = { kind = "zero-plane", reference_distance_mm = 120.0, reference_pixel_size_mm = 0.1052, emitter_distance_cm = 7.5, const_shift = 200.0 }"#;
+const PAPER_LIKE_MOUNT: &str = "mount = { alpha_deg = 0.8, beta_deg = -33.0, gamma_deg = 1.5, px_mm = 510.0, py_mm = 370.0, pz_mm = 15.0 }";
+/// Tilted only 24° down: it sees ground twice as far away.
+const FAR_SEEING_MOUNT: &str = "mount = { alpha_deg = 0.8, beta_deg = -24.0, gamma_deg = 1.5, px_mm = 510.0, py_mm = 370.0, pz_mm = 15.0 }";
+
+/// Calibrates with `config` and returns the result and the simulator's mount.
+fn calibrate(config: &Path) -> (i32, serde_json::Value, PoseDegMm) {
+    let truth = groundcal::config::Config::load(config)
+        .unwrap()
+        .0
+        .sim
+        .unwrap()
+        .mount;
+    let (code, result) =
+        groundcal_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    (code, result, truth)
+}
+
+#[test]
+fn both_depth_models_and_a_far_seeing_mount_recover_the_mount_to_the_noise_floor() {
+    for (model_name, model) in [
+        ("inverse-linear", INVERSE_LINEAR),
+        ("zero-plane", ZERO_PLANE),
+    ] {
+        for (mount_name, mount) in [
+            ("paper-like", PAPER_LIKE_MOUNT),
+            ("24° down", FAR_SEEING_MOUNT),
+        ] {
+            let config = config_with(
+                "models",
+                &[(INVERSE_LINEAR, model), (PAPER_LIKE_MOUNT, mount)],
+            );
+            let (code, result, truth) = calibrate(&config);
+            let _ = std::fs::remove_file(&config);
+            assert_eq!(code, 0, "{model_name}, {mount_name}: {result:#}");
+            let (angle, offset) = distance(&mount_of(&result), &truth);
+            println!("{model_name}, {mount_name}: off by {angle:.5}° and {offset:.3} mm");
+            assert!(
+                angle <= 0.005 && offset <= 0.3,
+                "{model_name}, {mount_name}: off by {angle}° and {offset} mm"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_foot_that_sinks_is_left_out_and_named_and_the_result_holds() {
+    let dir = std::env::temp_dir().join(format!("groundcal-sinking-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let config = config_with(
+        "sinking",
+        &[(
+            r#"world = "flat""#,
+            "world = \"flat\"\nsinking_foot = { foot = 3, from_pose = 30, depth_mm = 15.0 }",
+        )],
+    );
+    let truth = groundcal::config::Config::load(&config)
+        .unwrap()
+        .0
+        .sim
+        .unwrap()
+        .mount;
+    let (code, live) = groundcal_json(&[
+        "calibrate",
+        "--config",
+        config.to_str().unwrap(),
+        "--json",
+        "--record",
+        dir.to_str().unwrap(),
+    ]);
+    let _ = std::fs::remove_file(&config);
+    assert_eq!(code, 0, "{live:#}");
+    assert_eq!(live["summary"]["poses_used"], 52, "{live:#}");
+    let (angle, offset) = distance(&mount_of(&live), &truth);
+    println!("a foot sunk 15 mm from pose 30: off by {angle:.5}° and {offset:.3} mm");
+    assert!(
+        angle <= 0.03 && offset <= 1.0,
+        "off by {angle}° and {offset} mm"
+    );
+    // Pose 30 names the foot; from then on the foot counts where it sank.
+    let note = |index: usize| live["poses"][index - 1]["note"].as_str().map(str::to_owned);
+    assert!(note(29).is_none(), "{:?}", note(29));
+    let at_30 = note(30).expect("pose 30 names the foot");
+    assert!(at_30.contains("foot 3") && at_30.contains("15."), "{at_30}");
+    assert!(note(31).is_none(), "{:?}", note(31));
+
+    // The recording replays to the same, and its report names the foot.
+    let report = dir.join("report");
+    let (code, replayed) = groundcal_json(&[
+        "replay",
+        dir.to_str().unwrap(),
+        "--json",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{replayed:#}");
+    assert_eq!(replayed["poses"][29]["note"], live["poses"][29]["note"]);
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(html.contains("Poses kept with a note") && html.contains("foot 3 slipped"));
 }
 
 #[test]

@@ -43,9 +43,13 @@ pub struct BodyPose {
     /// Distance from each reported foot, mapped to the ground, to where it was
     /// planted, metres.
     pub foot_residuals: [f64; FEET],
-    /// The foot that moved since the home stance, if one did (1-based), with
-    /// how far it is from where the other five put it, metres.
+    /// The foot that moved since it was planted, if one did (1-based), with
+    /// how far it is from where the other five put it, metres. The pose is
+    /// then the other five's: five planted feet fix the body exactly.
     pub slipped_foot: Option<(usize, f64)>,
+    /// Why the feet do not fix the pose, if they do not: a second foot that
+    /// moved, with how far, metres (1-based).
+    pub second_slipped_foot: Option<(usize, f64)>,
 }
 
 fn check_finite(feet: &Feet) -> Result<(), BodyError> {
@@ -113,34 +117,72 @@ impl GroundFrame {
 
     /// The body pose from the feet reported at one pose.
     ///
-    /// A foot is flagged as slipped when, fitted without it, it lies more than
-    /// `slip_threshold` (metres) from where the other five put it; the worst such
-    /// foot is named.
+    /// A foot has slipped when, fitted without it, it lies more than
+    /// `slip_threshold` (metres) from where the other feet put it. The worst
+    /// such foot is left out and the pose is the other five's. A second foot
+    /// that disagrees with the remaining four is reported too: the feet then
+    /// do not fix the pose.
     pub fn body_pose(&self, feet_robot: &Feet, slip_threshold: f64) -> Result<BodyPose, BodyError> {
         check_finite(feet_robot)?;
         let all: Vec<usize> = (0..FEET).collect();
-        let ground_from_robot = rigid_fit(feet_robot, &self.feet_ground, &all)?;
+        let worst = self.worst_miss(feet_robot, &all)?;
+        let slipped_foot = worst.filter(|(_, miss)| *miss > slip_threshold);
+        let (kept, second_slipped_foot) = match slipped_foot {
+            None => (all, None),
+            Some((foot, _)) => {
+                let five: Vec<usize> = all.into_iter().filter(|&i| i != foot).collect();
+                let second = self
+                    .worst_miss(feet_robot, &five)?
+                    .filter(|(_, miss)| *miss > slip_threshold)
+                    .map(|(f, miss)| (f + 1, miss));
+                (five, second)
+            }
+        };
+        let ground_from_robot = rigid_fit(feet_robot, &self.feet_ground, &kept)?;
         let foot_residuals = std::array::from_fn(|i| {
             ((ground_from_robot * nalgebra::Point3::from(feet_robot[i])).coords
                 - self.feet_ground[i])
                 .norm()
         });
-        let mut slipped_foot: Option<(usize, f64)> = None;
-        for out in 0..FEET {
-            let others: Vec<usize> = (0..FEET).filter(|&i| i != out).collect();
+        Ok(BodyPose {
+            ground_from_robot,
+            foot_residuals,
+            slipped_foot: slipped_foot.map(|(f, miss)| (f + 1, miss)),
+            second_slipped_foot,
+        })
+    }
+
+    /// Among `feet`, the foot (0-based) farthest from where the others put
+    /// it, with that distance.
+    fn worst_miss(
+        &self,
+        feet_robot: &Feet,
+        feet: &[usize],
+    ) -> Result<Option<(usize, f64)>, BodyError> {
+        let mut worst: Option<(usize, f64)> = None;
+        for &out in feet {
+            let others: Vec<usize> = feet.iter().copied().filter(|&i| i != out).collect();
             let fit = rigid_fit(feet_robot, &self.feet_ground, &others)?;
             let miss = ((fit * nalgebra::Point3::from(feet_robot[out])).coords
                 - self.feet_ground[out])
                 .norm();
-            if miss > slip_threshold && slipped_foot.is_none_or(|(_, worst)| miss > worst) {
-                slipped_foot = Some((out + 1, miss));
+            if worst.is_none_or(|(_, w)| miss > w) {
+                worst = Some((out, miss));
             }
         }
-        Ok(BodyPose {
-            ground_from_robot,
-            foot_residuals,
-            slipped_foot,
-        })
+        Ok(worst)
+    }
+
+    /// Plants a foot anew where it is now (1-based `foot`), seen from the body
+    /// pose the other feet give: a foot that slipped and stays where it
+    /// slipped agrees again at the following poses.
+    pub fn replant(&mut self, foot: usize, feet_robot: &Feet, ground_from_robot: &Transform) {
+        if let Some(anchor) = foot
+            .checked_sub(1)
+            .and_then(|i| self.feet_ground.get_mut(i))
+        {
+            *anchor = (ground_from_robot * nalgebra::Point3::from(feet_robot[foot - 1])).coords;
+        }
     }
 }
 
@@ -238,7 +280,7 @@ mod tests {
     }
 
     #[test]
-    fn a_slipped_foot_is_named() {
+    fn a_slipped_foot_is_named_and_left_out_of_the_pose() {
         let frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
         let truth = PoseParams::new(0.0, -0.1, 0.2, Vector3::new(0.0, 0.7, 0.0)).to_transform();
         let mut feet = frame
@@ -249,6 +291,52 @@ mod tests {
         let (foot, miss) = pose.slipped_foot.unwrap();
         assert_eq!(foot, 3);
         assert!((miss - 0.0316).abs() < 0.002, "{miss}");
+        assert_eq!(pose.second_slipped_foot, None);
+        // The other five give the body pose exactly.
+        assert_abs_diff_eq!(
+            pose.ground_from_robot.to_homogeneous(),
+            truth.to_homogeneous(),
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn a_foot_that_stays_where_it_slipped_is_replanted() {
+        let mut frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
+        let sunk = Vector3::new(0.0, -0.015, 0.0);
+        let feet_at = |truth: &Transform, frame: &GroundFrame| {
+            let mut ground = frame.feet_ground;
+            ground[4] = home_feet()[4] + Vector3::new(0.0, 0.6, 0.0) + sunk;
+            ground.map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords)
+        };
+        let first = PoseParams::new(0.0, 0.1, 0.0, Vector3::new(0.0, 0.65, 0.0)).to_transform();
+        let feet = feet_at(&first, &frame);
+        let pose = frame.body_pose(&feet, 0.010).unwrap();
+        assert_eq!(pose.slipped_foot.map(|s| s.0), Some(5));
+        frame.replant(5, &feet, &pose.ground_from_robot);
+        // At the next pose the sunk foot agrees again, and all six count.
+        let next = PoseParams::new(0.0, -0.1, 0.1, Vector3::new(0.0, 0.62, 0.0)).to_transform();
+        let pose = frame.body_pose(&feet_at(&next, &frame), 0.010).unwrap();
+        assert_eq!(pose.slipped_foot, None);
+        assert_abs_diff_eq!(
+            pose.ground_from_robot.to_homogeneous(),
+            next.to_homogeneous(),
+            epsilon = 1e-9
+        );
+    }
+
+    #[test]
+    fn two_slipped_feet_are_both_named() {
+        let frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
+        let truth = PoseParams::new(0.0, 0.0, 0.1, Vector3::new(0.0, 0.6, 0.0)).to_transform();
+        let mut feet = frame
+            .feet_ground
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords);
+        feet[0] += Vector3::new(0.0, 0.03, 0.0);
+        feet[3] += Vector3::new(0.02, 0.0, 0.0);
+        let pose = frame.body_pose(&feet, 0.010).unwrap();
+        assert!(pose.slipped_foot.is_some());
+        assert!(pose.second_slipped_foot.is_some(), "{pose:?}");
     }
 
     #[test]

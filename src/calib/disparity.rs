@@ -472,10 +472,11 @@ impl PixelGrid {
             let mut row_sums: [f64; 6] =
                 std::array::from_fn(|i| s[i].to_array().iter().map(|&v| f64::from(v)).sum());
             // The columns past the last full eight.
-            for u in start + chunks * 8..end {
-                let r = pixels[u] - (base + plane.cu as f32 * self.du[u]);
+            let tail = start + chunks * 8..end;
+            for (&w, &du) in pixels[tail.clone()].iter().zip(&self.du[tail]) {
+                let r = w - (base + plane.cu as f32 * du);
                 if r.abs() < band {
-                    let (du, r) = (f64::from(self.du[u]), f64::from(r));
+                    let (du, r) = (f64::from(du), f64::from(r));
                     row_sums[0] += 1.0;
                     row_sums[1] += du;
                     row_sums[2] += du * du;

@@ -43,8 +43,12 @@ pub struct Observation {
     pub plane_covariance: Option<Matrix4<f64>>,
     /// Points that supported the plane, if known.
     pub inliers: Option<usize>,
-    /// Set aside before solving (a slipped foot, a failed fit), with why.
+    /// Set aside before solving (feet that do not fix the pose, a failed
+    /// fit), with why.
     pub set_aside: Option<String>,
+    /// What the operator should know of a pose that is used: a slipped foot
+    /// left out of its body pose.
+    pub note: Option<String>,
 }
 
 impl Observation {
@@ -57,6 +61,7 @@ impl Observation {
             plane_covariance: None,
             inliers: None,
             set_aside: None,
+            note: None,
         }
     }
 
@@ -132,6 +137,8 @@ pub struct PoseOutcome {
     /// `|d_T - d_M|` (paper's e_d), metres.
     pub e_d: f64,
     pub inliers: Option<usize>,
+    /// The observation's note (a slipped foot left out), if any.
+    pub note: Option<String>,
 }
 
 /// How well the schedule pins down each direction.
@@ -705,6 +712,7 @@ fn outcomes(
                 theta,
                 e_d,
                 inliers: obs.inliers,
+                note: obs.note.clone(),
             }
         })
         .collect()

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use groundcal_hal::kinect::Kinect;
 use groundcal_hal::sim::kinect::{SimKinect, SimKinectConfig};
-use groundcal_hal::sim::robot::{SimBodyController, SimRobotConfig};
+use groundcal_hal::sim::robot::{SimBodyController, SimRobotConfig, SinkingFoot};
 use groundcal_hal::sim::world::World;
 use groundcal_hal::sim::TruePose;
 use groundcal_hal::udp::{LinkConfig, UdpBodyController};
@@ -202,8 +202,14 @@ pub async fn open(
 
     let controller = if robot == "sim" {
         let parts = sim.as_ref().expect("made above for the simulated robot");
+        let mut robot = SimRobotConfig::reference(parts.sim.seed, parts.sim.time_scale);
+        robot.sinking_foot = parts.sim.sinking_foot.map(|s| SinkingFoot {
+            foot: s.foot,
+            from_pose: s.from_pose,
+            depth_mm: s.depth_mm,
+        });
         Controller::Sim(Box::new(SimBodyController::new(
-            SimRobotConfig::reference(parts.sim.seed, parts.sim.time_scale),
+            robot,
             parts.true_pose.clone(),
         )))
     } else {

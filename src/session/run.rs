@@ -345,6 +345,7 @@ async fn body<S: DepthSensor, C: BodyController>(
             message: format!("home feet: {e}"),
         })?,
     );
+    let mut feet = processor.feet_tracker();
     let mut writer = match &plan.record {
         Some(dir) => Some(RecordingWriter::create(
             dir,
@@ -424,7 +425,7 @@ async fn body<S: DepthSensor, C: BodyController>(
             };
             writer = Some(record_pose(w, &frames, record).await?);
         }
-        let fit = match processor.body_pose(commanded, &feet_mm) {
+        let fit = match feet.body_pose(commanded, &feet_mm) {
             Ok(body) => {
                 let processor = Arc::clone(&processor);
                 tokio::task::spawn_blocking(move || fit_pose(processor, index, body, frames))

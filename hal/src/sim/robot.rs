@@ -80,6 +80,21 @@ pub struct SimRobotConfig {
     /// Standard deviation of each reported foot coordinate.
     pub feet_noise_mm: f64,
     pub firmware: String,
+    /// A foot that sinks into soft ground, if one does.
+    pub sinking_foot: Option<SinkingFoot>,
+}
+
+/// A foot that sinks into soft ground once the body has been sent to a pose
+/// (and stays sunk): the feet are no longer where they were planted, which
+/// the calibration must notice and work around.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SinkingFoot {
+    /// Which foot, 1–6.
+    pub foot: usize,
+    /// The first pose id at which it has sunk.
+    pub from_pose: u16,
+    /// How far it sinks, mm.
+    pub depth_mm: f64,
 }
 
 impl SimRobotConfig {
@@ -97,6 +112,7 @@ impl SimRobotConfig {
             per_pose_sigma_mm: 0.2,
             feet_noise_mm: 0.1,
             firmware: FIRMWARE.to_string(),
+            sinking_foot: None,
         }
     }
 }
@@ -132,6 +148,8 @@ pub struct SimRobot {
     pose_id: u16,
     /// Whether the motion in progress (or finished) goes home.
     target_is_home: bool,
+    /// Whether the sinking foot has sunk.
+    sunk: bool,
 }
 
 impl SimRobot {
@@ -161,6 +179,7 @@ impl SimRobot {
             resting: PoseParams::identity(),
             pose_id: 0,
             target_is_home: true,
+            sunk: false,
         };
         let home = robot.config.home;
         robot.resting = robot.true_from_commanded(&home);
@@ -297,7 +316,17 @@ impl SimRobot {
     fn feet_body_mm(&mut self, ground_from_robot: &Transform) -> [[f64; 3]; 6] {
         let robot_from_ground = ground_from_robot.inverse();
         let mut feet = [[0.0; 3]; 6];
-        for (out, ground) in feet.iter_mut().zip(self.config.feet_ground_mm) {
+        let mut feet_ground = self.config.feet_ground_mm;
+        if let Some(sinking) = self.config.sinking_foot.filter(|_| self.sunk) {
+            if let Some(foot) = sinking
+                .foot
+                .checked_sub(1)
+                .and_then(|i| feet_ground.get_mut(i))
+            {
+                foot[1] -= sinking.depth_mm;
+            }
+        }
+        for (out, ground) in feet.iter_mut().zip(feet_ground) {
             let p = robot_from_ground * Point3::from(Vector3::from(ground) / 1000.0);
             for (o, v) in out.iter_mut().zip(p.coords.iter()) {
                 *o = v * 1000.0 + self.normal() * self.config.feet_noise_mm;
@@ -329,6 +358,9 @@ impl Body for SimRobot {
         }
         let to = self.true_from_commanded(pose);
         self.pose_id = pose_id;
+        if let Some(sinking) = self.config.sinking_foot {
+            self.sunk |= pose_id >= sinking.from_pose;
+        }
         self.target_is_home = false;
         self.start_motion(to, duration_ms, now);
         Ok(())
