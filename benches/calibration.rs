@@ -5,10 +5,10 @@
 use std::path::PathBuf;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
-use groundcal::calib::disparity::InverseDepthImage;
+use groundcal::calib::disparity::{Frame, InverseDepthImage};
 use groundcal::calib::geometry::{sensor_from_optical, PoseParams};
 use groundcal::calib::plane::{
-    fit_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
+    fit_ground, search::find_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
 };
 use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use groundcal::calib::solve::{predict, solve, Observation, SolveSettings};
@@ -72,6 +72,40 @@ fn ground_fit(c: &mut Criterion) {
     let mut image = InverseDepthImage::default();
     c.bench_function("raw frame to inverse depth only", |b| {
         b.iter(|| camera.inverse_depth_into(black_box(&pixels), &mut image))
+    });
+    // The fit reads raw frames as they are, in raw units.
+    let settings = PlaneFitSettings::default();
+    let domain = camera.value_domain();
+    let frame = Frame {
+        values: &pixels[..],
+        width: 640,
+        height: 480,
+    };
+    let no_ground = || panic!("the sample frame has ground");
+    let found = find_ground(&frame, &domain, camera.grid(), &prior, &settings, no_ground).unwrap();
+    c.bench_function("ground search only (cells, groups, support)", |b| {
+        b.iter(|| {
+            find_ground(
+                black_box(&frame),
+                &domain,
+                camera.grid(),
+                &prior,
+                &settings,
+                no_ground,
+            )
+        })
+    });
+    c.bench_function("one pass of moments over every pixel", |b| {
+        b.iter(|| {
+            camera.grid().moments_within(
+                black_box(&frame),
+                &domain,
+                &found.plane,
+                4.0 * found.noise,
+                0,
+                1,
+            )
+        })
     });
     let mut cloud = camera.points(&pixels);
     c.bench_function("raw frame to points only", |b| {

@@ -131,6 +131,22 @@ pub enum DepthImageError {
 /// Fakenect writes the host's (little-endian) bytes, unlike standard PGM; comments are refused
 /// because fakenect never writes them and its own reader does not skip them.
 pub fn parse_fakenect_pgm(path: &Path, bytes: &[u8]) -> Result<DepthImage, DepthImageError> {
+    let mut pixels = Vec::new();
+    let (width, height) = parse_fakenect_pgm_into(path, bytes, &mut pixels)?;
+    Ok(DepthImage {
+        width,
+        height,
+        pixels,
+    })
+}
+
+/// [`parse_fakenect_pgm`] into a buffer reused from frame to frame; returns
+/// the image's width and height.
+pub fn parse_fakenect_pgm_into(
+    path: &Path,
+    bytes: &[u8],
+    pixels: &mut Vec<u16>,
+) -> Result<(usize, usize), DepthImageError> {
     let header = parse_pgm_header(path, bytes, false)?;
     if header.maxval != 65535 {
         return Err(DepthImageError::MaxVal {
@@ -140,14 +156,12 @@ pub fn parse_fakenect_pgm(path: &Path, bytes: &[u8]) -> Result<DepthImage, Depth
         });
     }
     let data = pixel_data(path, bytes, &header)?;
-    Ok(DepthImage {
-        width: header.width,
-        height: header.height,
-        pixels: data
-            .chunks_exact(2)
-            .map(|c| u16::from_le_bytes([c[0], c[1]]))
-            .collect(),
-    })
+    pixels.clear();
+    pixels.resize(data.len() / 2, 0);
+    for (out, c) in pixels.iter_mut().zip(data.chunks_exact(2)) {
+        *out = u16::from_le_bytes([c[0], c[1]]);
+    }
+    Ok((header.width, header.height))
 }
 
 /// Parses a standard binary PGM with 16-bit (big-endian) samples, as written for depth in mm.

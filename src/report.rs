@@ -26,7 +26,7 @@ pub struct Provenance {
     pub groundcal_version: String,
     /// What was solved, e.g. the recording directory.
     pub input: String,
-    /// Hex SHA-256 of the input, so that a report can be matched to its data.
+    /// Hex BLAKE3 of the input, so that a report can be matched to its data.
     pub input_digest: String,
     /// RFC 3339, UTC.
     pub created: String,
@@ -493,7 +493,7 @@ fn poses_section(page: &mut String, result: &ResultJson) {
 fn provenance_section(page: &mut String, provenance: &Provenance) {
     let _ = writeln!(
         page,
-        "<footer id=\"provenance\"><h2>Provenance</h2>\n<dl class=\"facts\">\n<dt>input</dt><dd>{}</dd>\n<dt>input SHA-256</dt><dd><code class=\"digest\">{}</code></dd>\n<dt>groundcal</dt><dd>{}</dd>\n<dt>created</dt><dd>{}</dd>\n</dl>\n</footer>",
+        "<footer id=\"provenance\"><h2>Provenance</h2>\n<dl class=\"facts\">\n<dt>input</dt><dd>{}</dd>\n<dt>input BLAKE3</dt><dd><code class=\"digest\">{}</code></dd>\n<dt>groundcal</dt><dd>{}</dd>\n<dt>created</dt><dd>{}</dd>\n</dl>\n</footer>",
         escape(&provenance.input),
         escape(&provenance.input_digest),
         escape(&provenance.groundcal_version),

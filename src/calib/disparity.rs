@@ -24,7 +24,6 @@
 //! ground and the rejection iterations are in [`super::plane`].
 
 use nalgebra::{Matrix3, Matrix4, Vector3};
-use wide::f32x8;
 
 use super::geometry::Plane;
 use super::sensor::{DepthEncoding, DepthRange, Intrinsics, RAW_NO_READING};
@@ -46,7 +45,7 @@ pub struct InverseDepthImage {
 enum Conversion {
     /// Raw Kinect values: `w = a + b·raw` for `lo ≤ raw ≤ hi` (the trusted
     /// range), computed without a table so that the loop vectorises.
-    Affine { a: f32, b: f32, lo: u16, hi: u16 },
+    Affine { a: f64, b: f64, lo: u16, hi: u16 },
     /// Any other encoding: one entry per value (`+∞` = not trusted).
     Table(Vec<f32>),
 }
@@ -75,12 +74,7 @@ impl InverseDepthConverter {
                     // Depth is monotonic in the raw value, so the trusted
                     // values are one run; the table covers any other case.
                     (Some(&lo), Some(&hi)) if usize::from(hi - lo) + 1 == valid.len() => {
-                        Conversion::Affine {
-                            a: a as f32,
-                            b: b as f32,
-                            lo,
-                            hi,
-                        }
+                        Conversion::Affine { a, b, lo, hi }
                     }
                     _ => Conversion::Table(
                         (0..=u16::MAX)
@@ -111,6 +105,33 @@ impl InverseDepthConverter {
         }
     }
 
+    /// The domain the fit reads frames in: raw values as they are (no
+    /// conversion), anything else converted to inverse depth.
+    pub fn domain(&self) -> ValueDomain {
+        match &self.conversion {
+            Conversion::Affine { a, b, lo, hi } => ValueDomain {
+                offset: *a,
+                scale: *b,
+                trusted: (f32::from(*lo), f32::from(*hi)),
+            },
+            Conversion::Table(table) => {
+                let finite = table.iter().filter(|w| w.is_finite());
+                let lo = finite.clone().fold(f32::INFINITY, |m, &w| m.min(w));
+                let hi = finite.fold(f32::NEG_INFINITY, |m, &w| m.max(w));
+                ValueDomain {
+                    offset: 0.0,
+                    scale: 1.0,
+                    trusted: (lo, hi),
+                }
+            }
+        }
+    }
+
+    /// Whether frames are fitted as they are (raw values), with no conversion.
+    pub fn reads_raw(&self) -> bool {
+        matches!(self.conversion, Conversion::Affine { .. })
+    }
+
     /// Converts a frame into `image`, reusing its memory. A frame of another
     /// size than the intrinsics' is refused by the caller; here the rows that
     /// both have are used, so nothing panics.
@@ -124,6 +145,7 @@ impl InverseDepthConverter {
         let mut valid = 0usize;
         match &self.conversion {
             Conversion::Affine { a, b, lo, hi } => {
+                let (a, b) = (*a as f32, *b as f32);
                 for (out, &raw) in image.w.iter_mut().zip(&pixels[..n]) {
                     let inside = raw >= *lo && raw <= *hi;
                     *out = if inside {
@@ -333,6 +355,46 @@ impl DisparityMoments {
         m
     }
 
+    /// The least-squares plane alone (no covariance), with its residual sum
+    /// of squares: the search's many small solves.
+    pub fn solve_plane(&self, plane: &PixelPlane) -> Option<(PixelPlane, f64)> {
+        if self.count < 3.0 {
+            return None;
+        }
+        // The symmetric 3×3 normal equations by LDLᵀ, written out: the search
+        // solves a thousand of them per frame.
+        let (a11, a12, a13, a22, a23, a33) =
+            (self.count, self.su, self.sv, self.suu, self.suv, self.svv);
+        let (b1, b2, b3) = (self.sr, self.sur, self.svr);
+        let d1 = a11;
+        let l21 = a12 / d1;
+        let l31 = a13 / d1;
+        let d2 = a22 - l21 * a12;
+        if !(d1 > 0.0 && d2 > 1e-12 * a22.abs().max(1.0)) {
+            return None;
+        }
+        let l32 = (a23 - l31 * a12) / d2;
+        let d3 = a33 - l31 * a13 - l32 * l32 * d2;
+        if d3.is_nan() || d3 <= 1e-12 * a33.abs().max(1.0) {
+            return None;
+        }
+        let y1 = b1;
+        let y2 = b2 - l21 * y1;
+        let y3 = b3 - l31 * y1 - l32 * y2;
+        let x3 = y3 / d3;
+        let x2 = y2 / d2 - l32 * x3;
+        let x1 = y1 / d1 - l21 * x2 - l31 * x3;
+        let delta = Vector3::new(x1, x2, x3);
+        if !delta.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let rhs = Vector3::new(b1, b2, b3);
+        Some((
+            plane.corrected(&delta),
+            (self.srr - delta.dot(&rhs)).max(0.0),
+        ))
+    }
+
     /// The least-squares plane: `plane` (the one the residuals were taken to)
     /// corrected. `None` when the pixels do not fix a plane.
     pub fn solve(&self, plane: &PixelPlane) -> Option<PlaneCorrection> {
@@ -357,20 +419,186 @@ impl DisparityMoments {
     }
 }
 
+/// A value of a frame the fit reads: a raw Kinect value, or an inverse depth.
+pub trait FitValue: Copy + Send + Sync {
+    fn to_f32(self) -> f32;
+
+    /// How many of `values` lie in `lo..=hi`.
+    fn count_between(values: &[Self], lo: f32, hi: f32) -> usize;
+}
+
+impl FitValue for u16 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        f32::from(self)
+    }
+
+    fn count_between(values: &[u16], lo: f32, hi: f32) -> usize {
+        // In integers, one comparison a value: the loop vectorises.
+        let lo = lo.ceil().clamp(0.0, 65535.0) as u16;
+        let hi = hi.floor().clamp(0.0, 65535.0) as u16;
+        if lo > hi {
+            return 0;
+        }
+        let span = hi - lo;
+        values
+            .chunks(1 << 15)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .map(|&v| u16::from(v.wrapping_sub(lo) <= span))
+                    .sum::<u16>() as usize
+            })
+            .sum()
+    }
+}
+
+impl FitValue for f32 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+
+    fn count_between(values: &[f32], lo: f32, hi: f32) -> usize {
+        values.iter().filter(|&&v| v >= lo && v <= hi).count()
+    }
+}
+
+/// One frame as the fit reads it: row-major values, in a [`ValueDomain`].
+#[derive(Debug, Clone, Copy)]
+pub struct Frame<'a, T> {
+    pub values: &'a [T],
+    pub width: usize,
+    pub height: usize,
+}
+
+impl<'a, T: FitValue> Frame<'a, T> {
+    /// The value at column `u`, row `v`.
+    pub fn at(&self, u: usize, v: usize) -> f32 {
+        self.values[v * self.width + u].to_f32()
+    }
+
+    /// Pixels whose value is trusted.
+    pub fn count_trusted(&self, domain: &ValueDomain) -> usize {
+        T::count_between(self.values, domain.trusted.0, domain.trusted.1)
+    }
+}
+
+/// How a frame's values relate to inverse depth, `w = offset + scale·value`
+/// (1/m), and which values are trusted. Raw Kinect frames are fitted in raw
+/// units, with no conversion of any pixel; other frames are converted to
+/// inverse depth first (`offset = 0`, `scale = 1`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValueDomain {
+    pub offset: f64,
+    pub scale: f64,
+    /// Trusted values, lowest and highest (the trusted depth range).
+    pub trusted: (f32, f32),
+}
+
+impl ValueDomain {
+    /// A plane of values as a plane of inverse depth.
+    pub fn to_inverse_depth(&self, plane: &PixelPlane) -> PixelPlane {
+        PixelPlane {
+            c0: self.offset + self.scale * plane.c0,
+            cu: self.scale * plane.cu,
+            cv: self.scale * plane.cv,
+        }
+    }
+
+    /// A plane of inverse depth as a plane of values.
+    pub fn from_inverse_depth(&self, plane: &PixelPlane) -> PixelPlane {
+        PixelPlane {
+            c0: (plane.c0 - self.offset) / self.scale,
+            cu: plane.cu / self.scale,
+            cv: plane.cv / self.scale,
+        }
+    }
+}
+
 /// Column offsets `u − cx` of an image and their squares, built once per
-/// camera so that the per-pixel loop only loads them, and the trusted range
-/// in inverse depth.
+/// camera so that the per-pixel loop only loads them.
 #[derive(Debug, Clone)]
 pub struct PixelGrid {
     pub intrinsics: Intrinsics,
     du: Vec<f32>,
     du2: Vec<f32>,
-    /// The trusted depth range as `1/z`: far end, near end.
-    trusted_w: (f64, f64),
+}
+
+/// Lanes of the per-pixel loops: a fixed number, so that every build (SSE2,
+/// AVX2, NEON) adds the same numbers in the same order and the results are
+/// bit-identical.
+const LANES: usize = 16;
+
+/// Sums of one row: inliers, `Σu`, `Σu²`, `Σr`, `Σu·r`, `Σr²`.
+type RowSums = [f64; 6];
+
+/// The sum of the lanes, pairwise in a fixed order.
+#[inline(always)]
+fn lane_sum(lanes: &[f32; LANES]) -> f64 {
+    let mut half = [0f32; LANES / 2];
+    for (i, h) in half.iter_mut().enumerate() {
+        *h = lanes[i] + lanes[i + LANES / 2];
+    }
+    let mut quarter = [0f32; LANES / 4];
+    for (i, q) in quarter.iter_mut().enumerate() {
+        *q = half[i] + half[i + LANES / 4];
+    }
+    f64::from((quarter[0] + quarter[2]) + (quarter[1] + quarter[3]))
+}
+
+/// The per-pixel loop of [`PixelGrid::moments_within`] over one row's
+/// `values` (with their column offsets `du`, `du2`): the pixels within `band`
+/// of `base + cu·du`. Written as independent lanes, which compilers turn into
+/// vector instructions of any width.
+#[inline(always)]
+fn row_sums<T: FitValue>(
+    values: &[T],
+    du: &[f32],
+    du2: &[f32],
+    base: f32,
+    cu: f32,
+    band: f32,
+) -> RowSums {
+    let mut acc = [[0f32; LANES]; 6];
+    let n = values.len().min(du.len()).min(du2.len());
+    let full = n / LANES * LANES;
+    for ((v, d), d2) in values[..full]
+        .chunks_exact(LANES)
+        .zip(du[..full].chunks_exact(LANES))
+        .zip(du2[..full].chunks_exact(LANES))
+    {
+        for l in 0..LANES {
+            let r = v[l].to_f32() - (base + cu * d[l]);
+            let inside = r.abs() < band;
+            let one = if inside { 1.0 } else { 0.0 };
+            let kept = if inside { r } else { 0.0 };
+            acc[0][l] += one;
+            acc[1][l] += one * d[l];
+            acc[2][l] += one * d2[l];
+            acc[3][l] += kept;
+            acc[4][l] += kept * d[l];
+            acc[5][l] += kept * kept;
+        }
+    }
+    let mut sums: RowSums = std::array::from_fn(|k| lane_sum(&acc[k]));
+    for ((v, &d), &d2) in values[full..n].iter().zip(&du[full..n]).zip(&du2[full..n]) {
+        let r = v.to_f32() - (base + cu * d);
+        if r.abs() < band {
+            let (d, d2, r) = (f64::from(d), f64::from(d2), f64::from(r));
+            sums[0] += 1.0;
+            sums[1] += d;
+            sums[2] += d2;
+            sums[3] += r;
+            sums[4] += d * r;
+            sums[5] += r * r;
+        }
+    }
+    sums
 }
 
 impl PixelGrid {
-    pub fn new(intrinsics: Intrinsics, range: DepthRange) -> Self {
+    pub fn new(intrinsics: Intrinsics) -> Self {
         let du: Vec<f32> = (0..intrinsics.width)
             .map(|u| (u as f64 - intrinsics.cx) as f32)
             .collect();
@@ -379,19 +607,32 @@ impl PixelGrid {
             intrinsics,
             du,
             du2,
-            trusted_w: (1.0 / range.max_m, 1.0 / range.min_m),
         }
     }
 
+    /// Row offset `v − cy`.
+    pub fn dv(&self, row: usize) -> f64 {
+        row as f64 - self.intrinsics.cy
+    }
+
     /// The columns of row offset `dv` where `plane` lies within the trusted
-    /// range by at least `band` (in inverse depth), as `start..end`.
+    /// values by at least `band`, as `start..end`.
     ///
     /// Pixels are chosen by where the plane says they are, never by their
     /// own reading: a reading near the range's ends is cut off by the noise
     /// on one side only (by the sensor, or by the range check), and choosing
     /// by the reading would bias the fit towards the middle of the range.
-    fn columns_in_range(&self, plane: &PixelPlane, dv: f64, band: f64) -> (usize, usize) {
-        let (lo, hi) = (self.trusted_w.0 + band, self.trusted_w.1 - band);
+    fn columns_in_range(
+        &self,
+        plane: &PixelPlane,
+        domain: &ValueDomain,
+        dv: f64,
+        band: f64,
+    ) -> (usize, usize) {
+        let (lo, hi) = (
+            f64::from(domain.trusted.0) + band,
+            f64::from(domain.trusted.1) - band,
+        );
         let base = plane.c0 + plane.cv * dv;
         let width = self.du.len();
         if lo >= hi {
@@ -413,79 +654,78 @@ impl PixelGrid {
         (start, end.max(start))
     }
 
-    /// Row offset `v − cy`.
-    pub fn dv(&self, row: usize) -> f64 {
-        row as f64 - self.intrinsics.cy
-    }
-
     /// The moments of the pixels of every `row_step`-th row (from `first_row`)
-    /// whose inverse depth lies within `band` of `plane`, among the pixels
-    /// where the plane is within the trusted range by at least `band`.
+    /// whose value lies within `band` of `plane` (both in the frame's value
+    /// units), among the pixels where the plane is within the trusted values
+    /// by at least `band`.
     ///
-    /// Eight pixels at a time; sums over a row in f32 (residuals are small, so
-    /// nothing is lost), rows added in f64 in order: the result depends on the
-    /// input alone. Pixels without a reading are `+∞` and fail the band test.
-    pub fn moments_within(
+    /// Sums over a row in f32 lanes (residuals are small, so nothing is
+    /// lost), rows added in f64 in order: the result depends on the input
+    /// alone. Where the processor has AVX2, the same loop runs eight lanes
+    /// at a time.
+    pub fn moments_within<T: FitValue>(
         &self,
-        image: &InverseDepthImage,
+        frame: &Frame<T>,
+        domain: &ValueDomain,
         plane: &PixelPlane,
         band: f64,
         first_row: usize,
         row_step: usize,
     ) -> DisparityMoments {
-        let width = image.width.min(self.du.len());
-        let band_f64 = band;
-        let band = band as f32;
-        let band8 = f32x8::splat(band);
-        let cu = f32x8::splat(plane.cu as f32);
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            #[allow(unsafe_code)]
+            return unsafe {
+                self.moments_within_avx2(frame, domain, plane, band, first_row, row_step)
+            };
+        }
+        self.moments_within_any(frame, domain, plane, band, first_row, row_step)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn moments_within_avx2<T: FitValue>(
+        &self,
+        frame: &Frame<T>,
+        domain: &ValueDomain,
+        plane: &PixelPlane,
+        band: f64,
+        first_row: usize,
+        row_step: usize,
+    ) -> DisparityMoments {
+        self.moments_within_any(frame, domain, plane, band, first_row, row_step)
+    }
+
+    #[inline(always)]
+    fn moments_within_any<T: FitValue>(
+        &self,
+        frame: &Frame<T>,
+        domain: &ValueDomain,
+        plane: &PixelPlane,
+        band: f64,
+        first_row: usize,
+        row_step: usize,
+    ) -> DisparityMoments {
+        let width = frame.width.min(self.du.len());
         let mut total = DisparityMoments::default();
-        let load = |v: &[f32], at: usize| {
-            f32x8::from(<[f32; 8]>::try_from(&v[at..at + 8]).unwrap_or([f32::INFINITY; 8]))
-        };
-        for row in (first_row..image.height).step_by(row_step.max(1)) {
+        for row in (first_row..frame.height).step_by(row_step.max(1)) {
             let dv = self.dv(row);
-            let (start, end) = self.columns_in_range(plane, dv, band_f64);
+            let (start, end) = self.columns_in_range(plane, domain, dv, band);
             let end = end.min(width);
             if start >= end {
                 continue;
             }
-            let base = (plane.c0 + plane.cv * dv) as f32;
-            let base8 = f32x8::splat(base);
-            let pixels = &image.w[row * image.width..row * image.width + width];
-            let mut s = [f32x8::ZERO; 6];
-            let chunks = (end - start) / 8;
-            for k in 0..chunks {
-                let at = start + k * 8;
-                let w = load(pixels, at);
-                let du = load(&self.du, at);
-                let du2 = load(&self.du2, at);
-                let r = w - (base8 + cu * du);
-                let inside = r.abs().simd_lt(band8);
-                let r = r & inside;
-                s[0] += f32x8::ONE & inside;
-                s[1] += du & inside;
-                s[2] += du2 & inside;
-                s[3] += r;
-                s[4] += du * r;
-                s[5] += r * r;
-            }
-            let mut row_sums: [f64; 6] =
-                std::array::from_fn(|i| s[i].to_array().iter().map(|&v| f64::from(v)).sum());
-            // The columns past the last full eight.
-            let tail = start + chunks * 8..end;
-            for (&w, &du) in pixels[tail.clone()].iter().zip(&self.du[tail]) {
-                let r = w - (base + plane.cu as f32 * du);
-                if r.abs() < band {
-                    let (du, r) = (f64::from(du), f64::from(r));
-                    row_sums[0] += 1.0;
-                    row_sums[1] += du;
-                    row_sums[2] += du * du;
-                    row_sums[3] += r;
-                    row_sums[4] += du * r;
-                    row_sums[5] += r * r;
-                }
-            }
-            total.add_row(dv, &row_sums);
+            let values = &frame.values[row * frame.width + start..row * frame.width + end];
+            let sums = row_sums(
+                values,
+                &self.du[start..end],
+                &self.du2[start..end],
+                (plane.c0 + plane.cv * dv) as f32,
+                plane.cu as f32,
+                band as f32,
+            );
+            total.add_row(dv, &sums);
         }
         total
     }
@@ -590,19 +830,23 @@ mod tests {
                     .push(truth.at(u as f64 - i.cx, v as f64 - i.cy) as f32);
             }
         }
-        let grid = PixelGrid::new(
-            i,
-            DepthRange {
-                min_m: 0.1,
-                max_m: 100.0,
-            },
-        );
+        let grid = PixelGrid::new(i);
+        let domain = ValueDomain {
+            offset: 0.0,
+            scale: 1.0,
+            trusted: (0.01, 10.0),
+        };
         let start = PixelPlane {
             c0: 0.81,
             cu: 0.0,
             cv: 0.0,
         };
-        let m = grid.moments_within(&image, &start, 0.1, 0, 1);
+        let frame = Frame {
+            values: &image.w,
+            width: image.width,
+            height: image.height,
+        };
+        let m = grid.moments_within(&frame, &domain, &start, 0.1, 0, 1);
         assert_eq!(m.count, (i.width * i.height) as f64);
         let fit = m.solve(&start).unwrap();
         assert!((fit.plane.c0 - truth.c0).abs() < 1e-6, "{:?}", fit.plane);

@@ -7,7 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::disparity::{InverseDepthConverter, InverseDepthImage, PixelGrid};
+use super::disparity::{InverseDepthConverter, InverseDepthImage, PixelGrid, ValueDomain};
 
 pub use groundcal_hal::depth::{depth_sigma_m, DepthModel, Intrinsics, RAW_NO_READING};
 
@@ -185,7 +185,7 @@ impl DepthCamera {
             ray_right,
             ray_up,
             inverse_depth: InverseDepthConverter::new(encoding, &intrinsics, range),
-            grid: PixelGrid::new(intrinsics, range),
+            grid: PixelGrid::new(intrinsics),
         }
     }
 
@@ -193,6 +193,16 @@ impl DepthCamera {
     /// into `image`, reusing its memory.
     pub fn inverse_depth_into(&self, pixels: &[u16], image: &mut InverseDepthImage) {
         self.inverse_depth.convert_into(pixels, image);
+    }
+
+    /// The domain the ground fit reads frames in (raw values as they are).
+    pub fn value_domain(&self) -> ValueDomain {
+        self.inverse_depth.domain()
+    }
+
+    /// Whether the ground fit reads frames as they are, with no conversion.
+    pub fn fits_raw_values(&self) -> bool {
+        self.inverse_depth.reads_raw()
     }
 
     /// The pixel offsets the ground fit works with.

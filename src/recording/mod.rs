@@ -12,7 +12,7 @@ pub mod writer;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use crate::depth_image::{parse_fakenect_pgm, DepthImage};
+use crate::depth_image::{parse_fakenect_pgm_into, DepthImage};
 use dump::{parse_index, DumpEntry, EntryKind};
 use poses::{parse_poses, PoseRecord};
 use session::Session;
@@ -69,6 +69,18 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(
 
 /// Reads a whole file, refusing ones too large to be an input of this kind.
 pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
+    let mut bytes = Vec::new();
+    read_bounded_into(path, max_bytes, &mut bytes)?;
+    Ok(bytes)
+}
+
+/// [`read_bounded`] into a buffer that is reused from file to file (the
+/// replay's frames: fresh memory costs page faults every time).
+pub fn read_bounded_into(
+    path: &Path,
+    max_bytes: u64,
+    bytes: &mut Vec<u8>,
+) -> Result<(), InputError> {
     use std::io::Read;
     let file = std::fs::File::open(path)
         .map_err(|e| InputError::new(path, None, format!("cannot open: {e}")))?;
@@ -77,9 +89,10 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> 
         .metadata()
         .map(|m| m.len().min(max_bytes + 1))
         .unwrap_or(0);
-    let mut bytes = Vec::with_capacity(expected as usize + 1);
+    bytes.clear();
+    bytes.reserve(expected as usize + 1);
     file.take(max_bytes + 1)
-        .read_to_end(&mut bytes)
+        .read_to_end(bytes)
         .map_err(|e| InputError::new(path, None, format!("cannot read: {e}")))?;
     if bytes.len() as u64 > max_bytes {
         return Err(InputError::new(
@@ -88,7 +101,7 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> 
             format!("larger than {max_bytes} bytes: not an input of this kind"),
         ));
     }
-    Ok(bytes)
+    Ok(())
 }
 
 /// Largest `session.json`, `poses.jsonl` or `INDEX.txt` accepted.
@@ -199,25 +212,46 @@ impl Recording {
 
     /// Reads one depth frame, with its bytes (for the digest).
     pub fn read_depth_frame(&self, name: &str) -> Result<(DepthImage, Vec<u8>), InputError> {
+        let mut bytes = Vec::new();
+        let mut pixels = Vec::new();
+        self.read_depth_frame_into(name, &mut bytes, &mut pixels)?;
+        let intrinsics = self.session.kinect.intrinsics;
+        let image = DepthImage {
+            width: intrinsics.width,
+            height: intrinsics.height,
+            pixels,
+        };
+        Ok((image, bytes))
+    }
+
+    /// [`Recording::read_depth_frame`] into buffers reused from frame to
+    /// frame: the file's bytes, and its pixels (the session's size).
+    pub fn read_depth_frame_into(
+        &self,
+        name: &str,
+        bytes: &mut Vec<u8>,
+        pixels: &mut Vec<u16>,
+    ) -> Result<(), InputError> {
         let path = self.kinect_path(name);
         let intrinsics = self.session.kinect.intrinsics;
-        let bytes = read_bounded(
+        read_bounded_into(
             &path,
             fakenect_frame_len(intrinsics.width, intrinsics.height) as u64,
+            bytes,
         )?;
-        let image = parse_fakenect_pgm(&path, &bytes)
+        let (width, height) = parse_fakenect_pgm_into(&path, bytes, pixels)
             .map_err(|e| InputError::new(&path, None, e.to_string()))?;
-        if image.width != intrinsics.width || image.height != intrinsics.height {
+        if width != intrinsics.width || height != intrinsics.height {
             return Err(InputError::new(
                 &path,
                 None,
                 format!(
                     "frame is {}×{}, session.json says {}×{}",
-                    image.width, image.height, intrinsics.width, intrinsics.height
+                    width, height, intrinsics.width, intrinsics.height
                 ),
             ));
         }
-        Ok((image, bytes))
+        Ok(())
     }
 
     /// The text files' bytes (session.json, poses.jsonl, INDEX.txt).

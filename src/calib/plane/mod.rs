@@ -17,8 +17,9 @@
 //!    pixel: the maximum-likelihood plane, unbiased, from moment sums. The
 //!    paper's 2σ rejection becomes a rejection in inverse depth with one σ
 //!    for the whole frame, corrected for the truncation so that `k·σ` means
-//!    what it says; iterations on a subsample of one frame until they settle,
-//!    then passes over every pixel of every frame.
+//!    what it says; iterations on every eighth row of one frame until they
+//!    settle, then a pass over every second row and one (rarely more) over
+//!    every pixel of every frame.
 //! 3. **A covariance** of `(a, b, c, d)` from the fit, for the solve to weight
 //!    by.
 //!
@@ -35,8 +36,11 @@ use std::str::FromStr;
 use nalgebra::{Matrix4, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::disparity::{truncated_variance_factor, DisparityMoments, InverseDepthImage, PixelGrid};
-use super::geometry::{angle_between, Plane};
+use super::disparity::{
+    truncated_variance_factor, DisparityMoments, FitValue, Frame, InverseDepthImage, PixelGrid,
+    ValueDomain,
+};
+use super::geometry::Plane;
 use super::sensor::{DepthCamera, PointCloud};
 
 /// What is known about the ground before looking: where "up" is and how high
@@ -63,7 +67,9 @@ impl GroundPrior {
 
     /// Whether a plane is one the prior allows as the ground.
     pub fn admits(&self, plane: &Plane) -> bool {
-        if angle_between(&plane.normal, &self.up) > self.up_tolerance {
+        // The cone test as a dot product (the search asks a thousand times).
+        let cos = plane.normal.dot(&self.up) / (plane.normal.norm() * self.up.norm());
+        if cos.is_nan() || cos < self.up_tolerance.min(std::f64::consts::PI).cos() {
             return false;
         }
         match self.height {
@@ -162,12 +168,12 @@ impl Default for PlaneFitSettings {
             min_points: 500,
             min_ground_support: 0.02,
             min_lower_support: 0.03,
-            cell_size: 16,
+            cell_size: 24,
             planar_cell_sigmas: 3.0,
             agreement_sigmas: 4.0,
             cell_slack_deg: 5.0,
             cell_slack_mm: 50.0,
-            coarse_row_step: 4,
+            coarse_row_step: 8,
             paper_sample_size: 3000,
             paper_threshold_sigmas: 3.0,
             paper_coarse_stride: 8,
@@ -228,16 +234,70 @@ pub fn fit_ground(
     settings: &PlaneFitSettings,
     buffers: &mut FitBuffers,
 ) -> Result<GroundFit, PlaneFitError> {
-    buffers
-        .images
-        .resize_with(frames.len(), InverseDepthImage::default);
-    for (frame, image) in frames.iter().zip(buffers.images.iter_mut()) {
-        camera.inverse_depth_into(frame, image);
+    let domain = camera.value_domain();
+    let width = camera.intrinsics().width;
+    let height = camera.intrinsics().height;
+    let frame = |values| Frame {
+        values,
+        width,
+        height: (values.len() / width.max(1)).min(height),
+    };
+    if camera.fits_raw_values() {
+        // Raw Kinect frames are fitted as they are: no pixel is converted.
+        let raw: Vec<Frame<u16>> = frames.iter().map(|f| frame(f)).collect();
+        let valid = raw.iter().map(|f| f.count_trusted(&domain)).collect();
+        fit_frames(
+            &raw,
+            valid,
+            frames,
+            camera,
+            prior,
+            settings,
+            &mut buffers.cloud,
+        )
+    } else {
+        buffers
+            .images
+            .resize_with(frames.len(), InverseDepthImage::default);
+        for (pixels, image) in frames.iter().zip(buffers.images.iter_mut()) {
+            camera.inverse_depth_into(pixels, image);
+        }
+        let images = &buffers.images[..frames.len()];
+        let converted: Vec<Frame<f32>> = images
+            .iter()
+            .map(|i| Frame {
+                values: &i.w,
+                width: i.width,
+                height: i.height,
+            })
+            .collect();
+        let valid = images.iter().map(|i| i.valid).collect();
+        fit_frames(
+            &converted,
+            valid,
+            frames,
+            camera,
+            prior,
+            settings,
+            &mut buffers.cloud,
+        )
     }
-    let images = &buffers.images[..frames.len()];
-    let valid_points: usize = images.iter().map(|i| i.valid).sum();
+}
+
+/// The fit of frames in one value domain: search, then refine.
+fn fit_frames<T: FitValue>(
+    frames: &[Frame<T>],
+    valid: Vec<usize>,
+    pixels: &[&[u16]],
+    camera: &DepthCamera,
+    prior: &GroundPrior,
+    settings: &PlaneFitSettings,
+    cloud: &mut PointCloud,
+) -> Result<GroundFit, PlaneFitError> {
+    let domain = camera.value_domain();
+    let valid_points: usize = valid.iter().sum();
     let needed = settings.min_points.max(3);
-    if valid_points < needed || images.is_empty() {
+    if valid_points < needed || frames.is_empty() {
         return Err(PlaneFitError::TooFewPoints {
             found: valid_points,
             needed,
@@ -252,29 +312,25 @@ pub fn fit_ground(
     };
     let grid = camera.grid();
     // The search looks at the frame with the most readings.
-    let searched = images.iter().enumerate().fold(0, |best, (i, image)| {
-        if image.valid > images[best].valid {
-            i
-        } else {
-            best
-        }
-    });
-    let found = search::find_ground(&images[searched], grid, prior, settings, no_ground)?;
+    let searched =
+        (0..frames.len()).fold(0, |best, i| if valid[i] > valid[best] { i } else { best });
+    let found = search::find_ground(&frames[searched], &domain, grid, prior, settings, no_ground)?;
 
     let fit = match settings.method {
         GroundFitMethod::Disparity => {
-            fit_in_inverse_depth(images, searched, grid, &found, settings).ok_or_else(no_ground)?
+            fit_in_inverse_depth(frames, searched, &domain, grid, &found, settings)
+                .ok_or_else(no_ground)?
         }
         GroundFitMethod::Paper => {
-            let start = found
-                .plane
+            let start = domain
+                .to_inverse_depth(&found.plane)
                 .to_plane(&grid.intrinsics)
                 .ok_or_else(no_ground)?;
-            buffers.cloud.clear();
-            for frame in frames {
-                camera.append_points(frame, &mut buffers.cloud);
+            cloud.clear();
+            for frame in pixels {
+                camera.append_points(frame, cloud);
             }
-            paper::fit(&[&buffers.cloud], &start, settings).ok_or_else(no_ground)?
+            paper::fit(&[cloud], &start, settings).ok_or_else(no_ground)?
         }
     };
     let fraction = fit.inliers as f64 / valid_points as f64;
@@ -294,15 +350,17 @@ pub fn fit_ground(
     })
 }
 
-/// Fewest passes over every pixel, and most: the second pass decouples the
-/// result from the subsample the band was centred by.
+/// Fewest passes over the frames, and most: the first over every second row,
+/// the others over every row.
 const FINE_PASSES: (usize, usize) = (2, 4);
 
-/// Least squares in inverse depth with the rejection of the paper, from the
-/// plane the search found.
-fn fit_in_inverse_depth(
-    images: &[InverseDepthImage],
+/// Least squares in inverse depth (in the frames' value units, which are
+/// affine in it) with the rejection of the paper, from the plane the search
+/// found.
+fn fit_in_inverse_depth<T: FitValue>(
+    frames: &[Frame<T>],
     first: usize,
+    domain: &ValueDomain,
     grid: &PixelGrid,
     found: &search::Found,
     settings: &PlaneFitSettings,
@@ -320,15 +378,22 @@ fn fit_in_inverse_depth(
     // 1. One frame, every few rows, until the plane and the band settle.
     for _ in 0..settings.max_iterations.max(1) {
         iterations += 1;
-        let m = grid.moments_within(&images[first], &plane, band, 0, settings.coarse_row_step);
-        let correction = m.solve(&plane)?;
+        let m = grid.moments_within(
+            &frames[first],
+            domain,
+            &plane,
+            band,
+            0,
+            settings.coarse_row_step,
+        );
+        let (next_plane, rss) = m.solve_plane(&plane)?;
         // σ of the kept residuals, corrected for the truncation at ±band.
-        let kept = (correction.rss / (m.count - 3.0).max(1.0)).max(1e-18);
+        let kept = (rss / (m.count - 3.0).max(1.0)).max(1e-18);
         let next_sigma = (kept / truncated_variance_factor(band / sigma)).sqrt();
         let next_band = (k * next_sigma).min(widest);
-        let moved = correction.plane.largest_difference(&plane, intrinsics);
+        let moved = next_plane.largest_difference(&plane, intrinsics);
         let settled = moved < 0.05 * next_sigma && (next_band - band).abs() < 0.01 * band;
-        plane = correction.plane;
+        plane = next_plane;
         sigma = next_sigma;
         band = next_band;
         if settled {
@@ -336,34 +401,42 @@ fn fit_in_inverse_depth(
         }
     }
 
-    // 2. Every pixel of every frame.
+    // 2. Every frame: every second row, then every row, until the plane
+    //    moves by less than a fifth of a pixel's noise anywhere in the
+    //    image. The pass on every row is the one kept; the one before it
+    //    centres its band, so that the result hardly depends on where the
+    //    subsample put it.
     let mut last = None;
     for pass in 0..FINE_PASSES.1 {
         iterations += 1;
+        let row_step = if pass == 0 { 2 } else { 1 };
         let mut m = DisparityMoments::default();
-        for image in images {
-            m.add(&grid.moments_within(image, &plane, band, 0, 1));
+        for frame in frames {
+            m.add(&grid.moments_within(frame, domain, &plane, band, 0, row_step));
         }
         let correction = m.solve(&plane)?;
         let moved = correction.plane.largest_difference(&plane, intrinsics);
         last = Some((m, plane, correction));
         plane = correction.plane;
-        if pass + 1 >= FINE_PASSES.0 && moved < 0.05 * sigma {
+        if pass + 1 >= FINE_PASSES.0 && moved < 0.2 * sigma {
             break;
         }
     }
     let (m, taken_to, correction) = last?;
 
-    // 3. The plane, its covariance and its residuals.
+    // 3. The plane, its covariance and its residuals, in inverse depth.
     let dof = (m.count - 3.0).max(1.0);
     let variance = correction.rss / dof;
-    let covariance = correction
-        .plane
-        .plane_covariance(intrinsics, &(correction.inverse_information * variance))?;
-    let result = correction.plane.to_plane(intrinsics)?;
+    let in_inverse_depth = domain.to_inverse_depth(&correction.plane);
+    let covariance = in_inverse_depth.plane_covariance(
+        intrinsics,
+        &(correction.inverse_information * (variance * domain.scale * domain.scale)),
+    )?;
+    let result = in_inverse_depth.to_plane(intrinsics)?;
     // Mean inverse depth of the inliers, to express the RMS in metres.
-    let mean_w =
+    let mean_value =
         (m.count * taken_to.c0 + taken_to.cu * m.su + taken_to.cv * m.sv + m.sr) / m.count.max(1.0);
+    let mean_w = domain.offset + domain.scale * mean_value;
     tracing::debug!(
         iterations,
         inliers = m.count,
@@ -376,7 +449,7 @@ fn fit_in_inverse_depth(
         covariance,
         inliers: m.count as usize,
         valid_points: 0,
-        rms_m: variance.sqrt() / (mean_w * mean_w).max(1e-12),
+        rms_m: variance.sqrt() * domain.scale.abs() / (mean_w * mean_w).max(1e-12),
         iterations,
         method: GroundFitMethod::Disparity,
     })

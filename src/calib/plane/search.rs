@@ -8,13 +8,14 @@
 //! image, the same for near and far pixels, so it can be found by grouping.
 //!
 //! 1. **Cells.** The frame is cut into `cell_size`² cells; each cell's own
-//!    least-squares plane in inverse depth (every second pixel) and its RMS.
+//!    least-squares plane in inverse depth (every fourth pixel both ways) and
+//!    its RMS.
 //!    A cell is planar when its RMS is within a few times the frame's noise,
 //!    estimated as a low quantile of all cells' RMS.
 //! 2. **Grouping.** Planar cells whose plane the prior admits (with some
-//!    slack for a cell's own noise), nearest first, each join the first group
-//!    whose pooled plane they agree with at their four corners, or start a
-//!    group. A group's plane is the least-squares plane of all its cells'
+//!    slack for a cell's own noise), nearest first, each join the largest
+//!    group whose pooled plane they agree with at their four corners, or
+//!    start a group. A group's plane is the least-squares plane of all its cells'
 //!    pixels, so it sharpens as it grows.
 //! 3. **Support.** Each group's plane is scored by the pixels of every planar
 //!    cell that agrees with it; the prior is then applied strictly.
@@ -28,32 +29,42 @@
 //! frame alone.
 
 use super::{GroundPrior, PlaneFitError, PlaneFitSettings};
-use crate::calib::disparity::{DisparityMoments, InverseDepthImage, PixelGrid, PixelPlane};
+use crate::calib::disparity::{
+    DisparityMoments, FitValue, Frame, PixelGrid, PixelPlane, ValueDomain,
+};
 use crate::calib::geometry::{angle_between, Plane};
 
 /// One cell's plane.
 #[derive(Debug, Clone, Copy)]
 struct Cell {
-    /// Sums of `w` itself (residuals to the zero plane), global offsets.
+    /// Sums of the value itself (residuals to the zero plane), global offsets.
     moments: DisparityMoments,
+    /// The cell's plane in the frame's value units.
     plane: PixelPlane,
     rms: f64,
-    /// Pixel offsets `(u − cx, v − cy)` of the cell's corners.
-    corners: [(f64, f64); 4],
+    /// Pixel offsets `(u − cx, v − cy)` of the cell's centre, and half its
+    /// extent.
+    centre: (f64, f64),
+    half: (f64, f64),
     /// Inverse depth at the cell's centre: larger is nearer.
     centre_w: f64,
 }
 
 impl Cell {
-    /// Whether the cell's plane lies within `band` of `plane` at every corner.
+    /// Whether the cell's plane lies within `band` of `plane` at every corner
+    /// (the largest difference of two planes over a rectangle is at a corner:
+    /// at the centre, plus the slopes' differences times the half extents).
     fn agrees_with(&self, plane: &PixelPlane, band: f64) -> bool {
-        self.corners
-            .iter()
-            .all(|&(du, dv)| (self.plane.at(du, dv) - plane.at(du, dv)).abs() < band)
+        let (du, dv) = self.centre;
+        let at_centre = (self.plane.at(du, dv) - plane.at(du, dv)).abs();
+        at_centre
+            + (self.plane.cu - plane.cu).abs() * self.half.0
+            + (self.plane.cv - plane.cv).abs() * self.half.1
+            < band
     }
 }
 
-/// The zero plane: moments taken to it hold `w` itself.
+/// The zero plane: moments taken to it hold the values themselves.
 const ZERO: PixelPlane = PixelPlane {
     c0: 0.0,
     cu: 0.0,
@@ -63,67 +74,111 @@ const ZERO: PixelPlane = PixelPlane {
 /// The ground the search found, to start the fit from.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Found {
+    /// In the frame's value units.
     pub plane: PixelPlane,
-    /// The frame's noise in inverse depth, 1/m, from the cells.
+    /// The frame's noise in value units, from the cells.
     pub noise: f64,
 }
 
-/// Every cell of the frame with enough readings for a plane.
-fn cells(image: &InverseDepthImage, grid: &PixelGrid, size: usize) -> (Vec<Cell>, f64) {
-    let size = size.max(4);
+/// Readings of each cell per side (16 in all, evenly spread): a cell's plane
+/// needs only a few, and the search must cost little next to the fit.
+const CELL_SAMPLES: usize = 4;
+
+/// Every cell of the frame with enough trusted readings for a plane, and the
+/// number of trusted readings looked at.
+fn cells<T: FitValue>(
+    frame: &Frame<T>,
+    domain: &ValueDomain,
+    grid: &PixelGrid,
+    size: usize,
+) -> (Vec<Cell>, f64) {
+    let step = (size / CELL_SAMPLES).max(1);
+    let size = step * CELL_SAMPLES;
     let mut out = Vec::new();
     let mut sampled = 0.0;
-    let step = 2;
-    let min_count = (size / step) * (size / step) / 2;
+    let per_side = CELL_SAMPLES;
+    let min_count = (per_side * per_side / 2).max(4) as f64;
+    let (lo, hi) = domain.trusted;
     let cx = grid.intrinsics.cx;
-    for top in (0..image.height.saturating_sub(size - 1)).step_by(size) {
-        for left in (0..image.width.saturating_sub(size - 1)).step_by(size) {
-            let mut m = DisparityMoments::default();
-            for row in (top..top + size).step_by(step) {
-                let dv = grid.dv(row);
-                let mut row_sums = [0.0f64; 6];
-                for u in (left..left + size).step_by(step) {
-                    let w = image.w[row * image.width + u];
-                    if w.is_finite() {
-                        let (du, w) = (u as f64 - cx, f64::from(w));
-                        row_sums[0] += 1.0;
-                        row_sums[1] += du;
-                        row_sums[2] += du * du;
-                        row_sums[3] += w;
-                        row_sums[4] += du * w;
-                        row_sums[5] += w * w;
+    for top in (0..frame.height.saturating_sub(size - 1)).step_by(size) {
+        for left in (0..frame.width.saturating_sub(size - 1)).step_by(size) {
+            // Sums about the cell's first reading and centre, in f64.
+            let (cu, cv) = ((left + size / 2) as f64 - cx, grid.dv(top + size / 2));
+            let mut reference = None;
+            let mut local = [0.0f64; 10];
+            for row in (top + step / 2..top + size).step_by(step) {
+                let b = grid.dv(row) - cv;
+                for u in (left + step / 2..left + size).step_by(step) {
+                    let value = frame.at(u, row);
+                    if !(value >= lo && value <= hi) {
+                        continue;
+                    }
+                    let value = f64::from(value);
+                    let r = *reference.get_or_insert(value);
+                    let (a, y) = (u as f64 - cx - cu, value - r);
+                    for (sum, term) in local.iter_mut().zip([
+                        1.0,
+                        a,
+                        b,
+                        a * a,
+                        a * b,
+                        b * b,
+                        y,
+                        a * y,
+                        b * y,
+                        y * y,
+                    ]) {
+                        *sum += term;
                     }
                 }
-                let mut row_moments = DisparityMoments::default();
-                let [n, su, suu, sr, sur, srr] = row_sums;
-                row_moments.count = n;
-                row_moments.su = su;
-                row_moments.sv = dv * n;
-                row_moments.suu = suu;
-                row_moments.suv = dv * su;
-                row_moments.svv = dv * dv * n;
-                row_moments.sr = sr;
-                row_moments.sur = sur;
-                row_moments.svr = dv * sr;
-                row_moments.srr = srr;
-                m.add(&row_moments);
             }
-            sampled += m.count;
-            if m.count < min_count as f64 {
-                continue;
-            }
-            let Some(fit) = m.solve(&ZERO) else {
+            let [n, sa, sb, saa, sab, sbb, sy, say, sby, syy] = local;
+            sampled += n;
+            let Some(r) = reference.filter(|_| n >= min_count) else {
                 continue;
             };
-            let (u0, u1) = (left as f64 - cx, (left + size - 1) as f64 - cx);
-            let (v0, v1) = (grid.dv(top), grid.dv(top + size - 1));
-            let centre = ((u0 + u1) / 2.0, (v0 + v1) / 2.0);
+            // The same sums about the principal point and zero.
+            let m = DisparityMoments {
+                count: n,
+                su: sa + n * cu,
+                sv: sb + n * cv,
+                suu: saa + 2.0 * cu * sa + n * cu * cu,
+                suv: sab + cu * sb + cv * sa + n * cu * cv,
+                svv: sbb + 2.0 * cv * sb + n * cv * cv,
+                sr: sy + n * r,
+                sur: say + r * sa + cu * sy + n * cu * r,
+                svr: sby + r * sb + cv * sy + n * cv * r,
+                srr: syy + 2.0 * r * sy + n * r * r,
+            };
+            // The cell's own plane, solved about its centre for accuracy.
+            let centred = DisparityMoments {
+                count: n,
+                su: sa,
+                sv: sb,
+                suu: saa,
+                suv: sab,
+                svv: sbb,
+                sr: sy,
+                sur: say,
+                svr: sby,
+                srr: syy,
+            };
+            let Some((local_plane, rss)) = centred.solve_plane(&ZERO) else {
+                continue;
+            };
+            let plane = PixelPlane {
+                c0: local_plane.c0 + r - local_plane.cu * cu - local_plane.cv * cv,
+                cu: local_plane.cu,
+                cv: local_plane.cv,
+            };
+            let half = (size - 1) as f64 / 2.0;
             out.push(Cell {
                 moments: m,
-                plane: fit.plane,
-                rms: (fit.rss / (m.count - 3.0).max(1.0)).sqrt(),
-                corners: [(u0, v0), (u0, v1), (u1, v0), (u1, v1)],
-                centre_w: fit.plane.at(centre.0, centre.1),
+                plane,
+                rms: (rss / (n - 3.0).max(1.0)).sqrt(),
+                centre: (left as f64 + half - cx, grid.dv(top) + half),
+                half: (half, half),
+                centre_w: domain.offset + domain.scale * (local_plane.c0 + r),
             });
         }
     }
@@ -135,21 +190,27 @@ fn cells(image: &InverseDepthImage, grid: &PixelGrid, size: usize) -> (Vec<Cell>
 struct Group {
     moments: DisparityMoments,
     plane: PixelPlane,
+    /// Pixels when the plane was last solved: it is solved again once the
+    /// group has grown by a quarter.
+    solved_at: f64,
 }
 
 /// The most groups kept; later cells that agree with none are ignored.
 const MAX_GROUPS: usize = 48;
 
 /// Searches the frame for the ground the prior describes.
-pub fn find_ground(
-    image: &InverseDepthImage,
+pub fn find_ground<T: FitValue>(
+    frame: &Frame<T>,
+    domain: &ValueDomain,
     grid: &PixelGrid,
     prior: &GroundPrior,
     settings: &PlaneFitSettings,
     no_ground: impl Fn() -> PlaneFitError,
 ) -> Result<Found, PlaneFitError> {
     let intrinsics = &grid.intrinsics;
-    let (all_cells, sampled) = cells(image, grid, settings.cell_size);
+    // A plane of values in the sensor frame.
+    let to_plane = |p: &PixelPlane| domain.to_inverse_depth(p).to_plane(intrinsics);
+    let (all_cells, sampled) = cells(frame, domain, grid, settings.cell_size);
     if all_cells.is_empty() || sampled <= 0.0 {
         return Err(no_ground());
     }
@@ -174,31 +235,37 @@ pub fn find_ground(
     let mut candidates: Vec<&Cell> = planar
         .iter()
         .copied()
-        .filter(|c| {
-            c.plane
-                .to_plane(intrinsics)
-                .is_some_and(|p| slack.admits(&p))
-        })
+        .filter(|c| to_plane(&c.plane).is_some_and(|p| slack.admits(&p)))
         .collect();
     // Nearest first: their planes are the sharpest. Ties keep image order.
     candidates.sort_by(|a, b| b.centre_w.total_cmp(&a.centre_w));
 
+    // Groups are kept largest first, and a cell joins the largest it agrees
+    // with (most cells join the ground's at the first try).
     let mut groups: Vec<Group> = Vec::new();
     for cell in candidates {
         match groups
             .iter()
             .position(|g| cell.agrees_with(&g.plane, agree_band))
         {
-            Some(i) => {
+            Some(mut i) => {
                 let group = &mut groups[i];
                 group.moments.add(&cell.moments);
-                if let Some(fit) = group.moments.solve(&ZERO) {
-                    group.plane = fit.plane;
+                if group.moments.count >= 1.25 * group.solved_at {
+                    if let Some((plane, _)) = group.moments.solve_plane(&ZERO) {
+                        group.plane = plane;
+                    }
+                    group.solved_at = group.moments.count;
+                }
+                while i > 0 && groups[i - 1].moments.count < groups[i].moments.count {
+                    groups.swap(i - 1, i);
+                    i -= 1;
                 }
             }
             None if groups.len() < MAX_GROUPS => groups.push(Group {
                 moments: cell.moments,
                 plane: cell.plane,
+                solved_at: cell.moments.count,
             }),
             None => {}
         }
@@ -210,10 +277,17 @@ pub fn find_ground(
         plane: Plane,
         support: f64,
     }
+    // Groups too small to win are not scored: a plane's support is at least
+    // its own cells', and at most what the cells that agree with it hold.
+    let smallest = 0.5 * settings.min_ground_support.min(settings.min_lower_support) * sampled;
     let scored: Vec<Scored> = groups
-        .iter()
+        .iter_mut()
+        .filter(|g| g.moments.count >= smallest)
         .filter_map(|g| {
-            let plane = g.plane.to_plane(intrinsics)?;
+            if let Some((plane, _)) = g.moments.solve_plane(&ZERO) {
+                g.plane = plane;
+            }
+            let plane = to_plane(&g.plane)?;
             if !prior.admits(&plane) {
                 return None;
             }
