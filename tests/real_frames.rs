@@ -121,3 +121,113 @@ fn a_prior_that_excludes_the_floor_finds_no_ground() {
     ]);
     assert_eq!(code, 0, "{stderr}");
 }
+
+/// Writes millimetres as a 16-bit grayscale PNG (big-endian samples).
+fn write_png_mm(path: &std::path::Path, width: usize, height: usize, mm: &[u16]) {
+    let file = std::fs::File::create(path).unwrap();
+    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), width as u32, height as u32);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    let mut writer = encoder.write_header().unwrap();
+    let bytes: Vec<u8> = mm.iter().flat_map(|v| v.to_be_bytes()).collect();
+    writer.write_image_data(&bytes).unwrap();
+}
+
+/// PCL's real floor frame made into a corridor: all but three bands of the
+/// floor, a tenth of the valid pixels, become walls and people (vertical
+/// planes 0.9 and 1.4 m away, with the real frame's own noise moved onto
+/// them); the laptop and the box stay.
+/// The floor, now a tenth of the view, is still found where the whole frame
+/// puts it, with the prior of a rough mount (the floor's up within 20°).
+#[test]
+fn a_real_floor_that_is_a_tenth_of_the_view_is_found() {
+    let file = shared().join("data/real/pcl_floor_tilted_frame_20121214T142255.814212_depth.tiff");
+    let (image, _) = groundcal::depth_image::read_depth_image(&file, None).unwrap();
+    let (w, h) = (image.width, image.height);
+    let f = 525.0;
+    // The floor of the whole frame (the first test), optical frame.
+    let n = [0.074, -0.692, -0.718];
+    let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) as f64;
+    let n = n.map(|x: f64| x / norm.sqrt());
+    let d = 0.715;
+    let ray = |u: usize, v: usize| [(u as f64 - 320.0) / f, (v as f64 - 240.0) / f, 1.0];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    // Which pixels are floor, and their real noise along the ray (mm).
+    let floor_depth = |u: usize, v: usize| -d / dot(n, ray(u, v));
+    let valid = image.pixels.iter().filter(|&&z| z > 0).count();
+    // Walls and people stand on the floor: their normal is the horizontal
+    // direction towards the camera, `-z` made perpendicular to the floor's
+    // up (its normal, which points at the camera).
+    let up = n;
+    let towards = {
+        let back = [0.0, 0.0, -1.0];
+        let along = dot(back, up);
+        let h = [back[0] - along * up[0], back[1] - along * up[1], back[2] - along * up[2]];
+        let l = dot(h, h).sqrt();
+        h.map(|x| x / l)
+    };
+    let mut kept_floor = 0;
+    let mut masked = image.pixels.clone();
+    // Keep the floor in three bands of columns (between the people), about a
+    // tenth of the valid pixels; everything else that is floor becomes a
+    // wall or a person.
+    for v in 0..h {
+        for u in 0..w {
+            let i = v * w + u;
+            let z = f64::from(image.pixels[i]) / 1000.0;
+            if z <= 0.0 {
+                continue;
+            }
+            let floor_z = floor_depth(u, v);
+            if (z - floor_z).abs() > 0.03 {
+                continue; // the laptop, the box
+            }
+            if (u / 32) % 7 == 0 {
+                kept_floor += 1;
+                continue;
+            }
+            // A person every 80 columns, a wall behind them.
+            let distance = if (u / 40) % 2 == 0 { 0.9 } else { 1.4 };
+            let surface_z = distance / (-dot(towards, ray(u, v))).max(1e-3);
+            let noisy = surface_z + (z - floor_z);
+            masked[i] = (noisy * 1000.0).round().clamp(1.0, 65535.0) as u16;
+        }
+    }
+    let in_range = masked.iter().filter(|&&z| (500..=5000).contains(&z)).count();
+    println!(
+        "valid {valid}, kept floor {kept_floor}, in range after masking {in_range}, towards {towards:?}"
+    );
+    let dir = std::env::temp_dir().join(format!("groundcal-masked-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("pcl_floor_a_tenth.png");
+    write_png_mm(&png, w, h, &masked);
+    let up_arg = format!("{},{},{}", up[0], up[1], up[2]);
+    let (code, result) = groundcal_json(&[
+        "plane",
+        png.to_str().unwrap(),
+        "--json",
+        "--units",
+        "mm",
+        "--fx",
+        "525",
+        "--fy",
+        "525",
+        "--up",
+        &up_arg,
+        "--up-tolerance",
+        "20",
+    ]);
+    if code == 0 {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    assert_eq!(code, 0, "{result} (the frame is kept in {})", dir.display());
+    let share = result["inliers"].as_f64().unwrap() / result["valid_pixels"].as_f64().unwrap();
+    println!("the floor holds {:.1} % of the valid pixels", share * 100.0);
+    assert!(share <= 0.12, "the floor is {:.1} % of the view", share * 100.0);
+    let p = &result["plane_optical"];
+    let normal = ["a", "b", "c"].map(|k| p[k].as_f64().unwrap());
+    let found_d = p["d_m"].as_f64().unwrap();
+    assert!((found_d - d).abs() <= 0.01, "floor at {found_d} m");
+    let angle = angle_deg(normal, n);
+    assert!(angle <= 1.0, "normal {normal:?} is {angle}° off");
+}

@@ -304,6 +304,14 @@ pub fn find_ground<T: FitValue>(
             })
         })
         .collect();
+    for s in &scored {
+        tracing::debug!(
+            normal = ?s.plane.normal.as_slice(),
+            d = s.plane.d,
+            support = s.support,
+            "ground search: a candidate plane"
+        );
+    }
     let best = scored
         .iter()
         .filter(|s| s.support >= settings.min_ground_support)
