@@ -17,12 +17,20 @@ use groundcal::schedule::Schedule;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
+/// A depth frame of the shared sample recording, by its file name.
+fn sample_pixels(name: &str) -> Vec<u16> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/sample-12/kinect")
+        .join(name);
+    read_depth_image(&path, Some(DepthUnits::Raw11))
+        .expect("the shared sample recording is beside the project")
+        .0
+        .pixels
+}
+
 /// The first depth frame of the shared sample recording (inverse-linear model).
 fn sample_frame() -> (Vec<u16>, DepthCamera) {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/sample-12/kinect/d-1700000000.001000-2001000.pgm");
-    let (image, _) = read_depth_image(&path, Some(DepthUnits::Raw11))
-        .expect("the shared sample recording is beside the project");
+    let pixels = sample_pixels("d-1700000000.001000-2001000.pgm");
     let f = 575.8157389635317;
     let intrinsics = Intrinsics {
         fx: f,
@@ -37,7 +45,7 @@ fn sample_frame() -> (Vec<u16>, DepthCamera) {
         intrinsics,
         DepthRange::default(),
     );
-    (image.pixels, camera)
+    (pixels, camera)
 }
 
 fn ground_fit(c: &mut Criterion) {
@@ -69,6 +77,24 @@ fn ground_fit(c: &mut Criterion) {
             },
         );
     }
+    // A pose as recorded: the sample's first pose has two frames, fused.
+    let second = sample_pixels("d-1700000000.002000-3002000.pgm");
+    let settings = PlaneFitSettings::default();
+    c.bench_function(
+        "ground fit (disparity), one pose of two 640x480 raw frames",
+        |b| {
+            b.iter(|| {
+                fit_ground(
+                    &[black_box(&pixels), black_box(&second)],
+                    &camera,
+                    &prior,
+                    &settings,
+                    &mut buffers,
+                )
+                .unwrap()
+            })
+        },
+    );
     let mut image = InverseDepthImage::default();
     c.bench_function("raw frame to inverse depth only", |b| {
         b.iter(|| camera.inverse_depth_into(black_box(&pixels), &mut image))

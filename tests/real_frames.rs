@@ -162,7 +162,11 @@ fn a_real_floor_that_is_a_tenth_of_the_view_is_found() {
     let towards = {
         let back = [0.0, 0.0, -1.0];
         let along = dot(back, up);
-        let h = [back[0] - along * up[0], back[1] - along * up[1], back[2] - along * up[2]];
+        let h = [
+            back[0] - along * up[0],
+            back[1] - along * up[1],
+            back[2] - along * up[2],
+        ];
         let l = dot(h, h).sqrt();
         h.map(|x| x / l)
     };
@@ -193,7 +197,10 @@ fn a_real_floor_that_is_a_tenth_of_the_view_is_found() {
             masked[i] = (noisy * 1000.0).round().clamp(1.0, 65535.0) as u16;
         }
     }
-    let in_range = masked.iter().filter(|&&z| (500..=5000).contains(&z)).count();
+    let in_range = masked
+        .iter()
+        .filter(|&&z| (500..=5000).contains(&z))
+        .count();
     println!(
         "valid {valid}, kept floor {kept_floor}, in range after masking {in_range}, towards {towards:?}"
     );
@@ -223,7 +230,11 @@ fn a_real_floor_that_is_a_tenth_of_the_view_is_found() {
     assert_eq!(code, 0, "{result} (the frame is kept in {})", dir.display());
     let share = result["inliers"].as_f64().unwrap() / result["valid_pixels"].as_f64().unwrap();
     println!("the floor holds {:.1} % of the valid pixels", share * 100.0);
-    assert!(share <= 0.12, "the floor is {:.1} % of the view", share * 100.0);
+    assert!(
+        share <= 0.12,
+        "the floor is {:.1} % of the view",
+        share * 100.0
+    );
     let p = &result["plane_optical"];
     let normal = ["a", "b", "c"].map(|k| p[k].as_f64().unwrap());
     let found_d = p["d_m"].as_f64().unwrap();
