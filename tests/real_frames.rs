@@ -146,9 +146,9 @@ fn a_real_floor_that_is_a_tenth_of_the_view_is_found() {
     let (w, h) = (image.width, image.height);
     let f = 525.0;
     // The floor of the whole frame (the first test), optical frame.
-    let n = [0.074, -0.692, -0.718];
-    let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) as f64;
-    let n = n.map(|x: f64| x / norm.sqrt());
+    let n: [f64; 3] = [0.074, -0.692, -0.718];
+    let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let n = n.map(|x| x / norm);
     let d = 0.715;
     let ray = |u: usize, v: usize| [(u as f64 - 320.0) / f, (v as f64 - 240.0) / f, 1.0];
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
