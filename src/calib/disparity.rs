@@ -525,6 +525,16 @@ pub struct PixelGrid {
     du2: Vec<f32>,
 }
 
+/// One pass over a frame: the pixels within `band` of `plane`, on every
+/// `rows.1`-th row from `rows.0`.
+struct Pass<'a, T> {
+    frame: &'a Frame<'a, T>,
+    domain: &'a ValueDomain,
+    plane: &'a PixelPlane,
+    band: f64,
+    rows: (usize, usize),
+}
+
 /// Lanes of the per-pixel loops: a fixed number, so that every build (SSE2,
 /// AVX2, NEON) adds the same numbers in the same order and the results are
 /// bit-identical.
@@ -672,41 +682,37 @@ impl PixelGrid {
         first_row: usize,
         row_step: usize,
     ) -> DisparityMoments {
+        let pass = Pass {
+            frame,
+            domain,
+            plane,
+            band,
+            rows: (first_row, row_step),
+        };
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the processor has AVX2, checked just above.
             #[allow(unsafe_code)]
-            return unsafe {
-                self.moments_within_avx2(frame, domain, plane, band, first_row, row_step)
-            };
+            return unsafe { self.moments_avx2(&pass) };
         }
-        self.moments_within_any(frame, domain, plane, band, first_row, row_step)
+        self.moments(&pass)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn moments_within_avx2<T: FitValue>(
-        &self,
-        frame: &Frame<T>,
-        domain: &ValueDomain,
-        plane: &PixelPlane,
-        band: f64,
-        first_row: usize,
-        row_step: usize,
-    ) -> DisparityMoments {
-        self.moments_within_any(frame, domain, plane, band, first_row, row_step)
+    fn moments_avx2<T: FitValue>(&self, pass: &Pass<T>) -> DisparityMoments {
+        self.moments(pass)
     }
 
     #[inline(always)]
-    fn moments_within_any<T: FitValue>(
-        &self,
-        frame: &Frame<T>,
-        domain: &ValueDomain,
-        plane: &PixelPlane,
-        band: f64,
-        first_row: usize,
-        row_step: usize,
-    ) -> DisparityMoments {
+    fn moments<T: FitValue>(&self, pass: &Pass<T>) -> DisparityMoments {
+        let Pass {
+            frame,
+            domain,
+            plane,
+            band,
+            rows: (first_row, row_step),
+        } = *pass;
         let width = frame.width.min(self.du.len());
         let mut total = DisparityMoments::default();
         for row in (first_row..frame.height).step_by(row_step.max(1)) {
