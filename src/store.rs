@@ -13,13 +13,23 @@
 //! "sigma": {...}, "status": "accepted", "provenance": {...}}` with the keys of
 //! the result document (cli.md). Readers take `robot_from_sensor` and check
 //! `kinect_tilt_deg` against the Kinect's tilt: a calibration holds for one
-//! tilt. Every write goes to a temporary file that is fsynced, renamed over
-//! the old one, and the directory fsynced: a reader sees the old file or the
-//! new one, never half of one, even across a power cut.
+//! tilt. Every write goes to a temporary file of its own that is fsynced,
+//! renamed over the old one, and the directory fsynced: a reader sees the old
+//! file or the new one, never half of one, even across a power cut.
+//!
+//! Writers take turns: every change (add, accept or roll back, reject) holds
+//! the store's lock from reading to writing, a mutex for this process's
+//! threads and an exclusive `flock` on `store.lock` for other processes (the
+//! kernel releases it when a process dies, even by SIGKILL). So two taps on
+//! Accept, or two phones, cannot interleave, and the reply names what was
+//! stored. Temporary files left by a process killed while saving are removed
+//! when the daemon starts ([`Store::remove_stale_temporaries`]).
 
-use std::fs::{self, File};
+use std::fs::{self, File, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -51,14 +61,27 @@ fn io<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -
     }
 }
 
-/// Writes `bytes` to `path` atomically and durably.
+/// Temporary files of the store's writes: `.NAME.tmp-PID-N`.
+const TEMPORARY_MARK: &str = ".tmp-";
+
+/// Writes `bytes` to `path` atomically and durably, through a temporary file
+/// whose name no other write shares (this process's id and a counter).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
+    static WRITES: AtomicU64 = AtomicU64::new(0);
     let dir = path.parent().unwrap_or(Path::new("."));
     fs::create_dir_all(dir).map_err(io(dir, "cannot create the directory"))?;
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
-    let temp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let temp = dir.join(format!(
+        ".{name}{TEMPORARY_MARK}{}-{}",
+        std::process::id(),
+        WRITES.fetch_add(1, Ordering::Relaxed)
+    ));
     let result = (|| {
-        let mut file = File::create(&temp).map_err(io(&temp, "cannot create"))?;
+        let mut file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temp)
+            .map_err(io(&temp, "cannot create"))?;
         file.write_all(bytes).map_err(io(&temp, "cannot write"))?;
         file.sync_all().map_err(io(&temp, "cannot sync"))?;
         fs::rename(&temp, path).map_err(io(path, "cannot replace"))?;
@@ -70,6 +93,15 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
         let _ = fs::remove_file(&temp);
     }
     result
+}
+
+/// The store's writers in this process, one at a time.
+static WRITERS: Mutex<()> = Mutex::new(());
+
+/// Held while a change is made: this process's turn, and the lock file's.
+struct WriteTurn {
+    _file: File,
+    _turn: MutexGuard<'static, ()>,
 }
 
 /// One entry of the history.
@@ -103,6 +135,59 @@ impl Store {
         self.dir.join("history")
     }
 
+    /// Waits for the store's turn: every other writer, in this process or
+    /// another, has finished.
+    fn turn(&self) -> Result<WriteTurn, StoreError> {
+        // A writer that panicked left nothing half-written (writes are atomic).
+        let turn = WRITERS
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        fs::create_dir_all(&self.dir).map_err(io(&self.dir, "cannot create the directory"))?;
+        let path = self.dir.join("store.lock");
+        let file = OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&path)
+            .map_err(io(&path, "cannot open the lock file"))?;
+        file.lock().map_err(io(&path, "cannot lock"))?;
+        Ok(WriteTurn {
+            _file: file,
+            _turn: turn,
+        })
+    }
+
+    /// Removes the temporary files of writes that never finished (a process
+    /// killed while saving), and returns how many. The daemon calls it at
+    /// start; it waits for the store's turn, so no write in progress is hit.
+    pub fn remove_stale_temporaries(&self) -> Result<usize, StoreError> {
+        let _turn = self.turn()?;
+        let mut removed = 0;
+        for dir in [self.dir.clone(), self.history_dir()] {
+            let listing = match fs::read_dir(&dir) {
+                Ok(l) => l,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+                Err(e) => {
+                    return Err(StoreError::Io {
+                        path: dir,
+                        action: "cannot list",
+                        source: e,
+                    })
+                }
+            };
+            for item in listing {
+                let item = item.map_err(io(&dir, "cannot list"))?;
+                let name = item.file_name().to_string_lossy().into_owned();
+                if name.starts_with('.') && name.contains(TEMPORARY_MARK) {
+                    let path = item.path();
+                    fs::remove_file(&path).map_err(io(&path, "cannot remove"))?;
+                    removed += 1;
+                }
+            }
+        }
+        Ok(removed)
+    }
+
     fn entry_path(&self, id: &str) -> Result<PathBuf, StoreError> {
         // Ids are ours (a timestamp and a counter); refuse anything that could
         // name a file outside the history.
@@ -118,6 +203,7 @@ impl Store {
 
     /// Keeps a result in the history and returns its id.
     pub fn add(&self, result: &Value, created: &str) -> Result<String, StoreError> {
+        let _turn = self.turn()?;
         let stamp: String = created.chars().filter(|c| c.is_ascii_digit()).collect();
         let mut n = 1;
         let id = loop {
@@ -172,6 +258,7 @@ impl Store {
     /// Makes a result of the history the active calibration (accept, or roll
     /// back to an earlier one). Rejected results never become active.
     pub fn activate(&self, id: &str, now: &str) -> Result<Value, StoreError> {
+        let _turn = self.turn()?;
         let entry = self.get(id)?;
         if entry.get("status").and_then(Value::as_str) != Some("accepted") {
             return Err(StoreError::Rejected(id.to_string()));
@@ -207,6 +294,7 @@ impl Store {
     /// its status before; nothing is deleted. The active calibration cannot be
     /// rejected: roll back to another first.
     pub fn reject(&self, id: &str, now: &str, by: &str) -> Result<Value, StoreError> {
+        let _turn = self.turn()?;
         let mut entry = self.get(id)?;
         let active = self.active()?;
         if active

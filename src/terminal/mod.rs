@@ -221,12 +221,22 @@ impl AppState {
     ) -> Self {
         let (events, _) = broadcast::channel(1024);
         let (shutdown, _) = watch::channel(false);
+        let store = Store::new(state_dir);
+        // Saves cut short by a kill leave temporary files; nothing else does.
+        match store.remove_stale_temporaries() {
+            Ok(0) => {}
+            Ok(n) => tracing::warn!(
+                "removed {n} temporary files of saves that never finished in {}",
+                state_dir.display()
+            ),
+            Err(e) => tracing::warn!("cannot clean the store: {e}"),
+        }
         AppState(Arc::new(Shared {
             config,
             schedule,
             selection,
             token: token.trim().to_string(),
-            store: Store::new(state_dir),
+            store,
             status: Mutex::new(Status {
                 state: "idle",
                 robot: "idle".into(),
