@@ -9,8 +9,9 @@
 //! millimetres, drawn from the seed: manufacturing and installation errors)
 //! and a small random error per pose. The six feet stay planted on the
 //! ground; each STATE reports them in the body frame from the true pose,
-//! `feet_body = robot_from_ground(true) · feet_ground`, with ~0.1 mm of noise,
-//! as forward kinematics of measured joints would. The true pose is written
+//! `feet_body = robot_from_ground(true) · feet_ground`, with ~0.1 mm of noise
+//! (the same at every report of one pose), as forward kinematics of measured
+//! joints would. The true pose is written
 //! into a [`TruePose`] for the simulated Kinect, and nowhere else.
 
 use std::time::{Duration, Instant};
@@ -130,6 +131,13 @@ enum Phase {
     Settled,
     Halted,
     Fault(u8),
+}
+
+/// A standard normal draw (Box-Muller).
+fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.gen_range(f64::EPSILON..1.0);
+    let u2: f64 = rng.gen();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 /// The simulated body. Time is passed in, so that it runs on any clock.
@@ -274,9 +282,7 @@ impl SimRobot {
 
     /// A standard normal draw (Box-Muller).
     fn normal(&mut self) -> f64 {
-        let u1: f64 = self.rng.gen_range(f64::EPSILON..1.0);
-        let u2: f64 = self.rng.gen();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        standard_normal(&mut self.rng)
     }
 
     fn scaled(&self, duration_ms: u32) -> Duration {
@@ -313,8 +319,18 @@ impl SimRobot {
         self.phase = Phase::Fault(code.max(1));
     }
 
+    /// The feet as reported: the true feet in the body frame, with noise that
+    /// is the same at every report of one pose (as a joint encoder's error
+    /// is for one stance). Drawn from its own generator, keyed by the seed
+    /// and the pose, so that how often the feet are asked for does not change
+    /// any other draw: a simulated calibration is the same however its polls
+    /// fall in time.
     fn feet_body_mm(&mut self, ground_from_robot: &Transform) -> [[f64; 3]; 6] {
         let robot_from_ground = ground_from_robot.inverse();
+        let key = (u64::from(self.pose_id) << 1) | u64::from(self.target_is_home);
+        let mut noise_rng = ChaCha8Rng::seed_from_u64(
+            self.config.seed ^ 0x0fee_7000_0000_0000 ^ key.wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        );
         let mut feet = [[0.0; 3]; 6];
         let mut feet_ground = self.config.feet_ground_mm;
         if let Some(sinking) = self.config.sinking_foot.filter(|_| self.sunk) {
@@ -329,7 +345,7 @@ impl SimRobot {
         for (out, ground) in feet.iter_mut().zip(feet_ground) {
             let p = robot_from_ground * Point3::from(Vector3::from(ground) / 1000.0);
             for (o, v) in out.iter_mut().zip(p.coords.iter()) {
-                *o = v * 1000.0 + self.normal() * self.config.feet_noise_mm;
+                *o = v * 1000.0 + standard_normal(&mut noise_rng) * self.config.feet_noise_mm;
             }
         }
         feet
