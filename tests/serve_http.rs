@@ -301,6 +301,56 @@ async fn calibrate_accept_and_activate_over_http() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The response's head (status line and headers), lower-cased, of a GET.
+fn head_of(addr: SocketAddr, path: &str) -> String {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(addr).unwrap();
+    let request = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
+    stream.write_all(request.as_bytes()).unwrap();
+    let mut response = Vec::new();
+    stream.read_to_end(&mut response).unwrap();
+    let response = String::from_utf8_lossy(&response).to_lowercase();
+    response
+        .split_once("\r\n\r\n")
+        .map(|(head, _)| head.to_string())
+        .unwrap_or(response)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn no_other_site_can_frame_the_page() {
+    let dir = temp_dir("headers");
+    let (config, schedule) = Config::embedded_sim();
+    let state = AppState::new(
+        config,
+        schedule,
+        Selection::default(),
+        TOKEN.into(),
+        &dir.join("state"),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+    for path in ["/", "/api/status", "/no/such/endpoint"] {
+        let head = tokio::task::spawn_blocking(move || head_of(addr, path))
+            .await
+            .unwrap();
+        for header in [
+            "x-frame-options: deny",
+            "content-security-policy: frame-ancestors 'none'",
+            "x-content-type-options: nosniff",
+            "referrer-policy: no-referrer",
+        ] {
+            assert!(head.contains(header), "{path} lacks {header}:\n{head}");
+        }
+    }
+    let _ = stop.send(());
+    let _ = server.await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn serve_refuses_a_missing_config_or_token_before_listening() {
     use groundcal::cli::serve::{run, ServeOptions};

@@ -373,7 +373,27 @@ pub fn router(state: AppState) -> Router {
                 "no such endpoint (see docs/api.md)".into(),
             )
         })
+        .layer(axum::middleware::map_response(protective_headers))
         .with_state(state)
+}
+
+/// Headers on every response: no other site may show the page in a frame
+/// (where a click on it could be a click on Calibrate), browsers must not
+/// guess content types, and no address leaks to other sites.
+async fn protective_headers(mut response: Response) -> Response {
+    use axum::http::header::{
+        HeaderValue, CONTENT_SECURITY_POLICY, REFERRER_POLICY, X_CONTENT_TYPE_OPTIONS,
+        X_FRAME_OPTIONS,
+    };
+    let headers = response.headers_mut();
+    headers.insert(X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
+    headers.insert(
+        CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static("frame-ancestors 'none'"),
+    );
+    headers.insert(X_CONTENT_TYPE_OPTIONS, HeaderValue::from_static("nosniff"));
+    headers.insert(REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
+    response
 }
 
 /// Whether the watchdog may be fed: no session is running, or the running
