@@ -95,6 +95,19 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
     result
 }
 
+/// A directory's listing, or `None` when it does not exist (yet).
+fn list(dir: &Path) -> Result<Option<fs::ReadDir>, StoreError> {
+    match fs::read_dir(dir) {
+        Ok(listing) => Ok(Some(listing)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(StoreError::Io {
+            path: dir.to_path_buf(),
+            action: "cannot list",
+            source: e,
+        }),
+    }
+}
+
 /// The store's writers in this process, one at a time.
 static WRITERS: Mutex<()> = Mutex::new(());
 
@@ -164,16 +177,8 @@ impl Store {
         let _turn = self.turn()?;
         let mut removed = 0;
         for dir in [self.dir.clone(), self.history_dir()] {
-            let listing = match fs::read_dir(&dir) {
-                Ok(l) => l,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
-                Err(e) => {
-                    return Err(StoreError::Io {
-                        path: dir,
-                        action: "cannot list",
-                        source: e,
-                    })
-                }
+            let Some(listing) = list(&dir)? else {
+                continue;
             };
             for item in listing {
                 let item = item.map_err(io(&dir, "cannot list"))?;
@@ -329,16 +334,8 @@ impl Store {
             .active()?
             .and_then(|a| a.get("id").and_then(Value::as_str).map(String::from));
         let mut entries = Vec::new();
-        let listing = match fs::read_dir(&dir) {
-            Ok(l) => l,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(entries),
-            Err(e) => {
-                return Err(StoreError::Io {
-                    path: dir,
-                    action: "cannot list",
-                    source: e,
-                })
-            }
+        let Some(listing) = list(&dir)? else {
+            return Ok(entries);
         };
         for item in listing {
             let item = item.map_err(io(&dir, "cannot list"))?;

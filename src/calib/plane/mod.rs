@@ -242,19 +242,17 @@ pub fn fit_ground(
         width,
         height: (values.len() / width.max(1)).min(height),
     };
+    let request = Request {
+        pixels: frames,
+        camera,
+        prior,
+        settings,
+    };
     if camera.fits_raw_values() {
         // Raw Kinect frames are fitted as they are: no pixel is converted.
         let raw: Vec<Frame<u16>> = frames.iter().map(|f| frame(f)).collect();
         let valid = raw.iter().map(|f| f.count_trusted(&domain)).collect();
-        fit_frames(
-            &raw,
-            valid,
-            frames,
-            camera,
-            prior,
-            settings,
-            &mut buffers.cloud,
-        )
+        fit_frames(&raw, valid, &request, &mut buffers.cloud)
     } else {
         buffers
             .images
@@ -272,28 +270,33 @@ pub fn fit_ground(
             })
             .collect();
         let valid = images.iter().map(|i| i.valid).collect();
-        fit_frames(
-            &converted,
-            valid,
-            frames,
-            camera,
-            prior,
-            settings,
-            &mut buffers.cloud,
-        )
+        fit_frames(&converted, valid, &request, &mut buffers.cloud)
     }
 }
 
-/// The fit of frames in one value domain: search, then refine.
+/// What [`fit_ground`] was asked: the frames as they came, and how to read
+/// and judge them.
+struct Request<'a> {
+    pixels: &'a [&'a [u16]],
+    camera: &'a DepthCamera,
+    prior: &'a GroundPrior,
+    settings: &'a PlaneFitSettings,
+}
+
+/// The fit of frames in one value domain (`valid`: each frame's trusted
+/// pixels): search, then refine.
 fn fit_frames<T: FitValue>(
     frames: &[Frame<T>],
     valid: Vec<usize>,
-    pixels: &[&[u16]],
-    camera: &DepthCamera,
-    prior: &GroundPrior,
-    settings: &PlaneFitSettings,
+    request: &Request,
     cloud: &mut PointCloud,
 ) -> Result<GroundFit, PlaneFitError> {
+    let Request {
+        pixels,
+        camera,
+        prior,
+        settings,
+    } = *request;
     let domain = camera.value_domain();
     let valid_points: usize = valid.iter().sum();
     let needed = settings.min_points.max(3);
