@@ -49,6 +49,20 @@ pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
     if feet_mm.len() != 6 {
         return Err(format!("expected six feet, got {}", feet_mm.len()));
     }
+    // A hundred metres is far beyond any leg: larger numbers are a fault,
+    // and are named as one rather than surfacing as a NaN further on.
+    const MAX_FOOT_MM: f64 = 100_000.0;
+    for (i, foot) in feet_mm.iter().enumerate() {
+        if let Some(v) = foot
+            .iter()
+            .find(|v| !v.is_finite() || v.abs() > MAX_FOOT_MM)
+        {
+            return Err(format!(
+                "foot {} is at {v} mm from the body: not a foot of this robot (at most ±{MAX_FOOT_MM} mm)",
+                i + 1
+            ));
+        }
+    }
     Ok(std::array::from_fn(|i| {
         Vector3::new(feet_mm[i][0], feet_mm[i][1], feet_mm[i][2]) / 1000.0
     }))
@@ -242,5 +256,21 @@ pub fn nominal_mount_from_values(values: [f64; 6]) -> NominalMount {
         pz_mm: values[5],
         tolerance_deg: 15.0,
         tolerance_mm: 200.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn feet_out_of_reach_are_named() {
+        let mut feet = [[600.0, -600.0, 400.0]; 6];
+        assert!(feet_from_mm(&feet).is_ok());
+        feet[3][1] = 1e308;
+        let e = feet_from_mm(&feet).unwrap_err();
+        assert!(e.contains("foot 4") && e.contains("not a foot"), "{e}");
+        feet[3][1] = f64::NAN;
+        assert!(feet_from_mm(&feet).unwrap_err().contains("foot 4"));
     }
 }

@@ -81,7 +81,27 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
             if !record.robot_pose.is_finite() {
                 return Err(at("robot_pose has a value that is not a finite number"));
             }
+            let pose = &record.robot_pose;
+            if let Some((name, value)) = [
+                ("px_mm", pose.px_mm),
+                ("py_mm", pose.py_mm),
+                ("pz_mm", pose.pz_mm),
+            ]
+            .into_iter()
+            .find(|(_, v)| v.abs() > MAX_DISTANCE_MM)
+            {
+                return Err(at(&format!(
+                    "robot_pose.{name} = {value} mm is not where a body stands over its feet (at most ±{MAX_DISTANCE_MM} mm)"
+                )));
+            }
             let p = &record.plane;
+            let normal = (p.a * p.a + p.b * p.b + p.c * p.c).sqrt();
+            if normal.is_finite() && normal > 0.0 && (p.d_m / normal).abs() > MAX_HEIGHT_M {
+                return Err(at(&format!(
+                    "plane: d_m = {} m is not a sensor's height above the ground (at most {MAX_HEIGHT_M} m)",
+                    p.d_m
+                )));
+            }
             let plane = Plane::from_coefficients(p.a, p.b, p.c, p.d_m)
                 .map_err(|e| at(&format!("plane: {e}")))?;
             Ok(Observation::new(
@@ -92,6 +112,13 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
         })
         .collect()
 }
+
+/// Largest body position accepted, mm: a hundred metres, far beyond any
+/// legged robot's reach, so that absurd numbers are named as such.
+const MAX_DISTANCE_MM: f64 = 100_000.0;
+
+/// Largest sensor height above the ground accepted, metres.
+const MAX_HEIGHT_M: f64 = 100.0;
 
 /// Reads a planes file.
 pub fn read_planes(path: &Path) -> Result<Vec<Observation>, InputError> {
@@ -143,5 +170,17 @@ mod tests {
         assert!(e.to_string().contains("t.json"), "{e}");
         let e = parse(&ONE.replace("\"d_m\"", "\"d\"")).unwrap_err();
         assert!(e.message.contains("d_m"), "{e}");
+    }
+
+    #[test]
+    fn absurd_magnitudes_are_named_for_what_they_are() {
+        let e = parse(&ONE.replace("-0.9916", "1e15")).unwrap_err();
+        assert!(
+            e.message
+                .contains("d_m = 1000000000000000 m is not a sensor's height"),
+            "{e}"
+        );
+        let e = parse(&ONE.replace("\"py_mm\": 615", "\"py_mm\": 1e300")).unwrap_err();
+        assert!(e.message.contains("robot_pose.py_mm"), "{e}");
     }
 }
