@@ -63,6 +63,16 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
     if file.observations.is_empty() {
         return Err(InputError::new(path, None, "\"observations\" is empty"));
     }
+    if file.observations.len() > MAX_OBSERVATIONS {
+        return Err(InputError::new(
+            path,
+            None,
+            format!(
+                "{} observations: at most {MAX_OBSERVATIONS} are accepted (a calibration has tens; the solve's time grows faster than their number)",
+                file.observations.len()
+            ),
+        ));
+    }
     let mut seen = std::collections::BTreeSet::new();
     file.observations
         .iter()
@@ -112,6 +122,11 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
         })
         .collect()
 }
+
+/// Most observations a planes file may hold. A schedule has tens of poses;
+/// the solve takes about 0.9 s for 2 000 observations and 3.3 s for 4 000
+/// (docs/reliability.md), so more is refused rather than left to run.
+pub const MAX_OBSERVATIONS: usize = 2000;
 
 /// Largest body position accepted, mm: a hundred metres, far beyond any
 /// legged robot's reach, so that absurd numbers are named as such.
@@ -170,6 +185,27 @@ mod tests {
         assert!(e.to_string().contains("t.json"), "{e}");
         let e = parse(&ONE.replace("\"d_m\"", "\"d\"")).unwrap_err();
         assert!(e.message.contains("d_m"), "{e}");
+    }
+
+    #[test]
+    fn more_observations_than_the_limit_are_refused_with_the_count() {
+        let one = ONE
+            .split_once("\"observations\": [")
+            .and_then(|(_, rest)| rest.rsplit_once("]}"))
+            .map(|(record, _)| record.to_string())
+            .unwrap();
+        let records: Vec<String> = (1..=MAX_OBSERVATIONS + 1)
+            .map(|i| one.replace("\"index\": 1", &format!("\"index\": {i}")))
+            .collect();
+        let text = format!(
+            "{{\"format\": \"groundcal-planes\", \"version\": 1, \"observations\": [{}]}}",
+            records.join(",")
+        );
+        let e = parse(&text).unwrap_err();
+        assert!(e.message.contains("2001 observations: at most 2000"), "{e}");
+        // At the limit, the file is read.
+        let text = text.replacen(&format!(",{}", records[MAX_OBSERVATIONS]), "", 1);
+        assert_eq!(parse(&text).unwrap().len(), MAX_OBSERVATIONS);
     }
 
     #[test]
