@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
-use groundcal::calib::disparity::{Frame, InverseDepthImage};
+use groundcal::calib::disparity::Frame;
 use groundcal::calib::geometry::{sensor_from_optical, PoseParams};
 use groundcal::calib::plane::{
     fit_ground, search::find_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
@@ -95,10 +95,6 @@ fn ground_fit(c: &mut Criterion) {
             })
         },
     );
-    let mut image = InverseDepthImage::default();
-    c.bench_function("raw frame to inverse depth only", |b| {
-        b.iter(|| camera.inverse_depth_into(black_box(&pixels), &mut image))
-    });
     // The fit reads raw frames as they are, in raw units.
     let settings = PlaneFitSettings::default();
     let domain = camera.value_domain();

@@ -32,8 +32,8 @@ pub struct ReplayOptions {
 pub struct Replay {
     pub result: ResultJson,
     /// BLAKE3 of the text files' and every frame's BLAKE3, in order (hex).
-    /// (BLAKE3 rather than SHA-256: it hashes a frame in a third of the time,
-    /// which is a third of the replay's work.)
+    /// (BLAKE3 rather than SHA-256: SHA-256 took a quarter of a replay's
+    /// time, BLAKE3 a third of that; docs/performance.md.)
     pub input_digest: String,
     /// Depth frames read.
     pub frames: usize,
