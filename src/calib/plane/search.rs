@@ -277,8 +277,8 @@ pub fn find_ground<T: FitValue>(
         plane: Plane,
         support: f64,
     }
-    // Groups too small to win are not scored: a plane's support is at least
-    // its own cells', and at most what the cells that agree with it hold.
+    // Groups of fewer than half the pixels that can win are not scored: a
+    // plane that many more cells agree with has a larger group of its own.
     let smallest = 0.5 * settings.min_ground_support.min(settings.min_lower_support) * sampled;
     let scored: Vec<Scored> = groups
         .iter_mut()
