@@ -13,14 +13,14 @@
 //! - [`schedule`]: pose schedules and their checks before anything moves;
 //! - [`cli`]: the `groundcal` command's subcommands.
 
-pub mod calib;
+/// The calibration math, its own crate (`calib/`): no I/O.
+pub use groundcal_calib as calib;
 pub mod cli;
 pub mod config;
 pub mod depth_image;
 pub mod export;
 pub mod hardware;
 pub mod output;
-pub mod pipeline;
 pub mod recording;
 pub mod replay;
 pub mod report;

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use groundcal::calib::calibrate::CalibrationSettings;
 use groundcal::calib::plane::GroundFitMethod;
-use groundcal::calib::solve::SolveSettings;
 use groundcal::cli::{self, plane::PlaneOptions, ExitStatus};
 use groundcal::depth_image::DepthUnits;
 use nalgebra::Vector3;
@@ -186,7 +186,9 @@ fn usage_error(message: String) -> ExitStatus {
 
 fn run(args: Args) -> ExitStatus {
     match args.command {
-        Command::Solve { file, json } => cli::solve::run(&file, json, &SolveSettings::default()),
+        Command::Solve { file, json } => {
+            cli::solve::run(&file, json, &CalibrationSettings::default())
+        }
         Command::Replay {
             dir,
             json,
@@ -195,13 +197,14 @@ fn run(args: Args) -> ExitStatus {
             threads,
             ground_fit,
         } => {
-            let nominal_mount = match nominal_mount
-                .map(|m| cli::parse_numbers::<6>("--nominal-mount", &m))
-            {
-                None => None,
-                Some(Ok(values)) => Some(groundcal::pipeline::nominal_mount_from_values(values)),
-                Some(Err(e)) => return usage_error(e),
-            };
+            let nominal_mount =
+                match nominal_mount.map(|m| cli::parse_numbers::<6>("--nominal-mount", &m)) {
+                    None => None,
+                    Some(Ok(values)) => {
+                        Some(groundcal::calib::observe::NominalMount::from_values(values))
+                    }
+                    Some(Err(e)) => return usage_error(e),
+                };
             let mut options = groundcal::replay::ReplayOptions {
                 nominal_mount,
                 threads,

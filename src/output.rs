@@ -6,7 +6,7 @@
 use serde::Serialize;
 
 use crate::calib::geometry::{Plane, PoseDegMm, PoseParams};
-use crate::calib::solve::{Calibration, PoseOutcome, Verdict};
+use crate::calib::outcome::{Calibration, PoseOutcome, Verdict};
 
 /// `robot_from_sensor` as cli.md prints it.
 #[derive(Debug, Clone, Serialize)]
@@ -240,11 +240,12 @@ impl ResultJson {
         observations: &[crate::calib::solve::Observation],
         failed: &[(u32, String)],
         poses_total: usize,
-        settings: &crate::calib::solve::SolveSettings,
+        settings: &crate::calib::calibrate::CalibrationSettings,
         kinect_tilt_deg: f64,
     ) -> Self {
-        use crate::calib::solve::{solve_among, SolveError};
-        let mut result = match solve_among(observations, poses_total, settings) {
+        use crate::calib::calibrate::calibrate_among;
+        use crate::calib::solve::SolveError;
+        let mut result = match calibrate_among(observations, poses_total, settings) {
             Ok(calibration) => Self::from_calibration(&calibration),
             Err(SolveError::TooFewObservations { usable, outcomes }) => Self::unsolved(
                 SolveError::TooFewObservations {

@@ -9,10 +9,11 @@
 
 use rayon::prelude::*;
 
+use crate::calib::calibrate::CalibrationSettings;
+use crate::calib::observe::{BodyEstimate, ObserveSettings, PoseObserver};
 use crate::calib::plane::FitBuffers;
-use crate::calib::solve::{Observation, SolveSettings};
+use crate::calib::solve::Observation;
 use crate::output::ResultJson;
-use crate::pipeline::{BodyEstimate, PoseProcessor, PoseSettings};
 use crate::recording::session::NominalMount;
 use crate::recording::{InputError, Recording};
 
@@ -21,8 +22,8 @@ use crate::recording::{InputError, Recording};
 pub struct ReplayOptions {
     /// Overrides the recording's nominal mount.
     pub nominal_mount: Option<NominalMount>,
-    pub pose: PoseSettings,
-    pub solve: SolveSettings,
+    pub pose: ObserveSettings,
+    pub calibration: CalibrationSettings,
     /// Worker threads; `None` uses every core.
     pub threads: Option<usize>,
 }
@@ -62,7 +63,7 @@ struct PoseOutcome {
 
 fn process_pose(
     recording: &Recording,
-    processor: &PoseProcessor,
+    processor: &PoseObserver,
     pose: &crate::recording::poses::PoseRecord,
     body: &Result<BodyEstimate, String>,
     buffers: &mut WorkerBuffers,
@@ -114,7 +115,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     let session = &recording.session;
     let session_path = recording.dir.join("session.json");
     let nominal = options.nominal_mount.or(session.nominal_mount);
-    let processor = PoseProcessor::new(
+    let processor = PoseObserver::new(
         session.kinect.depth_model,
         session.kinect.intrinsics,
         &session.home.feet_body_mm,
@@ -186,7 +187,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         &observations,
         &failed,
         recording.poses.len(),
-        &options.solve,
+        &options.calibration,
         session.kinect.tilt_deg,
     );
     if let Some(note) = processor.prior_note() {

@@ -1023,7 +1023,8 @@ figure svg { display: block; width: 100%; height: auto; }
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::solve::{solve, SolveError, SolveSettings};
+    use crate::calib::calibrate::{calibrate as solve, CalibrationSettings as SolveSettings};
+    use crate::calib::solve::SolveError;
     use crate::recording::planes::read_planes;
 
     fn table2() -> Vec<crate::calib::solve::Observation> {

@@ -261,9 +261,12 @@ fn kinect_child(lib: &Path) {
     let info = kinect.info();
     assert_eq!(
         info.depth_model,
-        groundcal_hal::depth::DepthModel::default()
+        groundcal_calib::depth::DepthModel::default()
     );
-    assert_eq!(info.intrinsics, groundcal_hal::depth::Intrinsics::default());
+    assert_eq!(
+        info.intrinsics,
+        groundcal_calib::depth::Intrinsics::default()
+    );
 
     runtime.block_on(async {
         let started = std::time::SystemTime::now()

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use common::{distance, groundcal, groundcal_json, mount_of, shared};
 use groundcal::calib::geometry::PoseDegMm;
-use groundcal::pipeline::BodyPoseSource;
+use groundcal::calib::observe::BodyPoseSource;
 use groundcal::recording::Recording;
 use groundcal::replay::{replay, ReplayOptions};
 

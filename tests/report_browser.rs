@@ -11,7 +11,7 @@ mod common;
 
 use std::fs;
 
-use groundcal::calib::solve::{solve, SolveSettings};
+use groundcal::calib::calibrate::{calibrate, CalibrationSettings};
 use groundcal::output::ResultJson;
 use groundcal::recording::planes::read_planes;
 use groundcal::report::{write_report, Provenance};
@@ -24,7 +24,8 @@ fn report_opens_cleanly_in_chromium_on_a_phone_and_a_laptop() {
 
     let input = common::test_data("paper-table2-printed.json");
     let observations = read_planes(&input).expect("Table 2 reads");
-    let calibration = solve(&observations, &SolveSettings::default()).expect("Table 2 solves");
+    let calibration =
+        calibrate(&observations, &CalibrationSettings::default()).expect("Table 2 solves");
     let result = ResultJson::from_calibration(&calibration);
     // The report labels the digest BLAKE3, as `replay` computes it.
     let digest = blake3::hash(&fs::read(&input).unwrap())

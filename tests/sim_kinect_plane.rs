@@ -8,12 +8,12 @@
 //! planes per depth model, without bias (where the paper's fit has one).
 
 use groundcal::calib::geometry::{ground_in_sensor, Plane, PoseDegMm, PoseParams, Transform};
+use groundcal::calib::observe::{NominalMount, ObserveSettings, PoseObserver};
 use groundcal::calib::plane::{
     fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitError,
     PlaneFitSettings,
 };
 use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange};
-use groundcal::pipeline::{nominal_mount_from_values, PoseProcessor, PoseSettings};
 use groundcal_hal::sim::kinect::{DepthRenderer, SimKinectConfig};
 use groundcal_hal::sim::world::World;
 
@@ -52,12 +52,12 @@ fn pipeline_prior(model: DepthModel, ground_from_robot: &Transform) -> GroundPri
         [0.0, -600.0, -800.0],
         [692.8, -600.0, -400.0],
     ];
-    let processor = PoseProcessor::new(
+    let processor = PoseObserver::new(
         model,
         SimKinectConfig::default().intrinsics,
         &home_feet_mm,
-        Some(nominal_mount_from_values(NOMINAL_MOUNT)),
-        PoseSettings::default(),
+        Some(NominalMount::from_values(NOMINAL_MOUNT)),
+        ObserveSettings::default(),
     )
     .unwrap();
     processor.prior(ground_from_robot)

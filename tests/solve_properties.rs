@@ -1,8 +1,10 @@
 //! Property tests of the identification: ground truths built with a seeded
 //! RNG, noise added, and the truth recovered within the predicted uncertainty.
 
+use groundcal::calib::calibrate::{calibrate as solve, CalibrationSettings as SolveSettings};
 use groundcal::calib::geometry::{Plane, PoseParams};
-use groundcal::calib::solve::{predict, solve, Observation, SolveSettings, Verdict};
+use groundcal::calib::outcome::{Calibration, Verdict};
+use groundcal::calib::solve::{predict, Observation};
 use nalgebra::{Matrix4, Vector3};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -166,7 +168,7 @@ fn predicted_sigma_follows_the_noise() {
     }
 }
 
-fn schedule_result(schedule: &[PoseParams]) -> groundcal::calib::solve::Calibration {
+fn schedule_result(schedule: &[PoseParams]) -> Calibration {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mount = random_mount(&mut rng);
     let obs: Vec<Observation> = observe(&mount, schedule, |truth| {

@@ -2,7 +2,7 @@
 //! (`shared/spec/hexapod-udp.md`), which moves the body and reports the feet.
 
 use crate::error::Error;
-use crate::geometry::PoseDegMm;
+use groundcal_calib::geometry::PoseDegMm;
 
 /// The lower computer's limits on a commanded pose (WELCOME).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,16 +8,19 @@
 //! produced it. Each trait has a real implementation and a simulated one, and
 //! the session is generic over both.
 //!
-//! - [`geometry`], [`depth`]: poses and the Kinect's depth model, shared by the
-//!   real and the simulated hardware;
-//! - [`sensor`], [`controller`], [`error`]: the traits and their vocabulary.
+//! - [`sensor`], [`controller`], [`error`]: the traits and their vocabulary;
+//! - [`kinect`]: the Kinect over libfreenect (loaded at run time);
+//! - [`udp`]: the lower computer's protocol (pure) and its tokio link;
+//! - [`sim`]: the simulated world, Kinect and robot, and a simulated lower
+//!   computer on UDP.
+//!
+//! Poses and depth models come from `groundcal-calib` (the math, below this
+//! crate). Nothing here may depend on the application (`groundcal`) above it.
 
 #![deny(unsafe_code)]
 
 pub mod controller;
-pub mod depth;
 pub mod error;
-pub mod geometry;
 pub mod kinect;
 pub mod sensor;
 pub mod sim;

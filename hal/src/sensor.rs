@@ -1,7 +1,7 @@
 //! The depth sensor: the Kinect's depth camera, tilt motor, accelerometer and LED.
 
-use crate::depth::{DepthModel, Intrinsics};
 use crate::error::Error;
+use groundcal_calib::depth::{DepthModel, Intrinsics};
 
 /// One raw depth frame as the sensor delivered it.
 #[derive(Debug, Clone, PartialEq)]

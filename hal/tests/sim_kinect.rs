@@ -8,8 +8,8 @@
 
 use std::time::Duration;
 
-use groundcal_hal::depth::{DepthModel, Intrinsics, RAW_NO_READING};
-use groundcal_hal::geometry::{ground_in_sensor, sensor_from_optical, PoseDegMm, Transform};
+use groundcal_calib::depth::{DepthModel, Intrinsics, RAW_NO_READING};
+use groundcal_calib::geometry::{ground_in_sensor, sensor_from_optical, PoseDegMm, Transform};
 use groundcal_hal::sim::kinect::{DepthRenderer, SimKinect, SimKinectConfig};
 use groundcal_hal::sim::robot::REFERENCE_HOME;
 use groundcal_hal::sim::world::{Ground, Surface, World};

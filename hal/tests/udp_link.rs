@@ -4,7 +4,7 @@
 use std::net::SocketAddr;
 use std::time::Duration;
 
-use groundcal_hal::geometry::PoseDegMm;
+use groundcal_calib::geometry::PoseDegMm;
 use groundcal_hal::udp::client::Request;
 use groundcal_hal::udp::proto::{self, AckStatus, Datagram, Message};
 use groundcal_hal::udp::sim_server::{FaultInjection, SimOptions, SimServer, SimStats};

@@ -6,11 +6,11 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use super::{print_json, ExitStatus};
+use super::{finish, ExitStatus};
+use crate::calib::observe::ObserveSettings;
 use crate::calib::plane::{GroundFitMethod, PlaneFitSettings};
 use crate::config::Config;
 use crate::hardware::{self, Selection};
-use crate::pipeline::PoseSettings;
 use crate::recording::Recording;
 use crate::schedule::Schedule;
 use crate::session::{self, Event, Plan, RecordedPose, SessionError};
@@ -68,15 +68,15 @@ pub fn plan(
         settle: Duration::from_millis(c.settle_ms).div_f64(scale),
         tilt_deg: config.sensor.tilt_deg,
         nominal_mount: c.nominal_mount,
-        pose: PoseSettings {
+        pose: ObserveSettings {
             slip_threshold_m: c.slip_threshold_mm / 1000.0,
             plane: PlaneFitSettings {
                 method: c.ground_fit,
                 ..Default::default()
             },
-            ..PoseSettings::default()
+            ..ObserveSettings::default()
         },
-        solve: crate::calib::solve::SolveSettings {
+        calibration: crate::calib::calibrate::CalibrationSettings {
             gates: c.gates,
             ..Default::default()
         },
@@ -265,27 +265,13 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
         let _ = progress.await;
         match outcome {
             Ok(outcome) => {
-                let printed = if options.json {
-                    print_json(&outcome.result)
-                } else {
-                    print!("{}", outcome.result.to_table());
-                    Ok(())
-                };
                 if let Some(dir) = &outcome.recording {
                     eprintln!(
                         "groundcal calibrate: recording written to {}",
                         dir.display()
                     );
                 }
-                if let Err(e) = printed {
-                    eprintln!("groundcal calibrate: {e}");
-                    return ExitStatus::RuntimeFailure;
-                }
-                if outcome.result.accepted() {
-                    ExitStatus::Success
-                } else {
-                    ExitStatus::Rejected
-                }
+                finish("calibrate", &outcome.result, options.json)
             }
             Err(SessionError::Refused(reason)) => {
                 eprintln!("groundcal calibrate: refused before moving: {reason}");

@@ -28,7 +28,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use groundcal_hal::geometry::PoseDegMm;
+use groundcal_calib::geometry::PoseDegMm;
 use groundcal_hal::kinect::Kinect;
 use groundcal_hal::{DepthSensor, TiltState};
 

@@ -50,6 +50,26 @@ pub fn parse_numbers<const N: usize>(flag: &str, text: &str) -> Result<[f64; N],
     Ok(out)
 }
 
+/// The end of every command that produces a result: the result on stdout
+/// (JSON or the table), and the exit status its verdict calls for.
+pub fn finish(command: &str, result: &crate::output::ResultJson, json: bool) -> ExitStatus {
+    let printed = if json {
+        print_json(result)
+    } else {
+        print!("{}", result.to_table());
+        Ok(())
+    };
+    if let Err(e) = printed {
+        eprintln!("groundcal {command}: {e}");
+        return ExitStatus::RuntimeFailure;
+    }
+    if result.accepted() {
+        ExitStatus::Success
+    } else {
+        ExitStatus::Rejected
+    }
+}
+
 /// Prints a JSON document on stdout (and nothing else there).
 pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), String> {
     let text = serde_json::to_string_pretty(value)

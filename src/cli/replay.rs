@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use super::{print_json, ExitStatus};
+use super::{finish, ExitStatus};
 use crate::recording::Recording;
 use crate::replay::{replay, ReplayOptions};
 use crate::report::{write_report, Provenance};
@@ -43,19 +43,5 @@ pub fn run(
             }
         }
     }
-    let printed = if json {
-        print_json(&outcome.result)
-    } else {
-        print!("{}", outcome.result.to_table());
-        Ok(())
-    };
-    if let Err(e) = printed {
-        eprintln!("groundcal replay: {e}");
-        return ExitStatus::RuntimeFailure;
-    }
-    if outcome.result.accepted() {
-        ExitStatus::Success
-    } else {
-        ExitStatus::Rejected
-    }
+    finish("replay", &outcome.result, json)
 }

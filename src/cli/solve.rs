@@ -2,13 +2,14 @@
 
 use std::path::Path;
 
-use super::{print_json, ExitStatus};
-use crate::calib::solve::{solve, SolveError, SolveSettings};
+use super::{finish, ExitStatus};
+use crate::calib::calibrate::{calibrate, CalibrationSettings};
+use crate::calib::solve::SolveError;
 use crate::output::ResultJson;
 use crate::recording::planes::read_planes;
 
 /// Runs the command; messages go to stderr, the result to stdout.
-pub fn run(file: &Path, json: bool, settings: &SolveSettings) -> ExitStatus {
+pub fn run(file: &Path, json: bool, settings: &CalibrationSettings) -> ExitStatus {
     let observations = match read_planes(file) {
         Ok(o) => o,
         Err(e) => {
@@ -16,7 +17,7 @@ pub fn run(file: &Path, json: bool, settings: &SolveSettings) -> ExitStatus {
             return ExitStatus::BadInput;
         }
     };
-    let result = match solve(&observations, settings) {
+    let result = match calibrate(&observations, settings) {
         Ok(calibration) => ResultJson::from_calibration(&calibration),
         Err(SolveError::TooFewObservations { usable, outcomes }) => ResultJson::unsolved(
             SolveError::TooFewObservations {
@@ -27,19 +28,5 @@ pub fn run(file: &Path, json: bool, settings: &SolveSettings) -> ExitStatus {
             &outcomes,
         ),
     };
-    let printed = if json {
-        print_json(&result)
-    } else {
-        print!("{}", result.to_table());
-        Ok(())
-    };
-    if let Err(e) = printed {
-        eprintln!("groundcal solve: {e}");
-        return ExitStatus::RuntimeFailure;
-    }
-    if result.accepted() {
-        ExitStatus::Success
-    } else {
-        ExitStatus::Rejected
-    }
+    finish("solve", &result, json)
 }

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::InputError;
 use crate::calib::geometry::PoseDegMm;
+pub use crate::calib::observe::NominalMount;
 use crate::calib::sensor::{DepthModel, Intrinsics};
 
 /// The home stance: the commanded pose and the feet reported there.
@@ -24,57 +25,6 @@ pub struct KinectInfo {
     pub depth_model: DepthModel,
     #[serde(default)]
     pub intrinsics: Intrinsics,
-}
-
-/// The rough `robot_from_sensor` known before calibrating, with how far off
-/// it may be: it tells which plane in view is the ground, never the answer.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct NominalMount {
-    pub alpha_deg: f64,
-    pub beta_deg: f64,
-    pub gamma_deg: f64,
-    pub px_mm: f64,
-    pub py_mm: f64,
-    pub pz_mm: f64,
-    pub tolerance_deg: f64,
-    pub tolerance_mm: f64,
-}
-
-impl NominalMount {
-    /// The mount's pose.
-    pub fn pose(&self) -> PoseDegMm {
-        PoseDegMm {
-            alpha_deg: self.alpha_deg,
-            beta_deg: self.beta_deg,
-            gamma_deg: self.gamma_deg,
-            px_mm: self.px_mm,
-            py_mm: self.py_mm,
-            pz_mm: self.pz_mm,
-        }
-    }
-
-    /// Whether every number is usable.
-    pub fn validate(&self) -> Result<(), String> {
-        if !self.pose().is_finite()
-            || !self.tolerance_deg.is_finite()
-            || !self.tolerance_mm.is_finite()
-        {
-            return Err("nominal_mount has a value that is not a finite number".into());
-        }
-        if !(self.tolerance_deg > 0.0 && self.tolerance_deg <= 90.0) {
-            return Err(format!(
-                "nominal_mount.tolerance_deg must lie in (0, 90], not {}",
-                self.tolerance_deg
-            ));
-        }
-        if self.tolerance_mm <= 0.0 {
-            return Err(format!(
-                "nominal_mount.tolerance_mm must be positive, not {}",
-                self.tolerance_mm
-            ));
-        }
-        Ok(())
-    }
 }
 
 /// The whole `session.json`. Unknown keys are ignored (recording.md).

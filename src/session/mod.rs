@@ -24,9 +24,9 @@ pub use run::{run, SessionError, SessionOutcome};
 use std::path::PathBuf;
 use std::time::Duration;
 
+use crate::calib::calibrate::CalibrationSettings;
 use crate::calib::geometry::PoseDegMm;
-use crate::calib::solve::SolveSettings;
-use crate::pipeline::PoseSettings;
+use crate::calib::observe::ObserveSettings;
 use crate::recording::session::NominalMount;
 use crate::schedule::{Limits, Schedule};
 
@@ -42,8 +42,8 @@ pub struct Plan {
     /// The Kinect's motor tilt during calibration.
     pub tilt_deg: f64,
     pub nominal_mount: Option<NominalMount>,
-    pub pose: PoseSettings,
-    pub solve: SolveSettings,
+    pub pose: ObserveSettings,
+    pub calibration: CalibrationSettings,
     /// Write everything as a recording here, as it goes.
     pub record: Option<PathBuf>,
     /// GET_STATE polling while the body moves (at most 200 ms: the lower

@@ -13,11 +13,11 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::{Event, Plan, PoseFit, ProvisionalPose};
+use crate::calib::observe::{BodyEstimate, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::solve::Observation;
 use crate::depth_image::DepthImage;
 use crate::output::ResultJson;
-use crate::pipeline::{BodyEstimate, PoseProcessor};
 use crate::recording::poses::PoseRecord;
 use crate::recording::session::{Home, KinectInfo, Session};
 use crate::recording::writer::{RecordingWriter, WriteError};
@@ -189,7 +189,7 @@ impl PendingFit {
 
 /// Fits the ground of a pose from its frames (on a blocking worker).
 fn fit_pose(
-    processor: Arc<PoseProcessor>,
+    processor: Arc<PoseObserver>,
     index: u16,
     body: BodyEstimate,
     frames: Vec<DepthFrame>,
@@ -215,7 +215,7 @@ fn report_provisional(pending: &[PendingFit], plan: &Plan, events: &UnboundedSen
     if observations.len() < PROVISIONAL_MIN_POSES {
         return;
     }
-    let Ok(calibration) = crate::calib::solve::solve(&observations, &plan.solve) else {
+    let Ok(calibration) = crate::calib::solve::solve(&observations, &plan.calibration.solve) else {
         return;
     };
     let poses = calibration
@@ -333,7 +333,7 @@ async fn body<S: DepthSensor, C: BodyController>(
     let info = sensor.info();
     let home_feet: Vec<[f64; 3]> = home.feet_mm.to_vec();
     let processor = Arc::new(
-        PoseProcessor::new(
+        PoseObserver::new(
             info.depth_model,
             info.intrinsics,
             &home_feet,
@@ -456,7 +456,8 @@ async fn body<S: DepthSensor, C: BodyController>(
             Err(reason) => failed.push((u32::from(fit.index), reason)),
         }
     }
-    let mut result = ResultJson::from_poses(&observations, &failed, of, &plan.solve, plan.tilt_deg);
+    let mut result =
+        ResultJson::from_poses(&observations, &failed, of, &plan.calibration, plan.tilt_deg);
     if let Some(note) = processor.prior_note() {
         result.notes.insert(0, note);
     }

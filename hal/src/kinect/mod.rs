@@ -42,9 +42,9 @@ pub use error::{KinectError, LIBFREENECT_PACKAGE};
 use ffi::{Command, Device, Library, LoadError};
 use queue::{FrameQueue, ReplySender};
 
-use crate::depth::{DepthModel, Intrinsics};
 use crate::error::ErrorKind;
 use crate::sensor::{DepthFrame, DepthSensor, Led, SensorInfo, TiltState};
+use groundcal_calib::depth::{DepthModel, Intrinsics};
 
 /// The libraries tried, in order, when none is named: Debian's
 /// `libfreenect0.5` ships `libfreenect.so.0.5`, `libfreenect-dev` adds

@@ -36,12 +36,12 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use tokio::time::Instant;
 
-use crate::depth::{DepthModel, Intrinsics, RAW_NO_READING};
 use crate::error::{Error, ErrorKind};
-use crate::geometry::{rot_z, sensor_from_optical, Transform};
 use crate::sensor::{DepthFrame, DepthSensor, Led, SensorInfo, TiltState};
 use crate::sim::world::{RayHints, Surface, World};
 use crate::sim::TruePose;
+use groundcal_calib::depth::{DepthModel, Intrinsics, RAW_NO_READING};
+use groundcal_calib::geometry::{rot_z, sensor_from_optical, Transform};
 
 /// The Kinect's depth noise in disparity, 1/m: constant over the image, it is
 /// `σ(z) = 1.4·10⁻³·z²` m in depth (conventions.md), about half a raw step.
@@ -209,7 +209,7 @@ impl Error for SimKinectError {
 /// depth, with the midpoints in disparity (`1/z`, what the Kinect measures
 /// and rounds) between neighbours. The nearest raw of a depth is the one
 /// between the midpoints around it: the same answer as
-/// [`crate::depth::raw_for_depth`], found in constant time.
+/// [`groundcal_calib::depth::raw_for_depth`], found in constant time.
 ///
 /// Both models are linear in disparity (`1/z` is affine in the raw value), so
 /// the midpoints are evenly spaced in `1/z`: a table of bins in `1/z`, finer
@@ -753,8 +753,8 @@ impl DepthSensor for SimKinect {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::depth::raw_for_depth;
-    use crate::geometry::PoseParams;
+    use groundcal_calib::depth::raw_for_depth;
+    use groundcal_calib::geometry::PoseParams;
     use nalgebra::Vector3;
 
     #[test]

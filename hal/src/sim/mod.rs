@@ -14,7 +14,7 @@ pub mod world;
 
 use std::sync::{Arc, Mutex};
 
-use crate::geometry::Transform;
+use groundcal_calib::geometry::Transform;
 
 /// The simulated body's true `ground_from_robot`, shared between the
 /// simulated lower computer (writer) and the simulated Kinect (reader).

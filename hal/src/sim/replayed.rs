@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use crate::controller::{BodyLimits, BodyState, MotionState};
-use crate::geometry::PoseDegMm;
 use crate::udp::server::{Body, Refusal};
+use groundcal_calib::geometry::PoseDegMm;
 
 /// One recorded pose: what was commanded and the feet reported once settled.
 #[derive(Debug, Clone, PartialEq)]

@@ -23,9 +23,9 @@ use rand_chacha::ChaCha8Rng;
 use super::TruePose;
 use crate::controller::{BodyController, BodyLimits, BodyState, MotionState, Welcome};
 use crate::error::{Error, ErrorKind};
-use crate::geometry::{PoseDegMm, PoseParams, Transform};
 use crate::udp::proto::AckStatus;
 use crate::udp::server::{check_pose, Body, Refusal};
+use groundcal_calib::geometry::{PoseDegMm, PoseParams, Transform};
 
 /// The reference simulator's limits (`hexapod-udp.md`).
 pub const REFERENCE_LIMITS: BodyLimits = BodyLimits {

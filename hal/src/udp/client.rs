@@ -29,7 +29,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::proto::{self, AckStatus, Datagram, Message, SetPose, StatePayload, WelcomePayload};
 use crate::controller::{BodyLimits, BodyState, MotionState, Welcome};
-use crate::geometry::PoseDegMm;
+use groundcal_calib::geometry::PoseDegMm;
 
 /// Timing of the protocol on the upper computer's side.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -43,7 +43,7 @@ use super::client::{Client, ClientConfig, ClientStats, Event, Failure, Reply, Re
 use super::proto::AckStatus;
 use crate::controller::{BodyController, BodyState, MotionState, Welcome};
 use crate::error::{Error, ErrorKind};
-use crate::geometry::PoseDegMm;
+use groundcal_calib::geometry::PoseDegMm;
 
 /// DSCP "expedited forwarding" (RFC 3246), the class of our control traffic.
 pub const DSCP_EF: u8 = 46;

@@ -28,7 +28,7 @@ use super::proto::{
     self, kind, AckStatus, Datagram, DecodeError, Message, StatePayload, WelcomePayload,
 };
 use crate::controller::{BodyLimits, BodyState, MotionState};
-use crate::geometry::PoseDegMm;
+use groundcal_calib::geometry::PoseDegMm;
 
 /// What the lower computer moves: the protocol asks, the body acts.
 pub trait Body {

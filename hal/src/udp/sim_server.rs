@@ -42,10 +42,10 @@ use tokio::net::UdpSocket;
 use super::proto::{self, kind, Message};
 use super::server::{Server, ServerConfig, ServerCounters};
 use crate::controller::MotionState;
-use crate::geometry::Transform;
 use crate::sim::replayed::{ReplayScript, ReplayTally, ReplayedRobot};
 use crate::sim::robot::{SimRobot, SimRobotConfig};
 use crate::sim::TruePose;
+use groundcal_calib::geometry::Transform;
 
 /// The environment variable with the fault injection settings.
 pub const FAULTS_ENV: &str = "GROUNDCAL_SIM_FAULTS";

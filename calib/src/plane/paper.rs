@@ -14,8 +14,8 @@ use nalgebra::{Matrix3, Matrix4, SymmetricEigen, Vector3};
 use wide::f32x4;
 
 use super::{GroundFit, PlaneFitSettings};
-use crate::calib::geometry::{angle_between, Plane};
-use crate::calib::sensor::PointCloud;
+use crate::geometry::{angle_between, Plane};
+use crate::sensor::PointCloud;
 
 /// Moves of the plane below these (20 µrad, 20 µm: a fortieth of the solve's
 /// noise floor per pose) end the rejection iterations.

@@ -4,7 +4,7 @@
 use nalgebra::Vector6;
 use serde::{Deserialize, Serialize};
 
-use super::solve::{Observability, PoseOutcome};
+use crate::outcome::{Calibration, Observability, PoseOutcome, Solution, Summary, Verdict};
 
 /// Thresholds a calibration must meet to be accepted. Degrees and millimetres,
 /// as an operator would set them in the configuration.
@@ -67,17 +67,34 @@ impl Gates {
     }
 }
 
-/// Mean and maximum of θ and e_d over the used poses (the paper's Figs. 17-18).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Summary {
-    pub poses_total: usize,
-    pub poses_used: usize,
-    /// Radians.
-    pub theta_mean: f64,
-    pub theta_max: f64,
-    /// Metres.
-    pub e_d_mean: f64,
-    pub e_d_max: f64,
+/// The verdict on what the solve found: the summary of the used poses, the
+/// reasons against it and whether it is accepted. `poses_total` counts the
+/// poses of the run, including those that gave no observation at all.
+pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibration {
+    let mut summary = summarise(&solution.poses);
+    summary.poses_total = summary.poses_total.max(poses_total);
+    let reasons = judge(
+        gates,
+        &summary,
+        &solution.poses,
+        &solution.sigma(),
+        &solution.observability,
+    );
+    Calibration {
+        verdict: if reasons.is_empty() {
+            Verdict::Accepted
+        } else {
+            Verdict::Rejected
+        },
+        reasons,
+        robot_from_sensor: solution.robot_from_sensor,
+        covariance: solution.covariance,
+        poses: solution.poses,
+        summary,
+        observability: solution.observability,
+        variance_factors: solution.variance_factors,
+        iterations: solution.iterations,
+    }
 }
 
 /// The summary of the used poses.

@@ -6,12 +6,79 @@
 
 use nalgebra::Vector3;
 
-use crate::calib::body::{Feet, GroundFrame};
-use crate::calib::geometry::{PoseDegMm, Transform};
-use crate::calib::plane::{fit_ground, FitBuffers, GroundPrior, PlaneFitSettings};
-use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
-use crate::calib::solve::Observation;
-use crate::recording::session::NominalMount;
+use crate::body::{Feet, GroundFrame};
+use crate::geometry::{PoseDegMm, Transform};
+use crate::plane::{fit_ground, FitBuffers, GroundPrior, PlaneFitSettings};
+use crate::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
+use crate::solve::Observation;
+use serde::{Deserialize, Serialize};
+
+/// The rough `robot_from_sensor` known before calibrating, with how far off
+/// it may be: it tells which plane in view is the ground, never the answer.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NominalMount {
+    pub alpha_deg: f64,
+    pub beta_deg: f64,
+    pub gamma_deg: f64,
+    pub px_mm: f64,
+    pub py_mm: f64,
+    pub pz_mm: f64,
+    pub tolerance_deg: f64,
+    pub tolerance_mm: f64,
+}
+
+impl NominalMount {
+    /// The nominal mount from six values (degrees, millimetres, as
+    /// `--nominal-mount a,b,g,x,y,z`), with the tolerances of recording.md's
+    /// example.
+    pub fn from_values(values: [f64; 6]) -> Self {
+        Self {
+            alpha_deg: values[0],
+            beta_deg: values[1],
+            gamma_deg: values[2],
+            px_mm: values[3],
+            py_mm: values[4],
+            pz_mm: values[5],
+            tolerance_deg: 15.0,
+            tolerance_mm: 200.0,
+        }
+    }
+
+    /// The mount's pose.
+    pub fn pose(&self) -> PoseDegMm {
+        PoseDegMm {
+            alpha_deg: self.alpha_deg,
+            beta_deg: self.beta_deg,
+            gamma_deg: self.gamma_deg,
+            px_mm: self.px_mm,
+            py_mm: self.py_mm,
+            pz_mm: self.pz_mm,
+        }
+    }
+
+    /// Whether every number is usable.
+    pub fn validate(&self) -> Result<(), String> {
+        if !self.pose().is_finite()
+            || !self.tolerance_deg.is_finite()
+            || !self.tolerance_mm.is_finite()
+        {
+            return Err("nominal_mount has a value that is not a finite number".into());
+        }
+        if !(self.tolerance_deg > 0.0 && self.tolerance_deg <= 90.0) {
+            return Err(format!(
+                "nominal_mount.tolerance_deg must lie in (0, 90], not {}",
+                self.tolerance_deg
+            ));
+        }
+        if self.tolerance_mm <= 0.0 {
+            return Err(format!(
+                "nominal_mount.tolerance_mm must be positive, not {}",
+                self.tolerance_mm
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// Where the body pose of an observation comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -25,7 +92,7 @@ pub enum BodyPoseSource {
 
 /// Tuning of the per-pose processing.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PoseSettings {
+pub struct ObserveSettings {
     pub plane: PlaneFitSettings,
     /// A foot farther than this from where the other five put it has slipped, metres.
     pub slip_threshold_m: f64,
@@ -33,7 +100,7 @@ pub struct PoseSettings {
     pub depth_range: DepthRange,
 }
 
-impl Default for PoseSettings {
+impl Default for ObserveSettings {
     fn default() -> Self {
         Self {
             plane: PlaneFitSettings::default(),
@@ -68,13 +135,13 @@ pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
     }))
 }
 
-/// Turns each pose's feet and frames into an [`Observation`].
+/// Turns one pose's evidence, its feet and its frames, into one [`Observation`].
 #[derive(Debug, Clone)]
-pub struct PoseProcessor {
+pub struct PoseObserver {
     camera: DepthCamera,
     ground_frame: GroundFrame,
     nominal: Option<NominalMount>,
-    settings: PoseSettings,
+    settings: ObserveSettings,
 }
 
 /// The body pose of one observation, and whether it can be trusted.
@@ -149,7 +216,7 @@ impl FeetTracker {
     }
 }
 
-impl PoseProcessor {
+impl PoseObserver {
     /// A processor for one calibration: the sensor model, the ground frame from
     /// the home stance's feet, and the nominal mount (if known) for the prior.
     pub fn new(
@@ -157,7 +224,7 @@ impl PoseProcessor {
         intrinsics: Intrinsics,
         home_feet_mm: &[[f64; 3]],
         nominal: Option<NominalMount>,
-        settings: PoseSettings,
+        settings: ObserveSettings,
     ) -> Result<Self, String> {
         let home = feet_from_mm(home_feet_mm)?;
         let ground_frame =
@@ -241,21 +308,6 @@ impl PoseProcessor {
             set_aside: body.set_aside.clone(),
             note: body.note.clone(),
         })
-    }
-}
-
-/// The nominal mount from `--nominal-mount a,b,g,x,y,z` (degrees, millimetres),
-/// with the tolerances of recording.md's example.
-pub fn nominal_mount_from_values(values: [f64; 6]) -> NominalMount {
-    NominalMount {
-        alpha_deg: values[0],
-        beta_deg: values[1],
-        gamma_deg: values[2],
-        px_mm: values[3],
-        py_mm: values[4],
-        pz_mm: values[5],
-        tolerance_deg: 15.0,
-        tolerance_mm: 200.0,
     }
 }
 

@@ -29,10 +29,8 @@
 //! frame alone.
 
 use super::{GroundPrior, PlaneFitError, PlaneFitSettings};
-use crate::calib::disparity::{
-    DisparityMoments, FitValue, Frame, PixelGrid, PixelPlane, ValueDomain,
-};
-use crate::calib::geometry::{angle_between, Plane};
+use crate::disparity::{DisparityMoments, FitValue, Frame, PixelGrid, PixelPlane, ValueDomain};
+use crate::geometry::{angle_between, Plane};
 
 /// One cell's plane.
 #[derive(Debug, Clone, Copy)]

@@ -219,7 +219,7 @@ fn rigid_fit(from: &Feet, to: &Feet, indices: &[usize]) -> Result<Transform, Bod
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::geometry::PoseParams;
+    use crate::geometry::PoseParams;
     use approx::assert_abs_diff_eq;
 
     /// The sample's home stance: a hexagon 600 mm below the body.

@@ -5,37 +5,11 @@
 //! fit. Metric images (millimetres, TUM's 5000 per metre) convert by a scale.
 //! Points come out in the sensor frame V (X along the optical axis, Y up, Z right).
 
-use serde::{Deserialize, Serialize};
+use crate::disparity::{InverseDepthConverter, InverseDepthImage, PixelGrid, ValueDomain};
 
-use super::disparity::{InverseDepthConverter, InverseDepthImage, PixelGrid, ValueDomain};
-
-pub use groundcal_hal::depth::{depth_sigma_m, DepthModel, Intrinsics, RAW_NO_READING};
-
-/// What the 16-bit values of an image mean, with the model that converts them.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum DepthEncoding {
-    /// Raw 11-bit Kinect values through a depth model.
-    Raw11(DepthModel),
-    /// Metric depth: `value × metres_per_unit`, 0 = no reading.
-    Metric { metres_per_unit: f64 },
-}
-
-/// The range of depths that are trusted (conventions.md: 0.5–5 m).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DepthRange {
-    pub min_m: f64,
-    pub max_m: f64,
-}
-
-impl Default for DepthRange {
-    fn default() -> Self {
-        Self {
-            min_m: 0.5,
-            max_m: 5.0,
-        }
-    }
-}
+pub use crate::depth::{
+    depth_sigma_m, DepthEncoding, DepthModel, DepthRange, Intrinsics, RAW_NO_READING,
+};
 
 /// A converter from depth images to points, with its per-value table built once.
 #[derive(Debug, Clone)]

@@ -12,7 +12,7 @@
 //!    lowest supported plane winning (box tops and tables lie above the
 //!    ground, nothing in view below it). It finds a floor that is a tenth of
 //!    the view.
-//! 2. **Fit in inverse depth** ([`crate::calib::disparity`]): ordinary least
+//! 2. **Fit in inverse depth** ([`crate::disparity`]): ordinary least
 //!    squares of `1/z` over the pixels, where the noise is the same for every
 //!    pixel: the maximum-likelihood plane, unbiased, from moment sums. The
 //!    paper's 2σ rejection becomes a rejection in inverse depth with one σ
@@ -461,7 +461,7 @@ fn fit_in_inverse_depth<T: FitValue>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::sensor::{DepthEncoding, DepthModel, DepthRange, Intrinsics, RAW_NO_READING};
+    use crate::sensor::{DepthEncoding, DepthModel, DepthRange, Intrinsics, RAW_NO_READING};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

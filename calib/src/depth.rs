@@ -239,6 +239,32 @@ pub fn raw_for_depth(model: &DepthModel, z: f64) -> Option<u16> {
     )
 }
 
+/// What the 16-bit values of an image mean, with the model that converts them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepthEncoding {
+    /// Raw 11-bit Kinect values through a depth model.
+    Raw11(DepthModel),
+    /// Metric depth: `value × metres_per_unit`, 0 = no reading.
+    Metric { metres_per_unit: f64 },
+}
+
+/// The range of depths that are trusted (conventions.md: 0.5–5 m).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepthRange {
+    pub min_m: f64,
+    pub max_m: f64,
+}
+
+impl Default for DepthRange {
+    fn default() -> Self {
+        Self {
+            min_m: 0.5,
+            max_m: 5.0,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -28,7 +28,7 @@ use super::geometry::{
     angle_between, d_rot_x, d_rot_y, d_rot_z, ground_in_sensor, rot_x, rot_y, rot_z, Plane,
     PoseParams, Transform,
 };
-use super::quality::{self, Gates, Summary};
+use crate::outcome::{Observability, PoseOutcome, Solution};
 
 /// One pose's evidence.
 #[derive(Debug, Clone, PartialEq)]
@@ -96,8 +96,6 @@ pub struct SolveSettings {
     /// A direction whose normalised singular value is below this is unobservable
     /// (about the sine of the RMS spread of the tilts in that direction).
     pub min_spread: f64,
-    /// Acceptance thresholds.
-    pub gates: Gates,
 }
 
 impl Default for SolveSettings {
@@ -110,85 +108,7 @@ impl Default for SolveSettings {
             outlier_offset_floor: 0.015,
             max_outlier_fraction: 0.3,
             min_spread: 1.0f64.to_radians().sin(),
-            gates: Gates::default(),
         }
-    }
-}
-
-/// Verdict of a calibration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Verdict {
-    Accepted,
-    Rejected,
-}
-
-/// What happened to one observation.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PoseOutcome {
-    pub index: u32,
-    pub used: bool,
-    pub reason: Option<String>,
-    /// The ground as measured, in the sensor frame.
-    pub measured: Plane,
-    /// The ground as the result predicts it.
-    pub predicted: Plane,
-    /// Angle between measured and predicted normals (paper's θ), radians.
-    pub theta: f64,
-    /// `|d_T - d_M|` (paper's e_d), metres.
-    pub e_d: f64,
-    pub inliers: Option<usize>,
-    /// The observation's note (a slipped foot left out), if any.
-    pub note: Option<String>,
-}
-
-/// How well the schedule pins down each direction.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Observability {
-    /// Singular values of the rotation block of the Jacobian per observation
-    /// (unit noise), largest first: the RMS spread of the ground normals seen
-    /// from each rotation axis.
-    pub rotation_singular_values: [f64; 3],
-    /// The same for the translation block.
-    pub translation_singular_values: [f64; 3],
-    /// Operator-readable descriptions of unobservable directions.
-    pub problems: Vec<String>,
-}
-
-/// The result of a calibration.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Calibration {
-    pub verdict: Verdict,
-    pub reasons: Vec<String>,
-    pub robot_from_sensor: PoseParams,
-    /// Covariance of `[α, β, γ, px, py, pz]` (radians, metres).
-    pub covariance: Matrix6<f64>,
-    pub poses: Vec<PoseOutcome>,
-    pub summary: Summary,
-    pub observability: Observability,
-    /// Estimated noise relative to the assumed one: normals, offsets.
-    pub variance_factors: (f64, f64),
-    /// Levenberg-Marquardt's evaluations and termination.
-    pub iterations: usize,
-}
-
-impl Calibration {
-    /// One standard deviation of each parameter (radians, metres).
-    pub fn sigma(&self) -> Vector6<f64> {
-        Vector6::from_fn(|i, _| self.covariance[(i, i)].max(0.0).sqrt())
-    }
-
-    /// Correlation coefficients of the parameters.
-    pub fn correlations(&self) -> Matrix6<f64> {
-        let s = self.sigma();
-        Matrix6::from_fn(|i, j| {
-            if s[i] > 0.0 && s[j] > 0.0 {
-                self.covariance[(i, j)] / (s[i] * s[j])
-            } else if i == j {
-                1.0
-            } else {
-                0.0
-            }
-        })
     }
 }
 
@@ -492,21 +412,13 @@ fn worst_outlier(used: &[&Observation], settings: &SolveSettings) -> Option<(u32
     Some((used[worst.position].index, reason))
 }
 
-/// Identifies `robot_from_sensor` from the observations.
+/// Identifies `robot_from_sensor` from the observations: what it found, with
+/// its covariance and observability. Whether that is good enough is for
+/// [`crate::quality`] to say.
 pub fn solve(
     observations: &[Observation],
     settings: &SolveSettings,
-) -> Result<Calibration, SolveError> {
-    solve_among(observations, observations.len(), settings)
-}
-
-/// As [`solve`], for observations that are some of `poses_total` poses (the
-/// others gave no plane): the gates count the poses that could not be used.
-pub fn solve_among(
-    observations: &[Observation],
-    poses_total: usize,
-    settings: &SolveSettings,
-) -> Result<Calibration, SolveError> {
+) -> Result<Solution, SolveError> {
     let mut set_aside: Vec<Option<String>> =
         observations.iter().map(|o| o.set_aside.clone()).collect();
     let candidates = set_aside.iter().filter(|s| s.is_none()).count();
@@ -589,21 +501,10 @@ pub fn solve_among(
 
     let observability = observability(&used, settings);
     let outcomes = outcomes(observations, &set_aside, &robot_from_sensor);
-    let mut summary = quality::summarise(&outcomes);
-    summary.poses_total = summary.poses_total.max(poses_total);
-    let sigma = Vector6::from_fn(|i, _| covariance[(i, i)].max(0.0).sqrt());
-    let reasons = quality::judge(&settings.gates, &summary, &outcomes, &sigma, &observability);
-    Ok(Calibration {
-        verdict: if reasons.is_empty() {
-            Verdict::Accepted
-        } else {
-            Verdict::Rejected
-        },
-        reasons,
+    Ok(Solution {
         robot_from_sensor,
         covariance,
         poses: outcomes,
-        summary,
         observability,
         variance_factors,
         iterations: evaluations,
@@ -928,8 +829,9 @@ mod tests {
                 Observation::new(i + 1, g, predict(&truth, &g))
             })
             .collect();
-        let result = solve(&obs, &SolveSettings::default()).unwrap();
-        assert_eq!(result.verdict, Verdict::Rejected);
+        // The words come from the observability; the verdict from the gates.
+        let result = crate::calibrate::calibrate(&obs, &Default::default()).unwrap();
+        assert_eq!(result.verdict, crate::outcome::Verdict::Rejected);
         let text = result.reasons.join("\n");
         assert!(text.contains("rotation of the sensor about the ground normal (α) is not observable: the schedule never tilts the body"), "{text}");
         assert!(

@@ -26,7 +26,7 @@
 use nalgebra::{Matrix3, Matrix4, Vector3};
 
 use super::geometry::Plane;
-use super::sensor::{DepthEncoding, DepthRange, Intrinsics, RAW_NO_READING};
+use crate::depth::{DepthEncoding, DepthRange, Intrinsics, RAW_NO_READING};
 
 /// One frame in inverse depth, 1/m, row-major; `+∞` where the pixel has no
 /// trusted reading (no reading, or outside the trusted depth range), so that
@@ -759,7 +759,7 @@ fn erf(x: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::sensor::DepthModel;
+    use crate::sensor::DepthModel;
 
     fn intrinsics() -> Intrinsics {
         Intrinsics::default()

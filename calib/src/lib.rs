@@ -1,0 +1,37 @@
+//! The calibration math of groundcal: from depth frames and feet to
+//! `robot_from_sensor` with its uncertainty and a verdict (Chai et al., made
+//! robust; see docs/method.md).
+//!
+//! Pure and synchronous: values in, values out, no I/O. It must not depend on
+//! an async runtime, sockets, files, FFI or anything of the hardware or the
+//! application above it, so that it builds, tests and benchmarks alone and
+//! the daemon, replay and tests all compute the same thing.
+//!
+//! From the bottom up:
+//! - [`geometry`]: frames `a_from_b`, the paper's six parameters, planes;
+//! - [`depth`]: the Kinect's depth models (zero-plane, inverse-linear) and intrinsics;
+//! - [`sensor`]: a depth camera, pixels to points with weights;
+//! - [`disparity`]: frames in inverse depth, planes of the image, moment sums;
+//! - [`plane`]: the ground in one pose's frames (paper 4.1);
+//! - [`body`]: the ground frame and the body pose from the feet (paper 4.2);
+//! - [`observe`]: one pose's evidence (feet and frames) to one observation;
+//! - [`outcome`]: what a calibration found, shared by the solve and the verdict;
+//! - [`solve`]: `robot_from_sensor` from all observations (paper 4.3);
+//! - [`quality`]: θ and e_d (paper 5.2), gates and the verdict;
+//! - [`calibrate`]: the solve then the verdict, in one call.
+
+// One exception, in `disparity`: the AVX2 build of the per-pixel loop, called
+// only after the processor was checked for AVX2.
+#![deny(unsafe_code)]
+
+pub mod body;
+pub mod calibrate;
+pub mod depth;
+pub mod disparity;
+pub mod geometry;
+pub mod observe;
+pub mod outcome;
+pub mod plane;
+pub mod quality;
+pub mod sensor;
+pub mod solve;
