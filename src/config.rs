@@ -170,12 +170,7 @@ impl Config {
 
     /// The schedule's path, relative to the configuration file.
     pub fn schedule_path(&self, config_path: &Path) -> PathBuf {
-        match config_path.parent() {
-            Some(dir) if self.calibration.schedule.is_relative() => {
-                dir.join(&self.calibration.schedule)
-            }
-            _ => self.calibration.schedule.clone(),
-        }
+        resolve_from_config(config_path, &self.calibration.schedule)
     }
 
     /// The semantic checks; returns the schedule, checked against the limits.
@@ -330,6 +325,15 @@ impl Config {
             .validate(&self.robot.limits)
             .map_err(|e| InputError::new(&schedule_path, None, e.to_string()))?;
         Ok(schedule)
+    }
+}
+
+/// A path named in the configuration: relative paths are relative to the
+/// configuration file's directory, not to wherever the service was started.
+pub fn resolve_from_config(config_path: &Path, path: &Path) -> PathBuf {
+    match config_path.parent() {
+        Some(dir) if path.is_relative() => dir.join(path),
+        _ => path.to_path_buf(),
     }
 }
 

@@ -4,7 +4,7 @@
 //! (a path, or `@name` for the abstract namespace); nothing when it is unset.
 
 use std::os::unix::net::UnixDatagram;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// A handle to systemd's notification socket, if the service has one.
 #[derive(Debug)]
@@ -82,9 +82,63 @@ pub fn watchdog_interval() -> Option<Duration> {
     (usec > 0).then(|| Duration::from_micros(usec / 2))
 }
 
+/// Whether the watchdog may be fed: no session is running, or the running
+/// session's loop beat within `within`. A session stuck (a blocked call, a
+/// deadlock) stops the feeding, and systemd restarts the service.
+pub fn session_alive(last_beat: Option<Instant>, now: Instant, within: Duration) -> bool {
+    last_beat.is_none_or(|beat| now.saturating_duration_since(beat) <= within)
+}
+
+/// How often a session's loop beats: twice per watchdog feeding interval
+/// (itself half of `WatchdogSec`), at most every 500 ms.
+pub fn heartbeat_period() -> Duration {
+    let most = Duration::from_millis(500);
+    watchdog_interval().map_or(most, |every| (every / 2).min(most))
+}
+
+/// Feeds systemd's watchdog while the session is alive (see
+/// [`session_alive`]); `last_beat` says when its loop last beat. None when
+/// the service runs without a watchdog.
+pub fn spawn_watchdog_feed(
+    last_beat: impl Fn() -> Option<Instant> + Send + 'static,
+) -> Option<tokio::task::JoinHandle<()>> {
+    let every = watchdog_interval()?;
+    Some(tokio::spawn(async move {
+        let notifier = Notifier::from_env();
+        let mut tick = tokio::time::interval(every);
+        loop {
+            tick.tick().await;
+            if session_alive(last_beat(), Instant::now(), every * 2) {
+                notifier.watchdog();
+            } else {
+                // systemd restarts the service after WatchdogSec; the lower
+                // computer halts the robot once polling stops (1 s).
+                tracing::error!("the session loop is stuck; not feeding the watchdog");
+            }
+        }
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_stuck_session_stops_the_watchdog_feeding() {
+        let now = Instant::now();
+        let within = Duration::from_secs(10);
+        assert!(session_alive(None, now, within), "idle: fed");
+        assert!(session_alive(
+            Some(now - Duration::from_secs(3)),
+            now,
+            within
+        ));
+        assert!(!session_alive(
+            Some(now - Duration::from_secs(11)),
+            now,
+            within
+        ));
+    }
 
     #[test]
     fn messages_reach_a_fake_notify_socket() {

@@ -20,10 +20,10 @@ use std::process::Child;
 use std::time::{Duration, Instant};
 
 use groundcal::schedule::{Limits, Schedule};
-use groundcal_hal::udp::client::ClientStats;
-use groundcal_hal::udp::sim_server::{
+use groundcal_hal::sim::lower_computer::{
     FaultInjection, SimOptions, SimServer, FAULTS_ENV, RECEIPTS_ENV,
 };
+use groundcal_hal::udp::client::ClientStats;
 use groundcal_hal::udp::{LinkConfig, UdpBodyController};
 use groundcal_hal::{BodyController, MotionState};
 use serde_json::Value;

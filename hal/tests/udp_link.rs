@@ -5,9 +5,9 @@ use std::net::SocketAddr;
 use std::time::Duration;
 
 use groundcal_calib::geometry::PoseDegMm;
+use groundcal_hal::sim::lower_computer::{FaultInjection, SimOptions, SimServer, SimStats};
 use groundcal_hal::udp::client::Request;
 use groundcal_hal::udp::proto::{self, AckStatus, Datagram, Message};
-use groundcal_hal::udp::sim_server::{FaultInjection, SimOptions, SimServer, SimStats};
 use groundcal_hal::udp::{LinkConfig, UdpBodyController};
 use groundcal_hal::{BodyController, Error, ErrorKind, MotionState};
 use tokio::sync::oneshot;

@@ -4,16 +4,13 @@
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use super::{finish, ExitStatus};
-use crate::calib::observe::ObserveSettings;
-use crate::calib::plane::{GroundFitMethod, PlaneFitSettings};
+use crate::calib::plane::GroundFitMethod;
 use crate::config::Config;
 use crate::hardware::{self, Selection};
-use crate::recording::Recording;
 use crate::schedule::Schedule;
-use crate::session::{self, Event, Plan, RecordedPose, SessionError};
+use crate::session::{self, Event, Plan, SessionError};
 
 /// The command's options.
 #[derive(Debug, Clone, Default)]
@@ -43,86 +40,6 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
     }
     Config::load(Path::new("/etc/groundcal/groundcal.toml"))
         .map_err(|e| format!("{e} (give --config FILE)"))
-}
-
-/// The session plan from the configuration; a replayed sensor brings its
-/// recording's schedule, pose ids, frames per pose, tilt and nominal mount
-/// (refused when a pose id does not fit the link's 16 bits).
-pub fn plan(
-    config: &Config,
-    schedule: Schedule,
-    replay: Option<&Recording>,
-    record: Option<PathBuf>,
-) -> Result<Plan, String> {
-    let c = &config.calibration;
-    // Simulated hardware runs faster than real time: so do the waits.
-    let scale = match (&config.sim, config.robot.address.as_str()) {
-        (Some(sim), "sim") => sim.time_scale,
-        _ => 1.0,
-    };
-    let mut plan = Plan {
-        schedule,
-        limits: config.robot.limits,
-        frames_per_pose: c.frames_per_pose,
-        motion: Duration::from_millis(u64::from(c.motion_ms)),
-        settle: Duration::from_millis(c.settle_ms).div_f64(scale),
-        tilt_deg: config.sensor.tilt_deg,
-        nominal_mount: c.nominal_mount,
-        pose: ObserveSettings {
-            slip_threshold_m: c.slip_threshold_mm / 1000.0,
-            plane: PlaneFitSettings {
-                method: c.ground_fit,
-                ..Default::default()
-            },
-            ..ObserveSettings::default()
-        },
-        calibration: crate::calib::calibrate::CalibrationSettings {
-            gates: c.gates,
-            ..Default::default()
-        },
-        record,
-        poll: Duration::from_millis(100)
-            .div_f64(scale.max(1.0))
-            .max(Duration::from_millis(5)),
-        motion_slack: Duration::from_secs(5),
-        recorded_poses: None,
-    };
-    if let Some(recording) = replay {
-        plan.schedule = Schedule {
-            name: format!("replay of {}", recording.dir.display()),
-            home: recording.session.home.commanded,
-            poses: recording.poses.iter().map(|p| p.commanded).collect(),
-        };
-        plan.frames_per_pose = recording
-            .poses
-            .iter()
-            .map(|p| p.depth_frames.len())
-            .max()
-            .unwrap_or(1)
-            .max(1);
-        let recorded = recording
-            .poses
-            .iter()
-            .map(|p| {
-                let id = u16::try_from(p.index).map_err(|_| {
-                    format!(
-                        "{}: pose {} (poses.jsonl line {}): the link's pose ids stop at 65535",
-                        recording.dir.display(),
-                        p.index,
-                        p.line
-                    )
-                })?;
-                Ok(RecordedPose {
-                    id,
-                    frames: p.depth_frames.len(),
-                })
-            })
-            .collect::<Result<Vec<_>, String>>()?;
-        plan.recorded_poses = Some(recorded);
-        plan.tilt_deg = recording.session.kinect.tilt_deg;
-        plan.nominal_mount = recording.session.nominal_mount.or(plan.nominal_mount);
-    }
-    Ok(plan)
 }
 
 /// Prints progress as it happens.
@@ -250,13 +167,14 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             hardware::Sensor::Replay(r) => Some(r.recording().clone()),
             _ => None,
         };
-        let plan = match plan(&config, schedule, replay.as_ref(), options.record.clone()) {
-            Ok(p) => p,
-            Err(e) => {
-                eprintln!("groundcal calibrate: {e}");
-                return ExitStatus::BadInput;
-            }
-        };
+        let plan =
+            match Plan::from_config(&config, schedule, replay.as_ref(), options.record.clone()) {
+                Ok(p) => p,
+                Err(e) => {
+                    eprintln!("groundcal calibrate: {e}");
+                    return ExitStatus::BadInput;
+                }
+            };
         let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
         let progress = show_progress(receiver);
         let outcome =

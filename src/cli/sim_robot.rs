@@ -10,7 +10,7 @@
 //! SIGINT or SIGTERM, then prints its counters on stderr as one line
 //! `sim-robot: stats {...}` and exits 0. Fault injection and the receipts log
 //! come from the environment (`GROUNDCAL_SIM_FAULTS`,
-//! `GROUNDCAL_SIM_RECEIPTS`; see `groundcal_hal::udp::sim_server`): they are
+//! `GROUNDCAL_SIM_RECEIPTS`; see `groundcal_hal::sim::lower_computer`): they are
 //! for tests, not for operators.
 
 use std::collections::BTreeMap;
@@ -18,8 +18,8 @@ use std::io::Write;
 use std::net::{SocketAddr, ToSocketAddrs};
 use std::path::{Path, PathBuf};
 
+use groundcal_hal::sim::lower_computer::{self, FaultInjection, SimOptions, RECEIPTS_ENV};
 use groundcal_hal::sim::replayed::{RecordedStance, ReplayScript};
-use groundcal_hal::udp::sim_server::{self, FaultInjection, SimOptions, RECEIPTS_ENV};
 
 use crate::recording::Recording;
 
@@ -54,7 +54,7 @@ pub fn run(listen: &str, seed: u64, time_scale: f64, replay: Option<&Path>) -> E
         replay,
         ..SimOptions::new(seed, time_scale)
     };
-    let served = sim_server::run_until_signal(address, options, |bound| {
+    let served = lower_computer::run_until_signal(address, options, |bound| {
         let mut stdout = std::io::stdout().lock();
         // A test waits for this line; a closed stdout must not stop the server.
         let _ = writeln!(stdout, "listening on {bound}");

@@ -17,75 +17,13 @@
 //!
 //! Everything the operator might want to see is sent as an [`Event`].
 
+mod plan;
 mod run;
 
+pub use plan::{Plan, RecordedPose};
 pub use run::{run, SessionError, SessionOutcome};
 
-use std::path::PathBuf;
-use std::time::Duration;
-
-use crate::calib::calibrate::CalibrationSettings;
 use crate::calib::geometry::PoseDegMm;
-use crate::calib::observe::ObserveSettings;
-use crate::recording::session::NominalMount;
-use crate::schedule::{Limits, Schedule};
-
-/// Everything a session needs to know before it starts.
-#[derive(Debug, Clone)]
-pub struct Plan {
-    pub schedule: Schedule,
-    /// groundcal's own limits (the lower computer's are added at HELLO).
-    pub limits: Limits,
-    pub frames_per_pose: usize,
-    pub motion: Duration,
-    pub settle: Duration,
-    /// The Kinect's motor tilt during calibration.
-    pub tilt_deg: f64,
-    pub nominal_mount: Option<NominalMount>,
-    pub pose: ObserveSettings,
-    pub calibration: CalibrationSettings,
-    /// Write everything as a recording here, as it goes.
-    pub record: Option<PathBuf>,
-    /// GET_STATE polling while the body moves (at most 200 ms: the lower
-    /// computer's watchdog).
-    pub poll: Duration,
-    /// How long a motion may take beyond its nominal duration.
-    pub motion_slack: Duration,
-    /// For each pose of the schedule, the pose id sent and the frames
-    /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
-    /// recording's own, so that the session asks for what was recorded.
-    pub recorded_poses: Option<Vec<RecordedPose>>,
-}
-
-/// A pose as a recording has it: its id and how many frames it holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RecordedPose {
-    pub id: u16,
-    pub frames: usize,
-}
-
-impl Plan {
-    /// The pose id sent for the `k`-th pose of the schedule (from 0).
-    pub fn pose_id(&self, k: usize) -> u16 {
-        self.recorded_poses
-            .as_ref()
-            .and_then(|r| r.get(k))
-            .map_or_else(|| u16::try_from(k + 1).unwrap_or(u16::MAX), |r| r.id)
-    }
-
-    /// The frames to capture at the `k`-th pose of the schedule.
-    pub fn frames_at(&self, k: usize) -> usize {
-        self.recorded_poses
-            .as_ref()
-            .and_then(|r| r.get(k))
-            .map_or(self.frames_per_pose, |r| r.frames)
-    }
-
-    /// The longest a motion of `duration` may take before it is a failure.
-    pub fn motion_deadline(&self, duration: Duration) -> Duration {
-        duration * 3 + self.motion_slack
-    }
-}
 
 /// What happens, for the operator's progress display.
 #[derive(Debug, Clone, PartialEq)]

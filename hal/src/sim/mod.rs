@@ -6,8 +6,16 @@
 //! lower computer writes it as the body moves, the simulated Kinect reads it
 //! to render each frame. Nothing else may read it: the calibration must find
 //! the pose from the feet, as on the robot.
+//!
+//! - [`world`]: ground, boxes, walls, people; what a ray hits;
+//! - [`kinect`]: depth frames of the world, with the Kinect's noise;
+//! - [`robot`]: the body, its feet and its errors;
+//! - [`lower_computer`]: the simulated robot served over UDP
+//!   (`groundcal sim-robot`), with fault injection;
+//! - [`replayed`]: a lower computer that plays a recording's robot back.
 
 pub mod kinect;
+pub mod lower_computer;
 pub mod replayed;
 pub mod robot;
 pub mod world;

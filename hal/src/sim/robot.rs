@@ -1,5 +1,5 @@
 //! The simulated hexapod: the lower computer's body, as `groundcal sim-robot`
-//! serves it over UDP ([`crate::udp::sim_server`]) and as `--robot sim` uses it
+//! serves it over UDP ([`crate::sim::lower_computer`]) and as `--robot sim` uses it
 //! in process ([`SimBodyController`]).
 //!
 //! The body moves from its pose to the commanded one in the commanded

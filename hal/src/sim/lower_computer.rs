@@ -39,12 +39,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 use tokio::net::UdpSocket;
 
-use super::proto::{self, kind, Message};
-use super::server::{Server, ServerConfig, ServerCounters};
+use super::replayed::{ReplayScript, ReplayTally, ReplayedRobot};
+use super::robot::{SimRobot, SimRobotConfig};
+use super::TruePose;
 use crate::controller::MotionState;
-use crate::sim::replayed::{ReplayScript, ReplayTally, ReplayedRobot};
-use crate::sim::robot::{SimRobot, SimRobotConfig};
-use crate::sim::TruePose;
+use crate::udp::proto::{self, kind, Message};
+use crate::udp::server::{Server, ServerConfig, ServerCounters};
 use groundcal_calib::geometry::Transform;
 
 /// The environment variable with the fault injection settings.
@@ -509,7 +509,7 @@ impl SimServer {
                             seq: Some(r.seq),
                             pose_id: r.pose_id,
                             outcome: Some(match r.outcome {
-                                super::server::Outcome::Dropped(reason) => reason,
+                                crate::udp::server::Outcome::Dropped(reason) => reason,
                                 other => other.name(),
                             }),
                             ack: r.ack.map(|a| a.code()),
@@ -572,7 +572,7 @@ impl SimServer {
 
 /// A body the simulated lower computer can serve: the simulated hexapod or a
 /// replayed recording.
-trait ServedBody: super::server::Body {
+trait ServedBody: crate::udp::server::Body {
     /// Brings the motion up to `now`.
     fn advance(&mut self, now: Instant);
     /// A lower computer restart (fault injection).

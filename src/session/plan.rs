@@ -1,0 +1,151 @@
+//! The plan of a session: everything it needs to know before the robot
+//! moves, worked out from the configuration (and, for a replayed sensor, from
+//! the recording). Shared by `groundcal calibrate` and the daemon.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use crate::calib::calibrate::CalibrationSettings;
+use crate::calib::observe::ObserveSettings;
+use crate::calib::plane::PlaneFitSettings;
+use crate::config::Config;
+use crate::recording::session::NominalMount;
+use crate::recording::Recording;
+use crate::schedule::{Limits, Schedule};
+
+/// Everything a session needs to know before it starts.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub schedule: Schedule,
+    /// groundcal's own limits (the lower computer's are added at HELLO).
+    pub limits: Limits,
+    pub frames_per_pose: usize,
+    pub motion: Duration,
+    pub settle: Duration,
+    /// The Kinect's motor tilt during calibration.
+    pub tilt_deg: f64,
+    pub nominal_mount: Option<NominalMount>,
+    pub pose: ObserveSettings,
+    pub calibration: CalibrationSettings,
+    /// Write everything as a recording here, as it goes.
+    pub record: Option<PathBuf>,
+    /// GET_STATE polling while the body moves (at most 200 ms: the lower
+    /// computer's watchdog).
+    pub poll: Duration,
+    /// How long a motion may take beyond its nominal duration.
+    pub motion_slack: Duration,
+    /// For each pose of the schedule, the pose id sent and the frames
+    /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
+    /// recording's own, so that the session asks for what was recorded.
+    pub recorded_poses: Option<Vec<RecordedPose>>,
+}
+
+/// A pose as a recording has it: its id and how many frames it holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RecordedPose {
+    pub id: u16,
+    pub frames: usize,
+}
+
+impl Plan {
+    /// The session plan from the configuration; a replayed sensor brings its
+    /// recording's schedule, pose ids, frames per pose, tilt and nominal mount
+    /// (refused when a pose id does not fit the link's 16 bits).
+    pub fn from_config(
+        config: &Config,
+        schedule: Schedule,
+        replay: Option<&Recording>,
+        record: Option<PathBuf>,
+    ) -> Result<Plan, String> {
+        let c = &config.calibration;
+        // Simulated hardware runs faster than real time: so do the waits.
+        let scale = match (&config.sim, config.robot.address.as_str()) {
+            (Some(sim), "sim") => sim.time_scale,
+            _ => 1.0,
+        };
+        let mut plan = Plan {
+            schedule,
+            limits: config.robot.limits,
+            frames_per_pose: c.frames_per_pose,
+            motion: Duration::from_millis(u64::from(c.motion_ms)),
+            settle: Duration::from_millis(c.settle_ms).div_f64(scale),
+            tilt_deg: config.sensor.tilt_deg,
+            nominal_mount: c.nominal_mount,
+            pose: ObserveSettings {
+                slip_threshold_m: c.slip_threshold_mm / 1000.0,
+                plane: PlaneFitSettings {
+                    method: c.ground_fit,
+                    ..Default::default()
+                },
+                ..ObserveSettings::default()
+            },
+            calibration: crate::calib::calibrate::CalibrationSettings {
+                gates: c.gates,
+                ..Default::default()
+            },
+            record,
+            poll: Duration::from_millis(100)
+                .div_f64(scale.max(1.0))
+                .max(Duration::from_millis(5)),
+            motion_slack: Duration::from_secs(5),
+            recorded_poses: None,
+        };
+        if let Some(recording) = replay {
+            plan.schedule = Schedule {
+                name: format!("replay of {}", recording.dir.display()),
+                home: recording.session.home.commanded,
+                poses: recording.poses.iter().map(|p| p.commanded).collect(),
+            };
+            plan.frames_per_pose = recording
+                .poses
+                .iter()
+                .map(|p| p.depth_frames.len())
+                .max()
+                .unwrap_or(1)
+                .max(1);
+            let recorded = recording
+                .poses
+                .iter()
+                .map(|p| {
+                    let id = u16::try_from(p.index).map_err(|_| {
+                        format!(
+                            "{}: pose {} (poses.jsonl line {}): the link's pose ids stop at 65535",
+                            recording.dir.display(),
+                            p.index,
+                            p.line
+                        )
+                    })?;
+                    Ok(RecordedPose {
+                        id,
+                        frames: p.depth_frames.len(),
+                    })
+                })
+                .collect::<Result<Vec<_>, String>>()?;
+            plan.recorded_poses = Some(recorded);
+            plan.tilt_deg = recording.session.kinect.tilt_deg;
+            plan.nominal_mount = recording.session.nominal_mount.or(plan.nominal_mount);
+        }
+        Ok(plan)
+    }
+
+    /// The pose id sent for the `k`-th pose of the schedule (from 0).
+    pub fn pose_id(&self, k: usize) -> u16 {
+        self.recorded_poses
+            .as_ref()
+            .and_then(|r| r.get(k))
+            .map_or_else(|| u16::try_from(k + 1).unwrap_or(u16::MAX), |r| r.id)
+    }
+
+    /// The frames to capture at the `k`-th pose of the schedule.
+    pub fn frames_at(&self, k: usize) -> usize {
+        self.recorded_poses
+            .as_ref()
+            .and_then(|r| r.get(k))
+            .map_or(self.frames_per_pose, |r| r.frames)
+    }
+
+    /// The longest a motion of `duration` may take before it is a failure.
+    pub fn motion_deadline(&self, duration: Duration) -> Duration {
+        duration * 3 + self.motion_slack
+    }
+}

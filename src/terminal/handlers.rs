@@ -1,0 +1,203 @@
+//! The API's endpoints (docs/api.md). The token was checked before any
+//! write reaches them (`super::auth`).
+
+use std::convert::Infallible;
+use std::net::SocketAddr;
+
+use axum::extract::{ConnectInfo, Path as UrlPath, State};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde_json::{json, Value};
+use tokio::sync::oneshot;
+use tokio_stream::StreamExt;
+
+use super::api::{RunState, Status};
+use super::state::{now, AppState};
+use super::worker;
+use crate::store::StoreError;
+
+/// An error answer: a status and a sentence, as `{"error": "..."}`.
+pub struct ApiError(pub StatusCode, pub String);
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        (self.0, Json(json!({ "error": self.1 }))).into_response()
+    }
+}
+
+fn store_error(e: StoreError) -> ApiError {
+    match e {
+        StoreError::NotFound(_) => ApiError(StatusCode::NOT_FOUND, e.to_string()),
+        StoreError::Rejected(_) | StoreError::Active(_) => {
+            ApiError(StatusCode::CONFLICT, e.to_string())
+        }
+        _ => ApiError(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    }
+}
+
+/// Who sent a request, for the status and the store: the page's own name for
+/// itself (if any) and the address.
+fn client_name(headers: &HeaderMap, addr: SocketAddr) -> String {
+    headers
+        .get("x-groundcal-client")
+        .and_then(|v| v.to_str().ok())
+        .map(|s| s.trim().chars().take(64).collect::<String>())
+        .filter(|s| !s.is_empty())
+        .map(|s| format!("{s} ({})", addr.ip()))
+        .unwrap_or_else(|| addr.to_string())
+}
+
+pub async fn get_status(State(state): State<AppState>) -> Json<Status> {
+    Json(state.status())
+}
+
+pub async fn get_events(
+    State(state): State<AppState>,
+) -> Sse<impl tokio_stream::Stream<Item = Result<SseEvent, Infallible>>> {
+    // Each item: Some(Some(event)), Some(None) for nothing, None once the
+    // service stops (which ends the stream, so graceful shutdown can finish).
+    let stop = tokio_stream::wrappers::WatchStream::new(state.subscribe_stopping())
+        .map(|stopping| if stopping { None } else { Some(None) });
+    let events = tokio_stream::wrappers::BroadcastStream::new(state.subscribe_events())
+        .filter_map(|e| e.ok())
+        .map(|e| Some(Some(e)));
+    let stream = events
+        .merge(stop)
+        .take_while(Option::is_some)
+        .filter_map(|e| e.flatten())
+        .map(|e| Ok(SseEvent::default().data(serde_json::to_string(&e).unwrap_or_default())));
+    Sse::new(stream).keep_alive(KeepAlive::default())
+}
+
+pub async fn get_history(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
+    let history = state.store().history().map_err(store_error)?;
+    Ok(Json(json!({ "calibrations": history })))
+}
+
+pub async fn get_calibration(
+    State(state): State<AppState>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Json<Value>, ApiError> {
+    state.store().get(&id).map(Json).map_err(store_error)
+}
+
+pub async fn get_active(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
+    match state.store().active().map_err(store_error)? {
+        Some(a) => Ok(Json(a)),
+        None => Err(ApiError(
+            StatusCode::NOT_FOUND,
+            "no calibration is active yet".into(),
+        )),
+    }
+}
+
+/// Accept a result, or roll back to an earlier one: both make it active.
+pub async fn post_activate(
+    State(state): State<AppState>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Json<Value>, ApiError> {
+    state
+        .store()
+        .activate(&id, &now())
+        .map(Json)
+        .map_err(store_error)
+}
+
+pub async fn post_reject(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ConnectInfo(addr): ConnectInfo<SocketAddr>,
+    UrlPath(id): UrlPath<String>,
+) -> Result<Json<Value>, ApiError> {
+    state
+        .store()
+        .reject(&id, &now(), &client_name(&headers, addr))
+        .map(Json)
+        .map_err(store_error)
+}
+
+pub async fn post_abort(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ConnectInfo(addr): ConnectInfo<SocketAddr>,
+) -> Result<Response, ApiError> {
+    let abort = state.take_abort();
+    match abort {
+        Some(abort) => {
+            let _ = abort.send(format!(
+                "aborted by the operator ({})",
+                client_name(&headers, addr)
+            ));
+            Ok((StatusCode::ACCEPTED, Json(json!({ "aborting": true }))).into_response())
+        }
+        None => Err(ApiError(
+            StatusCode::CONFLICT,
+            "no calibration is running".into(),
+        )),
+    }
+}
+
+pub async fn post_start(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ConnectInfo(addr): ConnectInfo<SocketAddr>,
+) -> Result<Response, ApiError> {
+    if state.is_stopping() {
+        return Err(ApiError(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the service is stopping".into(),
+        ));
+    }
+    let by = client_name(&headers, addr);
+    let (abort_tx, abort_rx) = oneshot::channel::<String>();
+    {
+        let mut status = state.status_mut();
+        if status.state == RunState::Running {
+            return Err(ApiError(
+                StatusCode::CONFLICT,
+                format!(
+                    "a calibration is already running, started by {} at {}",
+                    status.by.as_deref().unwrap_or("someone"),
+                    status.started.as_deref().unwrap_or("?")
+                ),
+            ));
+        }
+        *status = Status {
+            state: RunState::Running,
+            by: Some(by.clone()),
+            started: Some(now()),
+            robot: "opening the hardware".into(),
+            hardware: std::mem::take(&mut status.hardware),
+            ..Status::default()
+        };
+        state.set_abort(abort_tx);
+    }
+    // A finished worker of an earlier session is joined here.
+    let worker_state = state.clone();
+    let spawned = state.replace_worker(|| {
+        std::thread::Builder::new()
+            .name("groundcal-session".into())
+            .spawn(move || worker::run_session(worker_state, abort_rx))
+    });
+    match spawned {
+        Ok(()) => {
+            let started = state.status_mut().started.clone();
+            Ok((
+                StatusCode::ACCEPTED,
+                Json(json!({ "state": "running", "by": by, "started": started })),
+            )
+                .into_response())
+        }
+        Err(e) => {
+            let mut status = state.status_mut();
+            status.state = RunState::Idle;
+            status.error = Some(format!("cannot start the session: {e}"));
+            Err(ApiError(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                format!("cannot start the session: {e}"),
+            ))
+        }
+    }
+}

@@ -1,0 +1,206 @@
+//! The daemon's state, shared by every request and the session thread: the
+//! configuration, the store, the status, the live events, and the handles
+//! that abort and join a running session.
+
+use std::path::Path;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Instant, SystemTime};
+
+use tokio::sync::{broadcast, oneshot, watch};
+
+use super::api::{EventJson, RunState, Status};
+use crate::config::Config;
+use crate::hardware::Selection;
+use crate::schedule::Schedule;
+use crate::store::Store;
+
+/// How many recent events the status keeps.
+const RECENT: usize = 30;
+
+struct Shared {
+    config: Config,
+    schedule: Schedule,
+    selection: Selection,
+    token: String,
+    store: Store,
+    status: Mutex<Status>,
+    events: broadcast::Sender<EventJson>,
+    abort: Mutex<Option<oneshot::Sender<String>>>,
+    worker: Mutex<Option<std::thread::JoinHandle<()>>>,
+    shutdown: watch::Sender<bool>,
+    /// When the running session's loop last beat (None: no session).
+    heartbeat: Mutex<Option<Instant>>,
+}
+
+/// The daemon's state, shared by every request.
+#[derive(Clone)]
+pub struct AppState(Arc<Shared>);
+
+impl AppState {
+    /// `token` is required for everything that moves the robot or changes the
+    /// active calibration; results are kept in the store in `state_dir`.
+    pub fn new(
+        config: Config,
+        schedule: Schedule,
+        selection: Selection,
+        token: String,
+        state_dir: &Path,
+    ) -> Self {
+        let (events, _) = broadcast::channel(1024);
+        let (shutdown, _) = watch::channel(false);
+        let store = Store::new(state_dir);
+        // Saves cut short by a kill leave temporary files; nothing else does.
+        match store.remove_stale_temporaries() {
+            Ok(0) => {}
+            Ok(n) => tracing::warn!(
+                "removed {n} temporary files of saves that never finished in {}",
+                state_dir.display()
+            ),
+            Err(e) => tracing::warn!("cannot clean the store: {e}"),
+        }
+        AppState(Arc::new(Shared {
+            config,
+            schedule,
+            selection,
+            token: token.trim().to_string(),
+            store,
+            status: Mutex::new(Status {
+                state: RunState::Idle,
+                robot: "idle".into(),
+                ..Status::default()
+            }),
+            events,
+            heartbeat: Mutex::new(None),
+            abort: Mutex::new(None),
+            worker: Mutex::new(None),
+            shutdown,
+        }))
+    }
+
+    /// A snapshot of the status.
+    pub fn status(&self) -> Status {
+        self.status_mut().clone()
+    }
+
+    /// The status, to change it.
+    pub(super) fn status_mut(&self) -> MutexGuard<'_, Status> {
+        lock(&self.0.status)
+    }
+
+    /// Records how the hardware check at start went (shown on the page).
+    pub fn set_hardware(&self, words: String) {
+        self.status_mut().hardware = words;
+    }
+
+    /// Aborts a running session (if any) and waits until it has stopped the robot.
+    pub async fn stop_session(&self, reason: &str) {
+        if let Some(abort) = self.take_abort() {
+            let _ = abort.send(reason.to_string());
+        }
+        let worker = lock(&self.0.worker).take();
+        if let Some(worker) = worker {
+            let _ = tokio::task::spawn_blocking(move || worker.join()).await;
+        }
+    }
+
+    pub(super) fn config(&self) -> &Config {
+        &self.0.config
+    }
+
+    pub(super) fn schedule(&self) -> &Schedule {
+        &self.0.schedule
+    }
+
+    pub(super) fn selection(&self) -> &Selection {
+        &self.0.selection
+    }
+
+    /// The token that writes must carry (trimmed; never empty once read).
+    pub(super) fn token(&self) -> &str {
+        &self.0.token
+    }
+
+    pub(super) fn store(&self) -> &Store {
+        &self.0.store
+    }
+
+    /// Shows an event in the status and sends it to every live stream.
+    pub(super) fn publish(&self, event: EventJson) {
+        {
+            let mut status = self.status_mut();
+            status.apply(&event);
+            if !matches!(event, EventJson::Provisional { .. }) {
+                status.recent_events.push_back(event.clone());
+            }
+            while status.recent_events.len() > RECENT {
+                status.recent_events.pop_front();
+            }
+        }
+        let _ = self.0.events.send(event);
+    }
+
+    pub(super) fn subscribe_events(&self) -> broadcast::Receiver<EventJson> {
+        self.0.events.subscribe()
+    }
+
+    /// Whether the service is stopping (no new calibration may start).
+    pub(super) fn is_stopping(&self) -> bool {
+        *self.0.shutdown.borrow()
+    }
+
+    /// Becomes true when the service stops: the live streams end on it.
+    pub(super) fn subscribe_stopping(&self) -> watch::Receiver<bool> {
+        self.0.shutdown.subscribe()
+    }
+
+    pub(super) fn mark_stopping(&self) {
+        let _ = self.0.shutdown.send(true);
+    }
+
+    pub(super) fn set_abort(&self, abort: oneshot::Sender<String>) {
+        *lock(&self.0.abort) = Some(abort);
+    }
+
+    /// The running session's abort, taken: only one abort is ever sent.
+    pub(super) fn take_abort(&self) -> Option<oneshot::Sender<String>> {
+        lock(&self.0.abort).take()
+    }
+
+    /// Joins a finished session thread, then keeps the new one.
+    pub(super) fn replace_worker(
+        &self,
+        start: impl FnOnce() -> std::io::Result<std::thread::JoinHandle<()>>,
+    ) -> std::io::Result<()> {
+        if let Some(old) = lock(&self.0.worker).take() {
+            let _ = old.join();
+        }
+        let handle = start()?;
+        *lock(&self.0.worker) = Some(handle);
+        Ok(())
+    }
+
+    /// The session's loop beats: it is alive now.
+    pub(super) fn beat(&self) {
+        *lock(&self.0.heartbeat) = Some(Instant::now());
+    }
+
+    /// No session runs: nothing to beat.
+    pub(super) fn clear_heartbeat(&self) {
+        *lock(&self.0.heartbeat) = None;
+    }
+
+    pub(super) fn last_beat(&self) -> Option<Instant> {
+        *lock(&self.0.heartbeat)
+    }
+}
+
+/// A lock that survives a panicked holder: every value kept here stays
+/// valid between statements.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Now, as the API writes times (RFC 3339, seconds).
+pub(super) fn now() -> String {
+    humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
+}
