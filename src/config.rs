@@ -3,9 +3,11 @@
 //! checks, so that a typo is an error naming the key rather than a default
 //! silently used. `groundcal check-config FILE` runs both.
 
+use std::fmt;
 use std::path::{Path, PathBuf};
+use std::str::FromStr;
 
-use serde::Deserialize;
+use serde::{Deserialize, Deserializer};
 
 use crate::calib::quality::Gates;
 use crate::calib::sensor::{DepthModel, Intrinsics};
@@ -32,7 +34,8 @@ pub struct Config {
 pub struct RobotConfig {
     /// `host:port` of the lower computer (hexapod-udp.md), or `sim` for the
     /// simulated one in process.
-    pub address: String,
+    #[serde(deserialize_with = "robot_address")]
+    pub address: RobotAddress,
     /// Bind the socket to this network interface (the robot's Wi-Fi).
     #[serde(default)]
     pub interface: Option<String>,
@@ -58,7 +61,8 @@ fn default_retries() -> u32 {
 #[serde(deny_unknown_fields)]
 pub struct SensorConfig {
     /// `kinect`, `sim`, or `replay:DIR`.
-    pub source: String,
+    #[serde(deserialize_with = "sensor_source")]
+    pub source: SensorSource,
     /// The libfreenect library file (e.g. libfreenect's fakenect build).
     #[serde(default)]
     pub freenect_lib: Option<PathBuf>,
@@ -112,7 +116,8 @@ pub struct SimConfig {
     /// should find.
     pub mount: crate::calib::geometry::PoseDegMm,
     /// `flat`, `boxes-and-wall`, `uneven` or `corridor`.
-    pub world: String,
+    #[serde(deserialize_with = "sim_world")]
+    pub world: SimWorld,
     /// A foot that sinks into soft ground from a pose on (tests of slipped
     /// feet): `{ foot = 3, from_pose = 30, depth_mm = 15.0 }`.
     #[serde(default)]
@@ -194,38 +199,11 @@ impl Config {
                 "must be finite, with min_height_mm < max_height_mm and positive tilt".into(),
             ));
         }
-        if self.robot.address != "sim"
-            && self.robot.address.parse::<std::net::SocketAddr>().is_err()
-        {
-            // A host name is allowed too; it must at least have a port.
-            if self
-                .robot
-                .address
-                .rsplit_once(':')
-                .and_then(|(_, p)| p.parse::<u16>().ok())
-                .is_none()
-            {
-                return Err(bad(
-                    "robot.address",
-                    format!("\"{}\" is neither `sim` nor host:port", self.robot.address),
-                ));
-            }
-        }
         if self.robot.retry_interval_ms == 0 || self.robot.retries == 0 {
             return Err(bad(
                 "robot",
                 "retry_interval_ms and retries must be positive".into(),
             ));
-        }
-        match self.sensor.source.as_str() {
-            "kinect" | "sim" => {}
-            s if s.starts_with("replay:") && s.len() > "replay:".len() => {}
-            s => {
-                return Err(bad(
-                    "sensor.source",
-                    format!("\"{s}\" is not kinect, sim or replay:DIR"),
-                ))
-            }
         }
         if !(self.sensor.tilt_deg.is_finite() && (-31.0..=31.0).contains(&self.sensor.tilt_deg)) {
             return Err(bad(
@@ -284,15 +262,6 @@ impl Config {
                     "has a value that is not a finite number".into(),
                 ));
             }
-            if !["flat", "boxes-and-wall", "uneven", "corridor"].contains(&sim.world.as_str()) {
-                return Err(bad(
-                    "sim.world",
-                    format!(
-                        "\"{}\" is not flat, boxes-and-wall, uneven or corridor",
-                        sim.world
-                    ),
-                ));
-            }
             if let Some(sinking) = &sim.sinking_foot {
                 if !(1..=6).contains(&sinking.foot) {
                     return Err(bad(
@@ -307,7 +276,8 @@ impl Config {
                     ));
                 }
             }
-        } else if self.robot.address == "sim" || self.sensor.source == "sim" {
+        } else if self.robot.address == RobotAddress::Sim || self.sensor.source == SensorSource::Sim
+        {
             return Err(bad(
                 "sim",
                 "the simulated robot or sensor needs a [sim] table".into(),
@@ -326,6 +296,149 @@ impl Config {
             .map_err(|e| InputError::new(&schedule_path, None, e.to_string()))?;
         Ok(schedule)
     }
+}
+
+/// Where the lower computer is (`robot.address`, `--robot`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RobotAddress {
+    /// The simulated lower computer, in process.
+    Sim,
+    /// A lower computer at `host:port` (hexapod-udp.md), resolved when the
+    /// link opens, IPv4 first.
+    HostPort(String),
+}
+
+impl FromStr for RobotAddress {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        if text == "sim" {
+            return Ok(Self::Sim);
+        }
+        // A host name is allowed too; it must at least have a host and a port.
+        let host_and_port = text
+            .rsplit_once(':')
+            .filter(|(host, _)| !host.is_empty())
+            .and_then(|(_, port)| port.parse::<u16>().ok())
+            .is_some();
+        if text.parse::<std::net::SocketAddr>().is_ok() || host_and_port {
+            Ok(Self::HostPort(text.to_string()))
+        } else {
+            Err(format!("\"{text}\" is neither `sim` nor host:port"))
+        }
+    }
+}
+
+impl fmt::Display for RobotAddress {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Sim => f.write_str("sim"),
+            Self::HostPort(address) => f.write_str(address),
+        }
+    }
+}
+
+/// Where depth frames come from (`sensor.source`, `--sensor`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SensorSource {
+    /// A Kinect v1 through libfreenect.
+    Kinect,
+    /// The simulated Kinect, seeing the simulated world.
+    Sim,
+    /// The frames of a recording, pose by pose.
+    Replay(PathBuf),
+}
+
+impl FromStr for SensorSource {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text {
+            "kinect" => Ok(Self::Kinect),
+            "sim" => Ok(Self::Sim),
+            _ => match text.strip_prefix("replay:") {
+                Some(dir) if !dir.is_empty() => Ok(Self::Replay(PathBuf::from(dir))),
+                _ => Err(format!("\"{text}\" is not kinect, sim or replay:DIR")),
+            },
+        }
+    }
+}
+
+impl fmt::Display for SensorSource {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Kinect => f.write_str("kinect"),
+            Self::Sim => f.write_str("sim"),
+            Self::Replay(dir) => write!(f, "replay:{}", dir.display()),
+        }
+    }
+}
+
+/// The simulated world (`sim.world`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimWorld {
+    /// Flat ground, nothing else.
+    Flat,
+    /// Boxes on the ground and a wall in view.
+    BoxesAndWall,
+    /// Ground with 1 cm bumps.
+    Uneven,
+    /// A corridor with people: the floor a tenth of the view.
+    Corridor,
+}
+
+impl SimWorld {
+    const NAMES: [(&'static str, SimWorld); 4] = [
+        ("flat", SimWorld::Flat),
+        ("boxes-and-wall", SimWorld::BoxesAndWall),
+        ("uneven", SimWorld::Uneven),
+        ("corridor", SimWorld::Corridor),
+    ];
+}
+
+impl FromStr for SimWorld {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        Self::NAMES
+            .iter()
+            .find(|(name, _)| *name == text)
+            .map(|(_, world)| *world)
+            .ok_or_else(|| format!("\"{text}\" is not flat, boxes-and-wall, uneven or corridor"))
+    }
+}
+
+impl fmt::Display for SimWorld {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let name = Self::NAMES
+            .iter()
+            .find(|(_, world)| world == self)
+            .map_or("?", |(name, _)| name);
+        f.write_str(name)
+    }
+}
+
+/// A string value parsed as `T`, an error naming `key` (the TOML error adds
+/// the file and line).
+fn parsed<'de, D: Deserializer<'de>, T: FromStr<Err = String>>(
+    deserializer: D,
+    key: &str,
+) -> Result<T, D::Error> {
+    let text = String::deserialize(deserializer)?;
+    text.parse()
+        .map_err(|e| serde::de::Error::custom(format!("{key}: {e}")))
+}
+
+fn robot_address<'de, D: Deserializer<'de>>(d: D) -> Result<RobotAddress, D::Error> {
+    parsed(d, "robot.address")
+}
+
+fn sensor_source<'de, D: Deserializer<'de>>(d: D) -> Result<SensorSource, D::Error> {
+    parsed(d, "sensor.source")
+}
+
+fn sim_world<'de, D: Deserializer<'de>>(d: D) -> Result<SimWorld, D::Error> {
+    parsed(d, "sim.world")
 }
 
 /// A path named in the configuration: relative paths are relative to the
@@ -379,12 +492,8 @@ mod tests {
             Config::parse(&path, &text.replace("tilt_deg = -20.0", "tilt_deg = 45.0")).unwrap();
         let err = config.validate(&path).unwrap_err();
         assert!(err.to_string().contains("sensor.tilt_deg"), "{err}");
-        let config =
-            Config::parse(&path, &text.replace("world = \"flat\"", "world = \"moon\"")).unwrap();
-        assert!(config
-            .validate(&path)
-            .unwrap_err()
-            .to_string()
-            .contains("sim.world"));
+        let err = Config::parse(&path, &text.replace("world = \"flat\"", "world = \"moon\""))
+            .unwrap_err();
+        assert!(err.to_string().contains("sim.world"), "{err}");
     }
 }

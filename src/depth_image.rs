@@ -20,27 +20,16 @@ const RAW11_MAX: u16 = 2047;
 
 const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
 
-/// What the 16-bit values of a depth image mean.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// What the 16-bit values of a depth image mean (`--units raw11|mm|tum`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum DepthUnits {
     /// Kinect 11-bit raw disparity; 2047 = no reading.
     Raw11,
     /// Millimetres; 0 = no reading.
+    #[value(name = "mm")]
     Millimetres,
     /// TUM RGB-D convention: 5000 per metre; 0 = no reading.
     Tum,
-}
-
-impl DepthUnits {
-    /// Parses the command-line spelling: `raw11`, `mm` or `tum`.
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "raw11" => Some(Self::Raw11),
-            "mm" => Some(Self::Millimetres),
-            "tum" => Some(Self::Tum),
-            _ => None,
-        }
-    }
 }
 
 /// One depth image in memory.
@@ -729,11 +718,12 @@ mod tests {
 
     #[test]
     fn units_parse() {
-        assert_eq!(DepthUnits::parse("raw11"), Some(DepthUnits::Raw11));
-        assert_eq!(DepthUnits::parse("mm"), Some(DepthUnits::Millimetres));
-        assert_eq!(DepthUnits::parse("tum"), Some(DepthUnits::Tum));
-        assert_eq!(DepthUnits::parse("MM"), None);
-        assert_eq!(DepthUnits::parse(""), None);
+        let units = |s: &str| <DepthUnits as clap::ValueEnum>::from_str(s, false).ok();
+        assert_eq!(units("raw11"), Some(DepthUnits::Raw11));
+        assert_eq!(units("mm"), Some(DepthUnits::Millimetres));
+        assert_eq!(units("tum"), Some(DepthUnits::Tum));
+        assert_eq!(units("MM"), None);
+        assert_eq!(units(""), None);
     }
 
     #[test]

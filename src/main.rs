@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 use groundcal::calib::calibrate::CalibrationSettings;
 use groundcal::calib::plane::GroundFitMethod;
 use groundcal::cli::{self, plane::PlaneOptions, ExitStatus};
+use groundcal::config::{RobotAddress, SensorSource};
 use groundcal::depth_image::DepthUnits;
 use nalgebra::Vector3;
 
@@ -17,10 +18,10 @@ use nalgebra::Vector3;
 struct HardwareArgs {
     /// The lower computer: host:port, or sim (simulated, in process).
     #[arg(long)]
-    robot: Option<String>,
+    robot: Option<RobotAddress>,
     /// The depth sensor: kinect, sim, or replay:DIR.
     #[arg(long)]
-    sensor: Option<String>,
+    sensor: Option<SensorSource>,
     /// The libfreenect library file (e.g. libfreenect's fakenect build).
     #[arg(long, value_name = "PATH")]
     freenect_lib: Option<PathBuf>,
@@ -133,9 +134,9 @@ enum Command {
         /// The configuration (sensor, library); the flags override it.
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
-        /// The sensor: kinect (libfreenect).
-        #[arg(long, default_value = "kinect")]
-        sensor: String,
+        /// The sensor: kinect (libfreenect); default the configuration's, else kinect.
+        #[arg(long)]
+        sensor: Option<SensorSource>,
         /// The libfreenect library file to load (e.g. libfreenect's fakenect, to play a dump back).
         #[arg(long, value_name = "PATH")]
         freenect_lib: Option<PathBuf>,
@@ -154,7 +155,7 @@ enum Command {
         json: bool,
         /// raw11 (fakenect .pgm), mm, or tum (5000 per metre).
         #[arg(long)]
-        units: Option<String>,
+        units: Option<DepthUnits>,
         /// zero-plane or inverse-linear:A,B (raw11 only).
         #[arg(long, default_value = "zero-plane")]
         model: String,
@@ -260,17 +261,31 @@ fn run(args: Args) -> ExitStatus {
         },
         Command::Export { file, format } => cli::export::run(&file, format),
         Command::Capture {
-            config: _,
+            config,
             sensor,
             freenect_lib,
             frames,
             out,
-        } => match sensor.as_str() {
-            "kinect" => cli::capture::run(freenect_lib.as_deref(), frames, &out),
-            other => usage_error(format!(
-                "--sensor: \"{other}\" cannot capture (yet); use kinect"
-            )),
-        },
+        } => {
+            // The configuration's sensor and library, the flags overriding them.
+            let sensor_config = match &config {
+                Some(path) => match groundcal::config::Config::load(path) {
+                    Ok((config, _)) => Some(config.sensor),
+                    Err(e) => return usage_error(e.to_string()),
+                },
+                None => None,
+            };
+            let source = sensor
+                .or_else(|| sensor_config.as_ref().map(|s| s.source.clone()))
+                .unwrap_or(SensorSource::Kinect);
+            let library = freenect_lib.or_else(|| sensor_config.and_then(|s| s.freenect_lib));
+            match source {
+                SensorSource::Kinect => cli::capture::run(library.as_deref(), frames, &out),
+                other => usage_error(format!(
+                    "--sensor: \"{other}\" cannot capture (yet); use kinect"
+                )),
+            }
+        }
         Command::Plane {
             file,
             json,
@@ -284,13 +299,6 @@ fn run(args: Args) -> ExitStatus {
             up_tolerance,
             ground_fit,
         } => {
-            let units = match units.as_deref().map(|u| DepthUnits::parse(u).ok_or(u)) {
-                None => None,
-                Some(Ok(u)) => Some(u),
-                Some(Err(u)) => {
-                    return usage_error(format!("--units: \"{u}\" is not raw11, mm or tum"))
-                }
-            };
             let model = match cli::plane::parse_model(&model) {
                 Ok(m) => m,
                 Err(e) => return usage_error(e),

@@ -122,3 +122,58 @@ fn unknown_commands_and_flags_are_usage_errors() {
     let (code, _, _) = groundcal(&["frobnicate"]);
     assert_eq!(code, 2);
 }
+
+/// The hardware flags and keys are typed: a value that is not one of them is
+/// bad input (exit 2) naming the flag or the key, before anything is opened.
+#[test]
+fn hardware_choices_that_do_not_exist_are_named() {
+    assert_bad_input(
+        &["calibrate", "--robot", "sim", "--sensor", "bogus"],
+        &["--sensor", "bogus", "kinect, sim or replay:DIR"],
+    );
+    assert_bad_input(
+        &["calibrate", "--robot", "", "--sensor", "sim"],
+        &["--robot", "neither `sim` nor host:port"],
+    );
+    assert_bad_input(
+        &["serve", "--config", "x", "--sensor", "replay:"],
+        &["--sensor"],
+    );
+    assert_bad_input(
+        &[
+            "capture",
+            "--sensor",
+            "camera",
+            "--frames",
+            "1",
+            "--out",
+            "/nonexistent",
+        ],
+        &["--sensor", "camera"],
+    );
+    let shipped = std::fs::read_to_string(
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/sim.toml"),
+    )
+    .unwrap();
+    for (from, to, key) in [
+        ("source = \"sim\"", "source = \"webcam\"", "sensor.source"),
+        ("address = \"sim\"", "address = \"robot\"", "robot.address"),
+        ("world = \"flat\"", "world = \"moon\"", "sim.world"),
+    ] {
+        assert!(shipped.contains(from), "config/sim.toml has {from}");
+        let dir =
+            std::env::temp_dir().join(format!("groundcal-typed-{}-{key}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = dir.join("groundcal.toml");
+        let schedule = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("config/schedules/octopus-52.toml");
+        let text = shipped
+            .replace(from, to)
+            .replace("schedules/octopus-52.toml", schedule.to_str().unwrap());
+        std::fs::write(&config, text).unwrap();
+        let config = config.to_str().unwrap();
+        assert_bad_input(&["check-config", config], &[key, config]);
+        assert_bad_input(&["calibrate", "--config", config], &[key]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

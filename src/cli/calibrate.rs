@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::{finish, ExitStatus};
 use crate::calib::plane::GroundFitMethod;
-use crate::config::Config;
+use crate::config::{Config, RobotAddress, SensorSource};
 use crate::hardware::{self, Selection};
 use crate::schedule::Schedule;
 use crate::session::{self, Event, Plan, SessionError};
@@ -31,10 +31,10 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
         return Config::load(path).map_err(|e| e.to_string());
     }
     let s = &options.selection;
-    if s.robot.as_deref() == Some("sim")
+    if s.robot == Some(RobotAddress::Sim)
         && s.sensor
-            .as_deref()
-            .is_none_or(|v| v == "sim" || v.starts_with("replay:"))
+            .as_ref()
+            .is_none_or(|v| matches!(v, SensorSource::Sim | SensorSource::Replay(_)))
     {
         return Ok(Config::embedded_sim());
     }

@@ -107,12 +107,8 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
                 // spoken to (HELLO) when a calibration starts.
                 format!(
                     "opened: {}; lower computer at {} (first contacted at Calibrate)",
-                    hardware::sensor_source(&config, &options.selection),
-                    options
-                        .selection
-                        .robot
-                        .as_deref()
-                        .unwrap_or(&config.robot.address)
+                    options.selection.sensor(&config),
+                    options.selection.robot(&config)
                 )
             }
             Err(e) => {

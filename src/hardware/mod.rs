@@ -5,8 +5,7 @@
 
 pub mod replay_sensor;
 
-use std::net::ToSocketAddrs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use groundcal_hal::kinect::Kinect;
@@ -21,7 +20,7 @@ use groundcal_hal::{
 };
 
 use crate::calib::geometry::PoseDegMm;
-use crate::config::{Config, SimConfig};
+use crate::config::{Config, RobotAddress, SensorSource, SimConfig, SimWorld};
 use crate::recording::Recording;
 use replay_sensor::ReplaySensor;
 
@@ -143,11 +142,25 @@ impl BodyController for Controller {
 /// overrides.
 #[derive(Debug, Clone, Default)]
 pub struct Selection {
-    /// `sim` or `host:port`.
-    pub robot: Option<String>,
-    /// `kinect`, `sim` or `replay:DIR`.
-    pub sensor: Option<String>,
+    pub robot: Option<RobotAddress>,
+    pub sensor: Option<SensorSource>,
     pub freenect_lib: Option<PathBuf>,
+}
+
+impl Selection {
+    /// The lower computer after the override.
+    pub fn robot(&self, config: &Config) -> RobotAddress {
+        self.robot
+            .clone()
+            .unwrap_or_else(|| config.robot.address.clone())
+    }
+
+    /// The sensor source after the override.
+    pub fn sensor(&self, config: &Config) -> SensorSource {
+        self.sensor
+            .clone()
+            .unwrap_or_else(|| config.sensor.source.clone())
+    }
 }
 
 /// The simulated robot and Kinect share the body's true pose.
@@ -167,20 +180,12 @@ fn sim_parts(config: &Config) -> Result<SimParts, HardwareError> {
 }
 
 fn world(sim: &SimConfig) -> World {
-    match sim.world.as_str() {
-        "boxes-and-wall" => World::boxes_and_wall(sim.seed),
-        "uneven" => World::uneven(sim.seed, 0.01),
-        "corridor" => World::corridor(sim.seed),
-        _ => World::flat(),
+    match sim.world {
+        SimWorld::Flat => World::flat(),
+        SimWorld::BoxesAndWall => World::boxes_and_wall(sim.seed),
+        SimWorld::Uneven => World::uneven(sim.seed, 0.01),
+        SimWorld::Corridor => World::corridor(sim.seed),
     }
-}
-
-/// The sensor source after overrides (`kinect`, `sim`, `replay:DIR`).
-pub fn sensor_source(config: &Config, selection: &Selection) -> String {
-    selection
-        .sensor
-        .clone()
-        .unwrap_or_else(|| config.sensor.source.clone())
 }
 
 /// Opens the hardware. The simulated robot and Kinect, when both are chosen,
@@ -189,18 +194,24 @@ pub async fn open(
     config: &Config,
     selection: &Selection,
 ) -> Result<(Sensor, Controller), HardwareError> {
-    let robot = selection
-        .robot
-        .clone()
-        .unwrap_or_else(|| config.robot.address.clone());
-    let source = sensor_source(config, selection);
-    let sim = if robot == "sim" || source == "sim" {
+    let robot = selection.robot(config);
+    let source = selection.sensor(config);
+    let sim = if robot == RobotAddress::Sim || source == SensorSource::Sim {
         Some(sim_parts(config)?)
     } else {
         None
     };
 
-    let controller = if robot == "sim" {
+    let controller = if let RobotAddress::HostPort(address) = &robot {
+        let mut link = LinkConfig::resolve(address).map_err(wrap)?;
+        link.interface = config.robot.interface.clone();
+        link.client.retry_interval =
+            std::time::Duration::from_millis(config.robot.retry_interval_ms);
+        link.client.retry_limit = config.robot.retries;
+        Controller::Udp(Box::new(
+            UdpBodyController::connect(&link).await.map_err(wrap)?,
+        ))
+    } else {
         let parts = sim.as_ref().expect("made above for the simulated robot");
         let mut robot = SimRobotConfig::reference(parts.sim.seed, parts.sim.time_scale);
         robot.sinking_foot = parts.sim.sinking_foot.map(|s| SinkingFoot {
@@ -212,33 +223,12 @@ pub async fn open(
             robot,
             parts.true_pose.clone(),
         )))
-    } else {
-        // IPv4 first: the robot's Wi-Fi is IPv4 (hexapod-udp.md allows both).
-        let peer = robot
-            .to_socket_addrs()
-            .ok()
-            .and_then(|a| {
-                let all: Vec<_> = a.collect();
-                all.iter().find(|a| a.is_ipv4()).or(all.first()).copied()
-            })
-            .ok_or_else(|| HardwareError {
-                kind: ErrorKind::LinkLost,
-                message: format!("cannot resolve the lower computer's address \"{robot}\""),
-            })?;
-        let mut link = LinkConfig::new(peer);
-        link.interface = config.robot.interface.clone();
-        link.client.retry_interval =
-            std::time::Duration::from_millis(config.robot.retry_interval_ms);
-        link.client.retry_limit = config.robot.retries;
-        Controller::Udp(Box::new(
-            UdpBodyController::connect(&link).await.map_err(wrap)?,
-        ))
     };
 
-    let sensor = match source.as_str() {
-        "sim" => {
+    let sensor = match source {
+        SensorSource::Sim => {
             let parts = sim.as_ref().expect("made above for the simulated sensor");
-            if robot != "sim" {
+            if robot != RobotAddress::Sim {
                 tracing::warn!("the simulated Kinect sees the simulated body, which a real lower computer does not move");
             }
             let mut kinect = SimKinectConfig {
@@ -264,28 +254,20 @@ pub async fn open(
                 .map_err(wrap)?,
             ))
         }
-        "kinect" => {
+        SensorSource::Kinect => {
             let library = selection
                 .freenect_lib
                 .clone()
                 .or_else(|| config.sensor.freenect_lib.clone());
             Sensor::Kinect(Box::new(Kinect::open(library.as_deref(), 0).map_err(wrap)?))
         }
-        other => match other.strip_prefix("replay:") {
-            Some(dir) => {
-                let recording = Recording::open(Path::new(dir)).map_err(|e| HardwareError {
-                    kind: ErrorKind::DeviceMissing,
-                    message: e.to_string(),
-                })?;
-                Sensor::Replay(Box::new(ReplaySensor::new(recording)))
-            }
-            None => {
-                return Err(HardwareError {
-                    kind: ErrorKind::DeviceMissing,
-                    message: format!("--sensor: \"{other}\" is not kinect, sim or replay:DIR"),
-                })
-            }
-        },
+        SensorSource::Replay(dir) => {
+            let recording = Recording::open(&dir).map_err(|e| HardwareError {
+                kind: ErrorKind::DeviceMissing,
+                message: e.to_string(),
+            })?;
+            Sensor::Replay(Box::new(ReplaySensor::new(recording)))
+        }
     };
     Ok((sensor, controller))
 }

@@ -8,7 +8,7 @@ use std::time::Duration;
 use crate::calib::calibrate::CalibrationSettings;
 use crate::calib::observe::ObserveSettings;
 use crate::calib::plane::PlaneFitSettings;
-use crate::config::Config;
+use crate::config::{Config, RobotAddress};
 use crate::recording::session::NominalMount;
 use crate::recording::Recording;
 use crate::schedule::{Limits, Schedule};
@@ -59,8 +59,8 @@ impl Plan {
     ) -> Result<Plan, String> {
         let c = &config.calibration;
         // Simulated hardware runs faster than real time: so do the waits.
-        let scale = match (&config.sim, config.robot.address.as_str()) {
-            (Some(sim), "sim") => sim.time_scale,
+        let scale = match (&config.sim, &config.robot.address) {
+            (Some(sim), RobotAddress::Sim) => sim.time_scale,
             _ => 1.0,
         };
         let mut plan = Plan {
