@@ -5,8 +5,7 @@
 //! panics: files come from disk and are untrusted, so sizes are checked before anything is
 //! allocated and every failure is an error that names the file.
 
-use std::fs::File;
-use std::io::{Cursor, Read};
+use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 /// Largest accepted width or height; anything bigger is refused before allocating.
@@ -389,27 +388,18 @@ fn sniff_format(path: &Path, bytes: &[u8]) -> Result<FileFormat, DepthImageError
 
 /// Reads the whole file, refusing before reading if it is implausibly large for a depth image.
 fn read_bounded(path: &Path) -> Result<Vec<u8>, DepthImageError> {
-    let io_err = |source| DepthImageError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let too_large = || DepthImageError::FileTooLarge {
-        path: path.to_path_buf(),
-        max: MAX_FILE_BYTES,
-    };
-    let file = File::open(path).map_err(io_err)?;
-    let len = file.metadata().map_err(io_err)?.len();
-    if len > MAX_FILE_BYTES {
-        return Err(too_large());
-    }
-    let mut bytes = Vec::with_capacity(len as usize);
-    // `take` guards against a file that grows between the size check and the read.
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io_err)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(too_large());
-    }
+    use crate::files::ReadError;
+    let mut bytes = Vec::new();
+    crate::files::read_bounded_into(path, MAX_FILE_BYTES, &mut bytes).map_err(|e| match e {
+        ReadError::File(f) => DepthImageError::Io {
+            path: path.to_path_buf(),
+            source: f.source,
+        },
+        ReadError::TooLarge { .. } => DepthImageError::FileTooLarge {
+            path: path.to_path_buf(),
+            max: MAX_FILE_BYTES,
+        },
+    })?;
     Ok(bytes)
 }
 

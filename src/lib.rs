@@ -19,6 +19,7 @@ pub mod cli;
 pub mod config;
 pub mod depth_image;
 pub mod export;
+pub mod files;
 pub mod hardware;
 pub mod output;
 pub mod recording;

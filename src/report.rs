@@ -8,16 +8,14 @@
 //! inlined; every text that comes from outside (reasons, paths) is escaped.
 
 use std::fmt::Write as _;
-use std::fs;
-use std::io::{self, Write as _};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::SystemTime;
 
 use plotters::coord::types::{RangedCoordf64, RangedCoordi32};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+use crate::files::{write_atomically, FileError};
 use crate::output::{PoseJson, ResultJson};
 
 /// Where a result came from.
@@ -44,37 +42,15 @@ impl Provenance {
     }
 }
 
-/// Writes `dir/index.html` atomically (a temporary file in `dir`, fsync,
-/// rename), so that a reader never sees half a report; creates `dir` if needed.
+/// Writes `dir/index.html` atomically ([`crate::files::write_atomically`]),
+/// so that a reader never sees half a report; creates `dir` if needed.
 pub fn write_report(
     dir: &Path,
     result: &ResultJson,
     provenance: &Provenance,
-) -> io::Result<PathBuf> {
-    // Unique per call, so that two reports written at once cannot share it.
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    fs::create_dir_all(dir)?;
-    let html = render_html(result, provenance);
+) -> Result<PathBuf, FileError> {
     let target = dir.join("index.html");
-    let temporary = dir.join(format!(
-        ".index.html.{}.{}.tmp",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let written = (|| {
-        let mut file = fs::File::create(&temporary)?;
-        file.write_all(html.as_bytes())?;
-        file.sync_all()?;
-        fs::rename(&temporary, &target)
-    })();
-    if let Err(e) = written {
-        let _ = fs::remove_file(&temporary);
-        return Err(e);
-    }
-    // Makes the rename itself durable; not every platform can open a directory.
-    if let Ok(d) = fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
+    write_atomically(&target, render_html(result, provenance).as_bytes())?;
     Ok(target)
 }
 
@@ -1158,6 +1134,7 @@ mod tests {
 
     #[test]
     fn writes_index_html_atomically() {
+        use std::fs;
         let dir = std::env::temp_dir().join(format!(
             "groundcal-report-test-{}-{:?}",
             std::process::id(),

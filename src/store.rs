@@ -26,9 +26,7 @@
 //! when the daemon starts ([`Store::remove_stale_temporaries`]).
 
 use std::fs::{self, File, OpenOptions};
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
 use serde::{Deserialize, Serialize};
@@ -43,6 +41,8 @@ pub enum StoreError {
         action: &'static str,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Write(#[from] crate::files::FileError),
     #[error("{}: {message}", path.display())]
     Invalid { path: PathBuf, message: String },
     #[error("no calibration {0} in the history")]
@@ -59,40 +59,6 @@ fn io<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -
         action,
         source,
     }
-}
-
-/// Temporary files of the store's writes: `.NAME.tmp-PID-N`.
-const TEMPORARY_MARK: &str = ".tmp-";
-
-/// Writes `bytes` to `path` atomically and durably, through a temporary file
-/// whose name no other write shares (this process's id and a counter).
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), StoreError> {
-    static WRITES: AtomicU64 = AtomicU64::new(0);
-    let dir = path.parent().unwrap_or(Path::new("."));
-    fs::create_dir_all(dir).map_err(io(dir, "cannot create the directory"))?;
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
-    let temp = dir.join(format!(
-        ".{name}{TEMPORARY_MARK}{}-{}",
-        std::process::id(),
-        WRITES.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&temp)
-            .map_err(io(&temp, "cannot create"))?;
-        file.write_all(bytes).map_err(io(&temp, "cannot write"))?;
-        file.sync_all().map_err(io(&temp, "cannot sync"))?;
-        fs::rename(&temp, path).map_err(io(path, "cannot replace"))?;
-        File::open(dir)
-            .and_then(|d| d.sync_all())
-            .map_err(io(dir, "cannot sync the directory"))
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&temp);
-    }
-    result
 }
 
 /// A directory's listing, or `None` when it does not exist (yet).
@@ -183,7 +149,7 @@ impl Store {
             for item in listing {
                 let item = item.map_err(io(&dir, "cannot list"))?;
                 let name = item.file_name().to_string_lossy().into_owned();
-                if name.starts_with('.') && name.contains(TEMPORARY_MARK) {
+                if crate::files::is_temporary(&name) {
                     let path = item.path();
                     fs::remove_file(&path).map_err(io(&path, "cannot remove"))?;
                     removed += 1;
@@ -227,7 +193,7 @@ impl Store {
             path: self.history_dir(),
             message: e.to_string(),
         })?;
-        write_atomically(&self.entry_path(&id)?, &bytes)?;
+        crate::files::write_atomically(&self.entry_path(&id)?, &bytes)?;
         Ok(id)
     }
 
@@ -291,7 +257,7 @@ impl Store {
             path: self.active_path(),
             message: e.to_string(),
         })?;
-        write_atomically(&self.active_path(), &bytes)?;
+        crate::files::write_atomically(&self.active_path(), &bytes)?;
         Ok(active)
     }
 
@@ -323,7 +289,7 @@ impl Store {
             path: path.clone(),
             message: e.to_string(),
         })?;
-        write_atomically(&path, &bytes)?;
+        crate::files::write_atomically(&path, &bytes)?;
         Ok(entry)
     }
 

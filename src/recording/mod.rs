@@ -74,34 +74,24 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> 
     Ok(bytes)
 }
 
-/// [`read_bounded`] into a buffer that is reused from file to file (the
-/// replay's frames: fresh memory costs page faults every time).
+/// [`read_bounded`] into a buffer that is reused from file to file
+/// ([`crate::files::read_bounded_into`]), errors as the recording's.
 pub fn read_bounded_into(
     path: &Path,
     max_bytes: u64,
     bytes: &mut Vec<u8>,
 ) -> Result<(), InputError> {
-    use std::io::Read;
-    let file = std::fs::File::open(path)
-        .map_err(|e| InputError::new(path, None, format!("cannot open: {e}")))?;
-    // Sized from the file's length, so that a frame is read without regrowing.
-    let expected = file
-        .metadata()
-        .map(|m| m.len().min(max_bytes + 1))
-        .unwrap_or(0);
-    bytes.clear();
-    bytes.reserve(expected as usize + 1);
-    file.take(max_bytes + 1)
-        .read_to_end(bytes)
-        .map_err(|e| InputError::new(path, None, format!("cannot read: {e}")))?;
-    if bytes.len() as u64 > max_bytes {
-        return Err(InputError::new(
+    use crate::files::ReadError;
+    crate::files::read_bounded_into(path, max_bytes, bytes).map_err(|e| match e {
+        ReadError::File(f) => {
+            InputError::new(path, None, format!("cannot {}: {}", f.action, f.source))
+        }
+        ReadError::TooLarge { max_bytes, .. } => InputError::new(
             path,
             None,
             format!("larger than {max_bytes} bytes: not an input of this kind"),
-        ));
-    }
-    Ok(())
+        ),
+    })
 }
 
 /// Largest `session.json`, `poses.jsonl` or `INDEX.txt` accepted.

@@ -45,6 +45,9 @@ pub enum WriteError {
     /// The writer refused: bad input, or a state that cannot be written.
     #[error("{}: {message}", path.display())]
     Refused { path: PathBuf, message: String },
+    /// A file could not be replaced whole.
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The file system failed.
     #[error("{}: cannot {action}: {source}", path.display())]
     Io {
@@ -74,6 +77,7 @@ impl WriteError {
     pub fn path(&self) -> &Path {
         match self {
             Self::Refused { path, .. } | Self::Io { path, .. } => path,
+            Self::File(e) => &e.path,
         }
     }
 }
@@ -158,17 +162,7 @@ impl RecordingWriter {
         std::fs::create_dir(&kinect).map_err(WriteError::io(&kinect, "create the directory"))?;
 
         // session.json: complete or absent, never half-written.
-        let tmp = dir.join(".session.json.tmp");
-        {
-            let mut file = create_new(&tmp)?;
-            file.write_all(text.as_bytes())
-                .map_err(WriteError::io(&tmp, "write"))?;
-            file.sync_all().map_err(WriteError::io(&tmp, "fsync"))?;
-        }
-        std::fs::rename(&tmp, &session_path).map_err(WriteError::io(
-            &session_path,
-            "rename the temporary file into place",
-        ))?;
+        crate::files::write_atomically(&session_path, text.as_bytes())?;
 
         let poses_path = dir.join("poses.jsonl");
         let poses = create_new(&poses_path)?;

@@ -1,0 +1,178 @@
+//! Files read and written with care, one way everywhere.
+//!
+//! - A write replaces a file whole or not at all: the bytes go to a temporary
+//!   file of a name no other write shares, are fsynced, renamed over the
+//!   target, and the directory is fsynced, so that a reader (or a reboot)
+//!   sees the old file or the new one, never half of one.
+//! - A read refuses a file larger than what its kind can be before reading
+//!   it, so that a wrong path cannot fill the memory.
+
+use std::fs::{self, File, OpenOptions};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// What failed on which file.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot {action}: {source}", path.display())]
+pub struct FileError {
+    pub path: PathBuf,
+    /// What was being done, as a verb phrase: "create", "replace", ….
+    pub action: &'static str,
+    pub source: std::io::Error,
+}
+
+fn failed<'a>(
+    path: &'a Path,
+    action: &'static str,
+) -> impl FnOnce(std::io::Error) -> FileError + 'a {
+    move |source| FileError {
+        path: path.to_path_buf(),
+        action,
+        source,
+    }
+}
+
+/// The part of a temporary file's name that marks it as one:
+/// `.NAME.tmp-PID-N`. Only a write killed mid-way leaves one behind.
+pub const TEMPORARY_MARK: &str = ".tmp-";
+
+/// Whether a directory entry is the temporary file of a write.
+pub fn is_temporary(file_name: &str) -> bool {
+    file_name.starts_with('.') && file_name.contains(TEMPORARY_MARK)
+}
+
+/// Writes `bytes` to `path` atomically and durably (see the module), creating
+/// the directory if needed. On failure the temporary file is removed and the
+/// old file, if any, is untouched.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
+    static WRITES: AtomicU64 = AtomicU64::new(0);
+    let dir = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    fs::create_dir_all(dir).map_err(failed(dir, "create the directory"))?;
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
+    let temporary = dir.join(format!(
+        ".{name}{TEMPORARY_MARK}{}-{}",
+        std::process::id(),
+        WRITES.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let mut file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temporary)
+            .map_err(failed(&temporary, "create"))?;
+        file.write_all(bytes).map_err(failed(&temporary, "write"))?;
+        file.sync_all().map_err(failed(&temporary, "sync"))?;
+        fs::rename(&temporary, path).map_err(failed(path, "replace"))?;
+        File::open(dir)
+            .and_then(|d| d.sync_all())
+            .map_err(failed(dir, "sync the directory"))
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&temporary);
+    }
+    result
+}
+
+/// Why a bounded read failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    #[error(transparent)]
+    File(#[from] FileError),
+    /// The file is larger than its kind can be.
+    #[error("{}: larger than {max_bytes} bytes: not an input of this kind", path.display())]
+    TooLarge { path: PathBuf, max_bytes: u64 },
+}
+
+/// Reads a whole file of at most `max_bytes` into `bytes` (cleared first and
+/// reused from file to file: fresh memory costs page faults every time).
+pub fn read_bounded_into(
+    path: &Path,
+    max_bytes: u64,
+    bytes: &mut Vec<u8>,
+) -> Result<(), ReadError> {
+    let file = File::open(path).map_err(failed(path, "open"))?;
+    // Sized from the file's length, so that a file is read without regrowing;
+    // `take` guards against a file that grows after that.
+    let expected = file
+        .metadata()
+        .map(|m| m.len().min(max_bytes + 1))
+        .unwrap_or(0);
+    bytes.clear();
+    bytes.reserve(expected as usize + 1);
+    file.take(max_bytes + 1)
+        .read_to_end(bytes)
+        .map_err(failed(path, "read"))?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(ReadError::TooLarge {
+            path: path.to_path_buf(),
+            max_bytes,
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("groundcal-files-{}-{name}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        dir
+    }
+
+    #[test]
+    fn a_write_replaces_whole_and_leaves_no_temporary() {
+        let dir = scratch("write");
+        let path = dir.join("active.json");
+        write_atomically(&path, b"one").unwrap();
+        write_atomically(&path, b"two").unwrap();
+        assert_eq!(fs::read(&path).unwrap(), b"two");
+        let names: Vec<String> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["active.json"]);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_failed_write_names_the_file_and_keeps_the_old_one() {
+        let dir = scratch("failed");
+        let path = dir.join("target");
+        // A directory where the file should go: the rename fails.
+        fs::create_dir_all(path.join("occupied")).unwrap();
+        let e = write_atomically(&path, b"new").unwrap_err();
+        assert_eq!(e.action, "replace");
+        assert!(e.to_string().contains("target"), "{e}");
+        assert!(path.join("occupied").is_dir());
+        assert!(!fs::read_dir(&dir)
+            .unwrap()
+            .any(|e| is_temporary(&e.unwrap().file_name().to_string_lossy())));
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_read_refuses_a_file_larger_than_its_kind() {
+        let dir = scratch("read");
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("f");
+        fs::write(&path, [7u8; 100]).unwrap();
+        let mut bytes = Vec::new();
+        read_bounded_into(&path, 100, &mut bytes).unwrap();
+        assert_eq!(bytes.len(), 100);
+        let e = read_bounded_into(&path, 99, &mut bytes).unwrap_err();
+        assert!(
+            matches!(e, ReadError::TooLarge { max_bytes: 99, .. }),
+            "{e}"
+        );
+        let e = read_bounded_into(&dir.join("missing"), 99, &mut bytes).unwrap_err();
+        assert!(e.to_string().contains("cannot open"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+}
