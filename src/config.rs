@@ -345,8 +345,9 @@ pub enum SensorSource {
     Kinect,
     /// The simulated Kinect, seeing the simulated world.
     Sim,
-    /// The frames of a recording, pose by pose.
-    Replay(PathBuf),
+    /// The frames of a recording played back pose by pose, as if live
+    /// (`replay:DIR`, the spelling of cli.md).
+    Playback(PathBuf),
 }
 
 impl FromStr for SensorSource {
@@ -357,7 +358,7 @@ impl FromStr for SensorSource {
             "kinect" => Ok(Self::Kinect),
             "sim" => Ok(Self::Sim),
             _ => match text.strip_prefix("replay:") {
-                Some(dir) if !dir.is_empty() => Ok(Self::Replay(PathBuf::from(dir))),
+                Some(dir) if !dir.is_empty() => Ok(Self::Playback(PathBuf::from(dir))),
                 _ => Err(format!("\"{text}\" is not kinect, sim or replay:DIR")),
             },
         }
@@ -369,7 +370,7 @@ impl fmt::Display for SensorSource {
         match self {
             Self::Kinect => f.write_str("kinect"),
             Self::Sim => f.write_str("sim"),
-            Self::Replay(dir) => write!(f, "replay:{}", dir.display()),
+            Self::Playback(dir) => write!(f, "replay:{}", dir.display()),
         }
     }
 }

@@ -65,7 +65,7 @@ pub trait DepthSensor {
 
     /// Tells the sensor which pose the next frames belong to: frames queued
     /// before it are discarded (they were taken before the pose began); a
-    /// replayed sensor serves that pose's recorded frames.
+    /// played-back sensor serves that pose's recorded frames.
     fn begin_pose(&mut self, _pose_id: u16) {}
 
     /// The next depth frame, in the order the sensor delivered them.

@@ -34,7 +34,7 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
     if s.robot == Some(RobotAddress::Sim)
         && s.sensor
             .as_ref()
-            .is_none_or(|v| matches!(v, SensorSource::Sim | SensorSource::Replay(_)))
+            .is_none_or(|v| matches!(v, SensorSource::Sim | SensorSource::Playback(_)))
     {
         return Ok(Config::embedded_sim());
     }
@@ -164,7 +164,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             }
         };
         let replay = match &sensor {
-            hardware::Sensor::Replay(r) => Some(r.recording().clone()),
+            hardware::Sensor::Playback(r) => Some(r.recording().clone()),
             _ => None,
         };
         let plan =

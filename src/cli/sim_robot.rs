@@ -3,7 +3,7 @@
 //! own process, for tests and demos of the UDP link. With `--replay DIR` it
 //! plays a recording's robot back instead of simulating one: it accepts only
 //! the recorded poses, exactly as commanded, and reports the recorded feet
-//! (`groundcal_hal::sim::replayed`).
+//! (`groundcal_hal::sim::recorded_robot`).
 //!
 //! It prints one line `listening on IP:PORT` on stdout once the socket is
 //! bound (so that `--listen 127.0.0.1:0` can be used and found), serves until
@@ -19,7 +19,7 @@ use std::net::{SocketAddr, ToSocketAddrs};
 use std::path::{Path, PathBuf};
 
 use groundcal_hal::sim::lower_computer::{self, FaultInjection, SimOptions, RECEIPTS_ENV};
-use groundcal_hal::sim::replayed::{RecordedStance, ReplayScript};
+use groundcal_hal::sim::recorded_robot::{RecordedScript, RecordedStance};
 
 use crate::recording::Recording;
 
@@ -75,8 +75,8 @@ pub fn run(listen: &str, seed: u64, time_scale: f64, replay: Option<&Path>) -> E
     }
 }
 
-/// A recording's robot as a script for the replayed lower computer.
-fn script_of(dir: &Path, time_scale: f64) -> Result<ReplayScript, String> {
+/// A recording's robot as a script for the recorded robot's lower computer.
+fn script_of(dir: &Path, time_scale: f64) -> Result<RecordedScript, String> {
     let recording = Recording::open(dir).map_err(|e| e.to_string())?;
     let feet = |feet: &[[f64; 3]], what: &str| -> Result<[[f64; 3]; 6], String> {
         <[[f64; 3]; 6]>::try_from(feet)
@@ -101,7 +101,7 @@ fn script_of(dir: &Path, time_scale: f64) -> Result<ReplayScript, String> {
         };
         poses.insert(id, stance);
     }
-    Ok(ReplayScript {
+    Ok(RecordedScript {
         home,
         poses,
         time_scale,

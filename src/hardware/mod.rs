@@ -3,7 +3,7 @@
 //! computer, the simulated ones, or a recording. The session is generic over
 //! the traits; these enums let the command line pick at run time.
 
-pub mod replay_sensor;
+pub mod playback_sensor;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -22,7 +22,7 @@ use groundcal_hal::{
 use crate::calib::geometry::PoseDegMm;
 use crate::config::{Config, RobotAddress, SensorSource, SimConfig, SimWorld};
 use crate::recording::Recording;
-use replay_sensor::ReplaySensor;
+use playback_sensor::PlaybackSensor;
 
 /// Any hardware error, keeping its kind and its words.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -49,7 +49,7 @@ fn wrap<E: Error>(e: E) -> HardwareError {
 pub enum Sensor {
     Kinect(Box<Kinect>),
     Sim(Box<SimKinect>),
-    Replay(Box<ReplaySensor>),
+    Playback(Box<PlaybackSensor>),
 }
 
 /// The lower computer chosen at run time.
@@ -63,7 +63,7 @@ macro_rules! each_sensor {
         match $self {
             Sensor::Kinect($s) => $body,
             Sensor::Sim($s) => $body,
-            Sensor::Replay($s) => $body,
+            Sensor::Playback($s) => $body,
         }
     };
 }
@@ -261,12 +261,12 @@ pub async fn open(
                 .or_else(|| config.sensor.freenect_lib.clone());
             Sensor::Kinect(Box::new(Kinect::open(library.as_deref(), 0).map_err(wrap)?))
         }
-        SensorSource::Replay(dir) => {
+        SensorSource::Playback(dir) => {
             let recording = Recording::open(&dir).map_err(|e| HardwareError {
                 kind: ErrorKind::DeviceMissing,
                 message: e.to_string(),
             })?;
-            Sensor::Replay(Box::new(ReplaySensor::new(recording)))
+            Sensor::Playback(Box::new(PlaybackSensor::new(recording)))
         }
     };
     Ok((sensor, controller))

@@ -1,5 +1,5 @@
 //! The plan of a session: everything it needs to know before the robot
-//! moves, worked out from the configuration (and, for a replayed sensor, from
+//! moves, worked out from the configuration (and, for a played-back sensor, from
 //! the recording). Shared by `groundcal calibrate` and the daemon.
 
 use std::path::PathBuf;
@@ -48,7 +48,7 @@ pub struct RecordedPose {
 }
 
 impl Plan {
-    /// The session plan from the configuration; a replayed sensor brings its
+    /// The session plan from the configuration; a played-back sensor brings its
     /// recording's schedule, pose ids, frames per pose, tilt and nominal mount
     /// (refused when a pose id does not fit the link's 16 bits).
     pub fn from_config(

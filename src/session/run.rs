@@ -273,7 +273,11 @@ async fn report_finished(
     }
 }
 
-async fn body<S: DepthSensor, C: BodyController>(
+/// Visits every pose of the schedule: the checks, HELLO, home, then per pose
+/// move, settle, capture and hand the frames to a fit; then home and the
+/// solve. Any error returns at once: the caller halts the robot and sends it
+/// home.
+async fn visit_poses<S: DepthSensor, C: BodyController>(
     sensor: &mut S,
     controller: &mut C,
     plan: &Plan,
@@ -529,7 +533,7 @@ pub async fn run<S: DepthSensor, C: BodyController>(
 ) -> Result<SessionOutcome, SessionError> {
     let mut pending = Vec::new();
     let outcome = {
-        let work = body(sensor, controller, plan, events, &mut pending);
+        let work = visit_poses(sensor, controller, plan, events, &mut pending);
         tokio::pin!(work);
         tokio::select! {
             outcome = &mut work => outcome,

@@ -30,7 +30,7 @@ pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
                 .await
                 .map_err(|e| e.to_string())?;
             let replay = match &sensor {
-                hardware::Sensor::Replay(r) => Some(r.recording().clone()),
+                hardware::Sensor::Playback(r) => Some(r.recording().clone()),
                 _ => None,
             };
             let plan = session::Plan::from_config(

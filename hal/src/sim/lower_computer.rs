@@ -39,7 +39,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 use tokio::net::UdpSocket;
 
-use super::replayed::{ReplayScript, ReplayTally, ReplayedRobot};
+use super::recorded_robot::{RecordedRobot, RecordedScript, RecordedTally};
 use super::robot::{SimRobot, SimRobotConfig};
 use super::TruePose;
 use crate::controller::MotionState;
@@ -160,8 +160,8 @@ pub struct SimOptions {
     /// Share the body's true pose (e.g. with a simulated Kinect).
     pub true_pose: Option<TruePose>,
     /// Play a recorded session back instead of simulating the body
-    /// ([`ReplayedRobot`]).
-    pub replay: Option<ReplayScript>,
+    /// ([`RecordedRobot`]).
+    pub replay: Option<RecordedScript>,
 }
 
 impl SimOptions {
@@ -195,9 +195,9 @@ pub struct SimStats {
     pub lives: Vec<ServerCounters>,
     pub faults: FaultCounters,
     pub restarts: u32,
-    /// What a replayed lower computer was asked (`--replay` only).
+    /// What a recorded robot's lower computer was asked (`--replay` only).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub replay: Option<ReplayTally>,
+    pub replay: Option<RecordedTally>,
 }
 
 impl SimStats {
@@ -419,7 +419,7 @@ impl SimServer {
         let epoch = now();
         match self.options.replay.clone() {
             Some(script) => {
-                let robot = ReplayedRobot::new(script, epoch);
+                let robot = RecordedRobot::new(script, epoch);
                 self.serve(robot, epoch, shutdown).await
             }
             None => {
@@ -538,7 +538,7 @@ impl SimServer {
         }
         stats.lives.push(*server.counters());
         stats.faults = impairment.counters;
-        stats.replay = robot.replay_tally();
+        stats.replay = robot.recorded_tally();
         #[derive(Serialize)]
         struct StatsLine<'a> {
             event: &'a str,
@@ -571,14 +571,14 @@ impl SimServer {
 }
 
 /// A body the simulated lower computer can serve: the simulated hexapod or a
-/// replayed recording.
+/// played-back recording.
 trait ServedBody: crate::udp::server::Body {
     /// Brings the motion up to `now`.
     fn advance(&mut self, now: Instant);
     /// A lower computer restart (fault injection).
     fn restart(&mut self, now: Instant);
-    /// What a replayed body was asked, if it is one.
-    fn replay_tally(&self) -> Option<ReplayTally> {
+    /// What a recorded robot was asked, if it is one.
+    fn recorded_tally(&self) -> Option<RecordedTally> {
         None
     }
 }
@@ -592,14 +592,14 @@ impl ServedBody for SimRobot {
     }
 }
 
-impl ServedBody for ReplayedRobot {
+impl ServedBody for RecordedRobot {
     fn advance(&mut self, now: Instant) {
-        ReplayedRobot::advance(self, now);
+        RecordedRobot::advance(self, now);
     }
     fn restart(&mut self, now: Instant) {
-        ReplayedRobot::restart(self, now);
+        RecordedRobot::restart(self, now);
     }
-    fn replay_tally(&self) -> Option<ReplayTally> {
+    fn recorded_tally(&self) -> Option<RecordedTally> {
         Some(self.tally().clone())
     }
 }

@@ -12,11 +12,11 @@
 //! - [`robot`]: the body, its feet and its errors;
 //! - [`lower_computer`]: the simulated robot served over UDP
 //!   (`groundcal sim-robot`), with fault injection;
-//! - [`replayed`]: a lower computer that plays a recording's robot back.
+//! - [`recorded_robot`]: a lower computer that plays a recording's robot back.
 
 pub mod kinect;
 pub mod lower_computer;
-pub mod replayed;
+pub mod recorded_robot;
 pub mod robot;
 pub mod world;
 

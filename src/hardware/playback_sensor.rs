@@ -1,4 +1,4 @@
-//! The replayed sensor (`--sensor replay:DIR`): serves a recording's frames
+//! The played-back sensor (`--sensor replay:DIR`): serves a recording's frames
 //! for the pose being captured, so that a live session can be run again on
 //! what the robot saw. It lives here rather than in `hal/` because it reads
 //! the recording format, which is this crate's.
@@ -11,7 +11,7 @@ use crate::recording::{InputError, Recording};
 
 /// Why the recording cannot serve a frame.
 #[derive(Debug, thiserror::Error)]
-pub enum ReplaySensorError {
+pub enum PlaybackSensorError {
     #[error("{0}")]
     Input(#[from] InputError),
     #[error("the recording has no pose {0}")]
@@ -22,17 +22,17 @@ pub enum ReplaySensorError {
     NoPose,
 }
 
-impl Error for ReplaySensorError {
+impl Error for PlaybackSensorError {
     fn kind(&self) -> ErrorKind {
         match self {
-            ReplaySensorError::Input(_) => ErrorKind::Protocol,
+            PlaybackSensorError::Input(_) => ErrorKind::Protocol,
             _ => ErrorKind::Other,
         }
     }
 }
 
 /// A recording played back as a sensor.
-pub struct ReplaySensor {
+pub struct PlaybackSensor {
     recording: Recording,
     /// Pose id → its line in the recording.
     poses: HashMap<u16, usize>,
@@ -42,7 +42,7 @@ pub struct ReplaySensor {
     tilt_deg: f64,
 }
 
-impl ReplaySensor {
+impl PlaybackSensor {
     /// Serves the frames of an opened recording.
     pub fn new(recording: Recording) -> Self {
         let poses = recording
@@ -72,8 +72,8 @@ impl ReplaySensor {
     }
 }
 
-impl DepthSensor for ReplaySensor {
-    type Error = ReplaySensorError;
+impl DepthSensor for PlaybackSensor {
+    type Error = PlaybackSensorError;
 
     fn info(&self) -> SensorInfo {
         SensorInfo {
@@ -112,16 +112,16 @@ impl DepthSensor for ReplaySensor {
     }
 
     async fn next_frame(&mut self) -> Result<DepthFrame, Self::Error> {
-        let (pose_id, served) = self.current.ok_or(ReplaySensorError::NoPose)?;
+        let (pose_id, served) = self.current.ok_or(PlaybackSensorError::NoPose)?;
         let line = *self
             .poses
             .get(&pose_id)
-            .ok_or(ReplaySensorError::NoSuchPose(pose_id))?;
+            .ok_or(PlaybackSensorError::NoSuchPose(pose_id))?;
         let record = &self.recording.poses[line];
         let name = record
             .depth_frames
             .get(served)
-            .ok_or(ReplaySensorError::OutOfFrames {
+            .ok_or(PlaybackSensorError::OutOfFrames {
                 pose: pose_id,
                 recorded: record.depth_frames.len(),
             })?;

@@ -10,7 +10,7 @@
 //! pose matches when each received value and the recorded one round to the
 //! same f32.
 //! A pose that does not match, or a pose id the recording does not have, is
-//! refused (ACK 2) and counted in [`ReplayTally`]: the upper computer is not
+//! refused (ACK 2) and counted in [`RecordedTally`]: the upper computer is not
 //! doing what it did when the recording was made.
 
 use std::collections::BTreeMap;
@@ -32,7 +32,7 @@ pub struct RecordedStance {
 
 /// A recorded session as the lower computer saw it.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ReplayScript {
+pub struct RecordedScript {
     pub home: RecordedStance,
     /// By pose id (never 0: that is home).
     pub poses: BTreeMap<u16, RecordedStance>,
@@ -41,7 +41,7 @@ pub struct ReplayScript {
     pub firmware: String,
 }
 
-impl ReplayScript {
+impl RecordedScript {
     /// Limits that admit every recorded pose: the reference simulator's,
     /// widened where the recording went further (a recording from another
     /// robot must still play).
@@ -64,9 +64,9 @@ impl ReplayScript {
     }
 }
 
-/// What the upper computer asked of the replayed lower computer.
+/// What the upper computer asked of the recorded robot.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
-pub struct ReplayTally {
+pub struct RecordedTally {
     /// Pose ids accepted, in the order their SET_POSE was acted on.
     pub accepted: Vec<u16>,
     /// SET_POSEs refused because they were not as recorded, each explained.
@@ -81,10 +81,10 @@ enum Phase {
     Halted,
 }
 
-/// The replayed body: motion is only a timer, feet come from the script.
+/// The recorded robot: motion is only a timer, feet come from the script.
 #[derive(Debug)]
-pub struct ReplayedRobot {
-    script: ReplayScript,
+pub struct RecordedRobot {
+    script: RecordedScript,
     /// Announced in WELCOME and checked at every SET_POSE: worked out once.
     limits: BodyLimits,
     epoch: Instant,
@@ -93,12 +93,12 @@ pub struct ReplayedRobot {
     stance: u16,
     /// The last accepted target (0: home).
     pose_id: u16,
-    tally: ReplayTally,
+    tally: RecordedTally,
 }
 
-impl ReplayedRobot {
+impl RecordedRobot {
     /// Standing at the recorded home stance at `now`.
-    pub fn new(script: ReplayScript, now: Instant) -> Self {
+    pub fn new(script: RecordedScript, now: Instant) -> Self {
         Self {
             limits: script.limits(),
             script,
@@ -106,12 +106,12 @@ impl ReplayedRobot {
             phase: Phase::Idle,
             stance: 0,
             pose_id: 0,
-            tally: ReplayTally::default(),
+            tally: RecordedTally::default(),
         }
     }
 
     /// What was asked so far.
-    pub fn tally(&self) -> &ReplayTally {
+    pub fn tally(&self) -> &RecordedTally {
         &self.tally
     }
 
@@ -173,7 +173,7 @@ fn difference(recorded: &PoseDegMm, received: &PoseDegMm) -> Option<String> {
     (!differing.is_empty()).then(|| differing.join(", "))
 }
 
-impl Body for ReplayedRobot {
+impl Body for RecordedRobot {
     fn limits(&self) -> BodyLimits {
         self.limits
     }
@@ -256,8 +256,8 @@ mod tests {
         }
     }
 
-    fn script() -> ReplayScript {
-        ReplayScript {
+    fn script() -> RecordedScript {
+        RecordedScript {
             home: stance(600.0, -600.0),
             poses: BTreeMap::from([(1, stance(650.0, -650.0)), (2, stance(900.0, -900.0))]),
             time_scale: 1.0,
@@ -268,7 +268,7 @@ mod tests {
     #[test]
     fn reports_the_recorded_feet_once_settled_and_refuses_other_poses() {
         let t0 = Instant::now();
-        let mut robot = ReplayedRobot::new(script(), t0);
+        let mut robot = RecordedRobot::new(script(), t0);
         assert_eq!(robot.state(t0).feet_mm[0][1], -600.0);
         let one = script().poses[&1].commanded;
         robot.set_pose(1, &one, 1000, t0).unwrap();
