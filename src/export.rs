@@ -21,9 +21,10 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion};
 use serde::Serialize;
-use serde_json::{Map, Value};
+use serde_json::Value;
 
 use crate::calib::geometry::{self, PoseDegMm, PoseParams, Transform};
+use crate::output::{ResultJson, ResultStatus};
 use crate::recording::{read_bounded, InputError};
 
 /// The ROS parent frame (REP-103 body frame).
@@ -353,112 +354,40 @@ pub fn parse_result(
             format!("not a groundcal result document{near} (a value must be a finite number): {e}"),
         )
     })?;
-    let doc = doc.as_object().ok_or_else(|| {
-        fail("not a groundcal result document: expected a JSON object with \"status\" and \"robot_from_sensor\"".into())
-    })?;
-
-    let status = match doc.get("status") {
-        None => return Err(fail("\"status\" is missing".into())),
-        Some(Value::String(s)) => s.as_str(),
-        Some(other) => {
-            return Err(fail(format!(
-                "\"status\" is {other}, expected \"accepted\" or \"rejected\""
-            )))
-        }
-    };
-    match status {
-        "accepted" => {}
-        "rejected" if allow_rejected => {}
-        "rejected" => {
-            let reasons = doc
-                .get("reasons")
-                .and_then(Value::as_array)
-                .map(|r| {
-                    r.iter()
-                        .filter_map(|v| v.as_str().map(str::to_owned))
-                        .collect()
-                })
-                .unwrap_or_default();
-            return Err(ExportError::Rejected {
-                path: path.to_path_buf(),
-                reasons,
-            });
-        }
-        other => {
-            return Err(fail(format!(
-                "\"status\" is \"{other}\", expected \"accepted\" or \"rejected\""
-            )))
-        }
+    let result = ResultJson::parse(doc).map_err(fail)?;
+    if result.status == ResultStatus::Rejected && !allow_rejected {
+        return Err(ExportError::Rejected {
+            path: path.to_path_buf(),
+            reasons: result.reasons,
+        });
     }
-
-    let mount = match doc.get("robot_from_sensor") {
-        None | Some(Value::Null) => {
-            return Err(fail(if status == "rejected" {
-                "\"robot_from_sensor\" is missing: the solve found no parameters to export".into()
-            } else {
-                "\"robot_from_sensor\" is missing".into()
-            }))
-        }
-        Some(Value::Object(m)) => m,
-        Some(_) => {
-            return Err(fail(
-                "\"robot_from_sensor\" is not an object with alpha_deg … pz_mm and matrix".into(),
-            ))
-        }
+    let Some(mount) = result.robot_from_sensor else {
+        return Err(fail(if result.status == ResultStatus::Rejected {
+            "\"robot_from_sensor\" is missing: the solve found no parameters to export".into()
+        } else {
+            "\"robot_from_sensor\" is missing".into()
+        }));
     };
-    let field = |key: &str| finite(mount.get(key), &format!("robot_from_sensor.{key}"));
     let pose = PoseDegMm {
-        alpha_deg: field("alpha_deg").map_err(fail)?,
-        beta_deg: field("beta_deg").map_err(fail)?,
-        gamma_deg: field("gamma_deg").map_err(fail)?,
-        px_mm: field("px_mm").map_err(fail)?,
-        py_mm: field("py_mm").map_err(fail)?,
-        pz_mm: field("pz_mm").map_err(fail)?,
+        alpha_deg: mount.alpha_deg,
+        beta_deg: mount.beta_deg,
+        gamma_deg: mount.gamma_deg,
+        px_mm: mount.px_mm,
+        py_mm: mount.py_mm,
+        pz_mm: mount.pz_mm,
     };
-    check_matrix(mount, &pose).map_err(fail)?;
-    check_quaternion(mount, &pose).map_err(fail)?;
+    check_matrix(&mount.matrix, &pose).map_err(fail)?;
+    if let Some(q) = mount.quaternion_xyzw {
+        check_quaternion(q, &pose).map_err(fail)?;
+    }
     Ok(pose)
 }
 
-/// A finite number at `key`, or a message naming the key.
-fn finite(value: Option<&Value>, key: &str) -> Result<f64, String> {
-    match value {
-        None => Err(format!("\"{key}\" is missing")),
-        Some(Value::Null) => Err(format!(
-            "\"{key}\" is null, not a finite number (JSON writes NaN and infinities as null)"
-        )),
-        Some(v) => v
-            .as_f64()
-            .filter(|x| x.is_finite())
-            .ok_or_else(|| format!("\"{key}\" is {v}, not a finite number")),
-    }
-}
-
-/// An array of `N` finite numbers at `key`.
-fn finite_array<const N: usize>(value: Option<&Value>, key: &str) -> Result<[f64; N], String> {
-    let items = match value {
-        None => return Err(format!("\"{key}\" is missing")),
-        Some(Value::Array(items)) if items.len() == N => items,
-        Some(_) => return Err(format!("\"{key}\" is not an array of {N} numbers")),
-    };
-    let mut out = [0.0; N];
-    for (k, (slot, item)) in out.iter_mut().zip(items).enumerate() {
-        *slot = finite(Some(item), &format!("{key}[{k}]"))?;
-    }
-    Ok(out)
-}
-
 /// The 4×4 `matrix` (translation in mm) must be the six parameters' matrix.
-fn check_matrix(mount: &Map<String, Value>, pose: &PoseDegMm) -> Result<(), String> {
+fn check_matrix(matrix: &[[f64; 4]; 4], pose: &PoseDegMm) -> Result<(), String> {
     let key = "robot_from_sensor.matrix";
-    let rows = match mount.get("matrix") {
-        None => return Err(format!("\"{key}\" is missing")),
-        Some(Value::Array(rows)) if rows.len() == 4 => rows,
-        Some(_) => return Err(format!("\"{key}\" is not a 4×4 array of numbers")),
-    };
     let expected = pose.to_params().to_matrix();
-    for (i, row) in rows.iter().enumerate() {
-        let row = finite_array::<4>(Some(row), &format!("{key}[{i}]"))?;
+    for (i, row) in matrix.iter().enumerate() {
         for (j, &value) in row.iter().enumerate() {
             let want = if j == 3 && i < 3 {
                 expected[(i, j)] * 1e3
@@ -478,12 +407,8 @@ fn check_matrix(mount: &Map<String, Value>, pose: &PoseDegMm) -> Result<(), Stri
 }
 
 /// `quaternion_xyzw`, where present, must be the parameters' rotation (either sign).
-fn check_quaternion(mount: &Map<String, Value>, pose: &PoseDegMm) -> Result<(), String> {
+fn check_quaternion(q: [f64; 4], pose: &PoseDegMm) -> Result<(), String> {
     let key = "robot_from_sensor.quaternion_xyzw";
-    let Some(value) = mount.get("quaternion_xyzw") else {
-        return Ok(());
-    };
-    let q = finite_array::<4>(Some(value), key)?;
     let want = quaternion_xyzw(&pose.to_params().rotation_matrix());
     let distance = |sign: f64| {
         q.iter()

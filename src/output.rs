@@ -2,24 +2,43 @@
 //!
 //! Keys and units are the contract: degrees and millimetres in names ending
 //! `_deg` and `_mm`, plane offsets in metres (`d_m`).
+//!
+//! The document is read back as well as written (`groundcal export`, the
+//! store, the daemon's status): [`ResultJson::parse`] names the key of any
+//! value that is wrong. `robot_from_sensor`'s numbers must be finite; any
+//! other number may be `null`, which is how JSON writes a NaN or an infinite
+//! σ, and reads back as NaN.
 
-use serde::Serialize;
+use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::calib::geometry::{Plane, PoseDegMm, PoseParams};
 use crate::calib::outcome::{Calibration, PoseOutcome, Verdict};
 
 /// `robot_from_sensor` as cli.md prints it.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MountJson {
+    #[serde(deserialize_with = "finite")]
     pub alpha_deg: f64,
+    #[serde(deserialize_with = "finite")]
     pub beta_deg: f64,
+    #[serde(deserialize_with = "finite")]
     pub gamma_deg: f64,
+    #[serde(deserialize_with = "finite")]
     pub px_mm: f64,
+    #[serde(deserialize_with = "finite")]
     pub py_mm: f64,
+    #[serde(deserialize_with = "finite")]
     pub pz_mm: f64,
     /// 4×4, translation in millimetres.
+    #[serde(deserialize_with = "finite_4x4")]
     pub matrix: [[f64; 4]; 4],
-    pub quaternion_xyzw: [f64; 4],
+    /// Always written; optional when read (older and other writers).
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "some_finite_4"
+    )]
+    pub quaternion_xyzw: Option<[f64; 4]>,
 }
 
 impl MountJson {
@@ -46,26 +65,36 @@ impl MountJson {
             py_mm: d.py_mm,
             pz_mm: d.pz_mm,
             matrix,
-            quaternion_xyzw: [q.i * sign, q.j * sign, q.k * sign, q.w * sign],
+            quaternion_xyzw: Some([q.i * sign, q.j * sign, q.k * sign, q.w * sign]),
         }
     }
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SigmaJson {
+    #[serde(deserialize_with = "number_or_nan")]
     pub alpha_deg: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub beta_deg: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub gamma_deg: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub px_mm: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub py_mm: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub pz_mm: f64,
 }
 
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct PlaneJson {
+    #[serde(deserialize_with = "number_or_nan")]
     pub a: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub b: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub c: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub d_m: f64,
 }
 
@@ -82,7 +111,7 @@ impl From<&Plane> for PlaneJson {
 
 /// One pose of the input. A pose that gave no plane (no frames, no ground
 /// found) has `used: false`, its reason, and no plane or errors.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PoseJson {
     pub index: u32,
     pub used: bool,
@@ -138,34 +167,75 @@ impl From<&PoseOutcome> for PoseJson {
     }
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SummaryJson {
     pub poses_used: usize,
     pub poses_total: usize,
+    #[serde(deserialize_with = "number_or_nan")]
     pub theta_deg_mean: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub theta_deg_max: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub e_d_mm_mean: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub e_d_mm_max: f64,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ObservabilityJson {
+    #[serde(deserialize_with = "three_or_nan")]
     pub rotation_singular_values: [f64; 3],
+    #[serde(deserialize_with = "three_or_nan")]
     pub translation_singular_values: [f64; 3],
 }
 
+/// The verdict (`"accepted"` or `"rejected"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ResultStatus {
+    Accepted,
+    Rejected,
+}
+
+impl ResultStatus {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Accepted => "accepted",
+            Self::Rejected => "rejected",
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ResultStatus {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        match serde_json::Value::deserialize(deserializer)? {
+            serde_json::Value::String(s) if s == "accepted" => Ok(Self::Accepted),
+            serde_json::Value::String(s) if s == "rejected" => Ok(Self::Rejected),
+            other => Err(serde::de::Error::custom(format!(
+                "is {other}, expected \"accepted\" or \"rejected\""
+            ))),
+        }
+    }
+}
+
 /// The whole result document.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ResultJson {
-    pub status: &'static str,
+    pub status: ResultStatus,
+    #[serde(default)]
     pub reasons: Vec<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub robot_from_sensor: Option<MountJson>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sigma: Option<SigmaJson>,
     /// Correlation coefficients of `[α, β, γ, px, py, pz]`.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "some_6x6_or_nan"
+    )]
     pub correlations: Option<[[f64; 6]; 6]>,
+    #[serde(default)]
     pub poses: Vec<PoseJson>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub summary: Option<SummaryJson>,
@@ -175,7 +245,7 @@ pub struct ResultJson {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub kinect_tilt_deg: Option<f64>,
     /// Things the operator should know that are not reasons to reject.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
 }
 
@@ -185,8 +255,8 @@ impl ResultJson {
         let r = c.correlations();
         Self {
             status: match c.verdict {
-                Verdict::Accepted => "accepted",
-                Verdict::Rejected => "rejected",
+                Verdict::Accepted => ResultStatus::Accepted,
+                Verdict::Rejected => ResultStatus::Rejected,
             },
             reasons: c.reasons.clone(),
             robot_from_sensor: Some(MountJson::from_params(&c.robot_from_sensor)),
@@ -220,7 +290,7 @@ impl ResultJson {
     /// A rejection with no parameters at all (too few usable poses).
     pub fn unsolved(reason: String, poses: &[PoseOutcome]) -> Self {
         Self {
-            status: "rejected",
+            status: ResultStatus::Rejected,
             reasons: vec![reason],
             robot_from_sensor: None,
             sigma: None,
@@ -280,14 +350,14 @@ impl ResultJson {
 
     /// Whether the calibration was accepted.
     pub fn accepted(&self) -> bool {
-        self.status == "accepted"
+        self.status == ResultStatus::Accepted
     }
 
     /// A table for a person at a terminal.
     pub fn to_table(&self) -> String {
         use std::fmt::Write;
         let mut out = String::new();
-        let _ = writeln!(out, "status: {}", self.status.to_uppercase());
+        let _ = writeln!(out, "status: {}", self.status.as_str().to_uppercase());
         for reason in &self.reasons {
             let _ = writeln!(out, "  - {reason}");
         }
@@ -340,4 +410,84 @@ impl ResultJson {
         }
         out
     }
+}
+
+impl ResultJson {
+    /// Reads a result document; an error names the key that is wrong
+    /// (`"robot_from_sensor.pz_mm" is null, …`).
+    pub fn parse(document: serde_json::Value) -> Result<Self, String> {
+        if !document.is_object() {
+            return Err("not a groundcal result document: expected a JSON object with \"status\" and \"robot_from_sensor\"".into());
+        }
+        serde_path_to_error::deserialize(document).map_err(|e| {
+            let path = e.path().to_string();
+            let message = e.into_inner().to_string();
+            let key = |field: &str| {
+                if path == "." {
+                    field.to_string()
+                } else {
+                    format!("{path}.{field}")
+                }
+            };
+            match message
+                .strip_prefix("missing field `")
+                .and_then(|m| m.strip_suffix('`'))
+            {
+                Some(field) => format!("\"{}\" is missing", key(field)),
+                None if message.starts_with("is ") => format!("\"{path}\" {message}"),
+                None => format!("\"{path}\": {message}"),
+            }
+        })
+    }
+}
+
+/// A number that must be finite: `null` (how JSON writes NaN) and anything
+/// else are refused in words.
+fn finite<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+    match serde_json::Value::deserialize(deserializer)? {
+        serde_json::Value::Null => Err(serde::de::Error::custom(
+            "is null, not a finite number (JSON writes NaN and infinities as null)",
+        )),
+        value => value
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| serde::de::Error::custom(format!("is {value}, not a finite number"))),
+    }
+}
+
+/// One finite number as an element of an array (so that the error's path
+/// names its index).
+struct Finite(f64);
+
+impl<'de> Deserialize<'de> for Finite {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        finite(deserializer).map(Finite)
+    }
+}
+
+fn finite_4x4<'de, D: Deserializer<'de>>(deserializer: D) -> Result<[[f64; 4]; 4], D::Error> {
+    let rows: [[Finite; 4]; 4] = Deserialize::deserialize(deserializer)?;
+    Ok(rows.map(|row| row.map(|x| x.0)))
+}
+
+fn some_finite_4<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Option<[f64; 4]>, D::Error> {
+    let values: [Finite; 4] = Deserialize::deserialize(deserializer)?;
+    Ok(Some(values.map(|x| x.0)))
+}
+
+/// A number, `null` read as NaN.
+fn number_or_nan<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(deserializer)?.unwrap_or(f64::NAN))
+}
+
+fn three_or_nan<'de, D: Deserializer<'de>>(deserializer: D) -> Result<[f64; 3], D::Error> {
+    let values: [Option<f64>; 3] = Deserialize::deserialize(deserializer)?;
+    Ok(values.map(|x| x.unwrap_or(f64::NAN)))
+}
+
+fn some_6x6_or_nan<'de, D: Deserializer<'de>>(
+    deserializer: D,
+) -> Result<Option<[[f64; 6]; 6]>, D::Error> {
+    let rows: [[Option<f64>; 6]; 6] = Deserialize::deserialize(deserializer)?;
+    Ok(Some(rows.map(|row| row.map(|x| x.unwrap_or(f64::NAN)))))
 }

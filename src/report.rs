@@ -201,14 +201,21 @@ fn parameters_section(page: &mut String, result: &ResultJson) {
         }
         page.push_str("</tr>\n");
     }
-    let q = m.quaternion_xyzw;
+    let quaternion = m
+        .quaternion_xyzw
+        .map(|q| {
+            format!(
+                " Quaternion (x, y, z, w): {}, {}, {}, {}",
+                num(q[0], 6),
+                num(q[1], 6),
+                num(q[2], 6),
+                num(q[3], 6)
+            )
+        })
+        .unwrap_or_default();
     let _ = writeln!(
         page,
-        "</tbody></table></div>\n<p>Translation in millimetres. Quaternion (x, y, z, w): {}, {}, {}, {}</p>\n</details>",
-        num(q[0], 6),
-        num(q[1], 6),
-        num(q[2], 6),
-        num(q[3], 6)
+        "</tbody></table></div>\n<p>Translation in millimetres.{quaternion}</p>\n</details>"
     );
     page.push_str("</section>\n");
 }
@@ -1054,7 +1061,7 @@ mod tests {
     #[test]
     fn an_accepted_result_says_so() {
         let mut result = solved();
-        result.status = "accepted";
+        result.status = crate::output::ResultStatus::Accepted;
         result.reasons.clear();
         let html = render_html(&result, &provenance());
         assert!(html.contains("<h1>ACCEPTED</h1>"));

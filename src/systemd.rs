@@ -77,8 +77,23 @@ fn send_abstract(_socket: &UnixDatagram, _name: &str, _message: &str) -> std::io
 }
 
 /// Half of the watchdog interval systemd asks for (`WATCHDOG_USEC`), if any.
+/// Like `sd_watchdog_enabled(3)`, a `WATCHDOG_PID` that names another
+/// process means the watchdog is not ours to feed (a child inherited it).
 pub fn watchdog_interval() -> Option<Duration> {
-    let usec: u64 = std::env::var("WATCHDOG_USEC").ok()?.parse().ok()?;
+    watchdog_interval_from(
+        std::env::var("WATCHDOG_USEC").ok().as_deref(),
+        std::env::var("WATCHDOG_PID").ok().as_deref(),
+        std::process::id(),
+    )
+}
+
+fn watchdog_interval_from(usec: Option<&str>, pid: Option<&str>, own_pid: u32) -> Option<Duration> {
+    let usec: u64 = usec?.parse().ok()?;
+    if let Some(pid) = pid {
+        if pid.parse::<u32>().ok()? != own_pid {
+            return None;
+        }
+    }
     (usec > 0).then(|| Duration::from_micros(usec / 2))
 }
 
@@ -122,6 +137,26 @@ pub fn spawn_watchdog_feed(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_watchdog_is_fed_only_by_the_process_it_names() {
+        let half = Some(Duration::from_secs(5));
+        assert_eq!(watchdog_interval_from(Some("10000000"), None, 42), half);
+        assert_eq!(
+            watchdog_interval_from(Some("10000000"), Some("42"), 42),
+            half
+        );
+        assert_eq!(
+            watchdog_interval_from(Some("10000000"), Some("43"), 42),
+            None
+        );
+        assert_eq!(
+            watchdog_interval_from(Some("10000000"), Some("x"), 42),
+            None
+        );
+        assert_eq!(watchdog_interval_from(Some("0"), None, 42), None);
+        assert_eq!(watchdog_interval_from(None, Some("42"), 42), None);
+    }
 
     #[test]
     fn a_stuck_session_stops_the_watchdog_feeding() {
