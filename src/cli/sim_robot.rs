@@ -15,13 +15,14 @@
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::net::{SocketAddr, ToSocketAddrs};
+
 use std::path::{Path, PathBuf};
 
 use groundcal_hal::sim::lower_computer::{self, FaultInjection, SimOptions, RECEIPTS_ENV};
 use groundcal_hal::sim::recorded_robot::{RecordedScript, RecordedStance};
 
 use crate::recording::Recording;
+use groundcal_hal::udp::link::resolve_ipv4_first;
 
 use super::ExitStatus;
 
@@ -31,7 +32,7 @@ pub fn run(listen: &str, seed: u64, time_scale: f64, replay: Option<&Path>) -> E
         eprintln!("groundcal: sim-robot: {message}");
         ExitStatus::BadInput
     };
-    let address = match resolve(listen) {
+    let address = match resolve_ipv4_first(listen) {
         Ok(a) => a,
         Err(e) => return usage(format!("--listen \"{listen}\": {e}")),
     };
@@ -109,20 +110,6 @@ fn script_of(dir: &Path, time_scale: f64) -> Result<RecordedScript, String> {
     })
 }
 
-/// `host:port` to one socket address, IPv4 preferred.
-fn resolve(listen: &str) -> Result<SocketAddr, String> {
-    let addresses: Vec<SocketAddr> = listen
-        .to_socket_addrs()
-        .map_err(|e| format!("not a host:port ({e})"))?
-        .collect();
-    addresses
-        .iter()
-        .find(|a| a.is_ipv4())
-        .or(addresses.first())
-        .copied()
-        .ok_or_else(|| "resolves to no address".to_string())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,10 +141,10 @@ mod tests {
     #[test]
     fn listen_addresses_resolve() {
         assert_eq!(
-            resolve("127.0.0.1:7400").unwrap(),
+            resolve_ipv4_first("127.0.0.1:7400").unwrap(),
             "127.0.0.1:7400".parse().unwrap()
         );
-        assert!(resolve("localhost:0").is_ok());
-        assert!(resolve("127.0.0.1").is_err());
+        assert!(resolve_ipv4_first("localhost:0").is_ok());
+        assert!(resolve_ipv4_first("127.0.0.1").is_err());
     }
 }

@@ -87,23 +87,28 @@ impl LinkConfig {
 
     /// The defaults, towards `host:port` (resolved now, IPv4 preferred).
     pub fn resolve(address: &str) -> Result<Self, UdpError> {
-        let setup = |what: String| UdpError::Setup {
+        let peer = resolve_ipv4_first(address).map_err(|what| UdpError::Setup {
             peer: address.to_string(),
             what,
             missing_device: false,
-        };
-        let addresses: Vec<SocketAddr> = address
-            .to_socket_addrs()
-            .map_err(|e| setup(format!("cannot resolve the address: {e}")))?
-            .collect();
-        let peer = addresses
-            .iter()
-            .find(|a| a.is_ipv4())
-            .or(addresses.first())
-            .copied()
-            .ok_or_else(|| setup("the address resolves to nothing".into()))?;
+        })?;
         Ok(Self::new(peer))
     }
+}
+
+/// `host:port` to one socket address, IPv4 first: the robot's Wi-Fi is IPv4
+/// (hexapod-udp.md allows both).
+pub fn resolve_ipv4_first(address: &str) -> Result<SocketAddr, String> {
+    let addresses: Vec<SocketAddr> = address
+        .to_socket_addrs()
+        .map_err(|e| format!("cannot resolve the address: {e}"))?
+        .collect();
+    addresses
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or(addresses.first())
+        .copied()
+        .ok_or_else(|| "the address resolves to nothing".to_string())
 }
 
 /// A failure of the link, classified for the session.
