@@ -86,6 +86,9 @@ fn the_unit_exposure_is_at_most_4_9() {
         "StateDirectory=groundcal",
         "ProtectSystem=strict",
         "NoNewPrivileges=yes",
+        // Room for the connection limit (256) several times over, as
+        // tests/serve_flood.rs shows under 1,024.
+        "LimitNOFILE=4096",
     ] {
         assert!(text.contains(key), "the unit lacks {key}");
     }

@@ -6,6 +6,7 @@
 //! - [`api`]: the status and event documents the API sends;
 //! - [`state`]: what every request and the session thread share;
 //! - [`auth`]: the token, one layer for every write;
+//! - [`connections`]: few and short connections, so a flood cannot lock the operator out;
 //! - [`handlers`]: the endpoints;
 //! - [`worker`]: the session thread.
 //!
@@ -17,16 +18,19 @@
 
 pub mod api;
 pub mod auth;
+pub mod connections;
 pub mod handlers;
 pub mod state;
 pub mod worker;
 
 pub use api::{EventJson, RunState, Status};
 pub use auth::read_token;
+pub use connections::{ConnectionLimits, Connections};
 pub use state::AppState;
 
 use std::future::Future;
-use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
 
 use axum::http::StatusCode;
 use axum::response::{Html, Response};
@@ -85,12 +89,23 @@ async fn protective_headers(mut response: Response) -> Response {
 }
 
 /// Serves until `shutdown` completes; then aborts a running session, waits
-/// for it to stop the robot, and returns. Notifies systemd (READY, WATCHDOG,
+/// for it to stop the robot, and returns once the connections have closed
+/// (at most a request timeout later). Notifies systemd (READY, WATCHDOG,
 /// STOPPING) when it is listening.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    serve_with_limits(listener, state, shutdown, ConnectionLimits::default()).await
+}
+
+/// [`serve`] with other connection limits.
+pub async fn serve_with_limits(
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+    limits: ConnectionLimits,
 ) -> std::io::Result<()> {
     let notifier = crate::systemd::Notifier::from_env();
     let address = listener.local_addr()?;
@@ -98,6 +113,10 @@ pub async fn serve(
     let beating = state.clone();
     let watchdog = crate::systemd::spawn_watchdog_feed(move || beating.last_beat());
     let app = router(state.clone());
+    let connections = Arc::new(Connections::default());
+    let (closing, closing_seen) = tokio::sync::watch::channel(false);
+    // Connections are accepted until the session has stopped the robot, so
+    // that the page can watch it stop.
     let stopping = state.clone();
     let graceful = async move {
         shutdown.await;
@@ -105,14 +124,42 @@ pub async fn serve(
         stopping.stop_session("the service is stopping").await;
         stopping.mark_stopping();
     };
-    let served = axum::serve(
-        listener,
-        app.into_make_service_with_connect_info::<SocketAddr>(),
-    )
-    .with_graceful_shutdown(graceful)
-    .await;
+    let mut graceful = std::pin::pin!(graceful);
+    loop {
+        tokio::select! {
+            () = graceful.as_mut() => break,
+            accepted = listener.accept() => match accepted {
+                Ok((stream, peer)) => connections::spawn(
+                    stream,
+                    peer,
+                    app.clone(),
+                    connections.clone(),
+                    limits,
+                    closing_seen.clone(),
+                ),
+                Err(e) => {
+                    // Out of descriptors (or a connection reset before it was
+                    // accepted): wait for some to close rather than spin.
+                    tracing::warn!("cannot accept a connection: {e}");
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                }
+            },
+        }
+    }
+    drop(listener);
+    let _ = closing.send(true);
+    let wait = limits.request_timeout + Duration::from_secs(1);
+    if tokio::time::timeout(wait, connections.all_closed())
+        .await
+        .is_err()
+    {
+        tracing::warn!(
+            "{} connections still open {wait:?} after the service stopped",
+            connections.count()
+        );
+    }
     if let Some(w) = watchdog {
         w.abort();
     }
-    served
+    Ok(())
 }
