@@ -245,20 +245,7 @@ fn run(args: Args) -> ExitStatus {
             selection: hardware.into(),
             listen,
         }),
-        Command::CheckConfig { file } => match groundcal::config::Config::load(&file) {
-            Ok((config, schedule)) => {
-                println!(
-                    "{}: valid; robot {}, sensor {}, schedule \"{}\" with {} poses",
-                    file.display(),
-                    config.robot.address,
-                    config.sensor.source,
-                    schedule.name,
-                    schedule.poses.len()
-                );
-                ExitStatus::Success
-            }
-            Err(e) => usage_error(e.to_string()),
-        },
+        Command::CheckConfig { file } => cli::check_config::run(&file),
         Command::Export { file, format } => cli::export::run(&file, format),
         Command::Capture {
             config,

@@ -4,13 +4,43 @@ mod common;
 
 use common::groundcal;
 
+/// A shipped configuration as installed: beside its schedules, with its
+/// token file (which the package creates) present.
+fn installed_copy(path: &std::path::Path, dir: &std::path::Path) -> std::path::PathBuf {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let token = dir.join("token");
+    std::fs::write(&token, "a-token\n").unwrap();
+    let text: String = std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|line| {
+            if line.starts_with("token_file") {
+                format!("token_file = \"{}\"", token.display())
+            } else if line.starts_with("schedule = \"schedules/") {
+                line.replace(
+                    "schedules/",
+                    &format!("{}/config/schedules/", root.display()),
+                )
+            } else {
+                line.to_string()
+            }
+        })
+        .map(|line| line + "\n")
+        .collect();
+    let copy = dir.join(path.file_name().unwrap());
+    std::fs::write(&copy, text).unwrap();
+    copy
+}
+
 #[test]
 fn every_shipped_configuration_passes_check_config() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    let scratch = common::TempDir::new("check-config-shipped");
     let mut checked = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
+            let path = installed_copy(&path, &scratch.0);
             let (code, stdout, stderr) = groundcal(&["check-config", path.to_str().unwrap()]);
             assert_eq!(code, 0, "{}: {stderr}", path.display());
             assert!(stdout.contains("valid"));
@@ -18,6 +48,28 @@ fn every_shipped_configuration_passes_check_config() {
         }
     }
     assert!(checked >= 2);
+}
+
+/// `serve` refuses a configuration whose token it cannot read, so
+/// `check-config` does too, naming the key and the file.
+#[test]
+fn a_configuration_that_serves_without_a_readable_token_is_refused() {
+    let scratch = common::TempDir::new("check-config-token");
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/groundcal.toml");
+    let config = installed_copy(&shipped, &scratch.0);
+    let token = scratch.0.join("token");
+    for (what, setup) in [("missing", None), ("empty", Some(" \n"))] {
+        match setup {
+            None => std::fs::remove_file(&token).unwrap(),
+            Some(text) => std::fs::write(&token, text).unwrap(),
+        }
+        let (code, stdout, stderr) = groundcal(&["check-config", config.to_str().unwrap()]);
+        assert_eq!(code, 2, "{what}: {stdout}");
+        assert!(
+            stderr.contains("serve.token_file") && stderr.contains(token.to_str().unwrap()),
+            "{what}: {stderr}"
+        );
+    }
 }
 
 #[test]

@@ -5,6 +5,7 @@
 
 pub mod calibrate;
 pub mod capture;
+pub mod check_config;
 pub mod export;
 pub mod plane;
 pub mod replay;
