@@ -142,6 +142,10 @@ pub struct ServeConfig {
     pub token_file: PathBuf,
     /// Where the active calibration, its history and recordings live.
     pub state_dir: PathBuf,
+    /// Names the page may be opened by besides an address, `localhost` and
+    /// the machine's own name (and `NAME.local`), e.g. `["octopus"]`.
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
 }
 
 impl Config {

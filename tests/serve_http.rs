@@ -303,9 +303,17 @@ async fn calibrate_accept_and_activate_over_http() {
 
 /// The response's head (status line and headers), lower-cased, of a GET.
 fn head_of(addr: SocketAddr, path: &str) -> String {
+    raw_head(addr, "GET", path, &format!("Host: {addr}\r\n"))
+}
+
+/// The head of the response to one hand-written request with these header
+/// lines, lower-cased.
+fn raw_head(addr: SocketAddr, method: &str, path: &str, headers: &str) -> String {
     use std::io::{Read, Write};
     let mut stream = std::net::TcpStream::connect(addr).unwrap();
-    let request = format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n");
+    let request = format!(
+        "{method} {path} HTTP/1.1\r\n{headers}Content-Length: 0\r\nConnection: close\r\n\r\n"
+    );
     stream.write_all(request.as_bytes()).unwrap();
     let mut response = Vec::new();
     stream.read_to_end(&mut response).unwrap();
@@ -333,10 +341,15 @@ async fn no_other_site_can_frame_the_page() {
     let server = tokio::spawn(serve(listener, state, async move {
         let _ = stopped.await;
     }));
-    for path in ["/", "/api/status", "/no/such/endpoint"] {
+    for path in ["/", "/page.js", "/api/status", "/no/such/endpoint"] {
         let head = tokio::task::spawn_blocking(move || head_of(addr, path))
             .await
             .unwrap();
+        // The page's code is its own files: nothing inline may run.
+        assert!(
+            head.contains("script-src 'self'") && !head.contains("unsafe-inline"),
+            "{path}: {head}"
+        );
         for header in [
             "x-frame-options: deny",
             "content-security-policy: frame-ancestors 'none'",
@@ -346,6 +359,64 @@ async fn no_other_site_can_frame_the_page() {
             assert!(head.contains(header), "{path} lacks {header}:\n{head}");
         }
     }
+    let _ = stop.send(());
+    let _ = server.await;
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A page elsewhere cannot use the daemon: not through a name of its own that
+/// resolves to the robot (DNS rebinding), and not by writing from its origin.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_elsewhere_can_neither_read_nor_write() {
+    let dir = temp_dir("origin");
+    let (config, schedule) = Config::embedded_sim();
+    let state = AppState::new(
+        config,
+        schedule,
+        Selection::default(),
+        TOKEN.into(),
+        &dir.join("state"),
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+    let ask = |method: &'static str, path: &'static str, headers: String| {
+        tokio::task::spawn_blocking(move || raw_head(addr, method, path, &headers))
+    };
+    let status_of = |head: &str| head.split(' ').nth(1).unwrap_or_default().to_string();
+    let auth = format!("Authorization: Bearer {TOKEN}\r\n");
+    // A name that is not this daemon's: refused, even for reading.
+    let head = ask("GET", "/api/status", "Host: evil.example:8080\r\n".into())
+        .await
+        .unwrap();
+    assert_eq!(status_of(&head), "421", "{head}");
+    // The daemon's own address: served.
+    let head = ask("GET", "/api/status", format!("Host: {addr}\r\n"))
+        .await
+        .unwrap();
+    assert_eq!(status_of(&head), "200", "{head}");
+    // A write with the token from another site's page: refused.
+    let head = ask(
+        "POST",
+        "/api/calibrations/current/abort",
+        format!("Host: {addr}\r\nOrigin: http://evil.example\r\n{auth}"),
+    )
+    .await
+    .unwrap();
+    assert_eq!(status_of(&head), "403", "{head}");
+    // The same write from the daemon's own page reaches the endpoint (no
+    // calibration runs: 409).
+    let head = ask(
+        "POST",
+        "/api/calibrations/current/abort",
+        format!("Host: {addr}\r\nOrigin: http://{addr}\r\n{auth}"),
+    )
+    .await
+    .unwrap();
+    assert_eq!(status_of(&head), "409", "{head}");
     let _ = stop.send(());
     let _ = server.await;
     let _ = std::fs::remove_dir_all(&dir);

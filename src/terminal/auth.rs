@@ -1,12 +1,18 @@
-//! Who may write: every request that moves the robot or changes the active
-//! calibration carries the token (`Authorization: Bearer TOKEN`). One layer on
-//! the router checks it for every method but GET and HEAD, so a new write
-//! endpoint is protected without anyone remembering to.
+//! Who may ask:
+//! - every request that moves the robot or changes the active calibration
+//!   carries the token (`Authorization: Bearer TOKEN`). One layer on the
+//!   router checks it for every method but GET and HEAD, so a new write
+//!   endpoint is protected without anyone remembering to;
+//! - every request names this daemon in its `Host` (an address, `localhost`,
+//!   the machine's name, or a name of `serve.allowed_hosts`), so that a web
+//!   page elsewhere cannot read the daemon through a name of its own that
+//!   resolves here (DNS rebinding);
+//! - a write from a browser comes from a page of this daemon (`Origin`).
 
 use std::path::Path;
 
 use axum::extract::{Request, State};
-use axum::http::{HeaderMap, Method, StatusCode};
+use axum::http::{header, HeaderMap, Method, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
@@ -60,5 +66,114 @@ fn carries_token(headers: &HeaderMap, expected: &str) -> bool {
                 == 0
         }
         _ => false,
+    }
+}
+
+/// The layer: a request must name this daemon as its host, and a browser's
+/// write must come from one of its pages.
+pub async fn same_site_only(
+    State(state): State<AppState>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let allowed = state
+        .config()
+        .serve
+        .as_ref()
+        .map(|s| s.allowed_hosts.as_slice())
+        .unwrap_or_default();
+    let host = request
+        .headers()
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .unwrap_or_default()
+        .to_string();
+    if !host.is_empty() && !names_this_daemon(&host, allowed, machine_name()) {
+        return ApiError(
+            StatusCode::MISDIRECTED_REQUEST,
+            format!(
+                "this daemon answers to its address or its own names, not to \"{host}\" (add the name to serve.allowed_hosts)"
+            ),
+        )
+        .into_response();
+    }
+    let writes = ![Method::GET, Method::HEAD].contains(request.method());
+    if let Some(origin) = request.headers().get(header::ORIGIN) {
+        let origin = origin.to_str().unwrap_or_default();
+        let same = origin
+            .strip_prefix("http://")
+            .or_else(|| origin.strip_prefix("https://"))
+            .is_some_and(|o| o.eq_ignore_ascii_case(&host));
+        if writes && !same {
+            return ApiError(
+                StatusCode::FORBIDDEN,
+                format!(
+                    "a write from another site ({origin}) is refused: use this daemon's own page"
+                ),
+            )
+            .into_response();
+        }
+    }
+    next.run(request).await
+}
+
+/// This machine's name, read once (`/proc/sys/kernel/hostname`).
+fn machine_name() -> &'static str {
+    static NAME: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    NAME.get_or_init(|| {
+        std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .map(|n| n.trim().to_ascii_lowercase())
+            .unwrap_or_default()
+    })
+}
+
+/// Whether a `Host` header (`name[:port]`, `[v6]:port`) names this daemon:
+/// an IP address, `localhost`, the machine's name (also with `.local`, as
+/// mDNS announces it), or a configured name.
+fn names_this_daemon(host: &str, allowed: &[String], machine: &str) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(v6) => v6.split(']').next().unwrap_or_default(),
+        None => host.rsplit_once(':').map_or(host, |(name, port)| {
+            if port.chars().all(|c| c.is_ascii_digit()) {
+                name
+            } else {
+                host
+            }
+        }),
+    };
+    let name = name.trim_end_matches('.').to_ascii_lowercase();
+    name.parse::<std::net::IpAddr>().is_ok()
+        || name == "localhost"
+        || (!machine.is_empty() && (name == machine || name == format!("{machine}.local")))
+        || allowed.iter().any(|a| a.eq_ignore_ascii_case(&name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_host_must_name_this_daemon() {
+        let allowed = ["octopus-upper".to_string()];
+        for host in [
+            "127.0.0.1:8080",
+            "192.168.4.1",
+            "[::1]:8080",
+            "localhost:8080",
+            "robot:8080",
+            "robot.local",
+            "ROBOT.local.:8080",
+            "octopus-upper:8080",
+        ] {
+            assert!(names_this_daemon(host, &allowed, "robot"), "{host}");
+        }
+        for host in [
+            "evil.example",
+            "evil.example:8080",
+            "robot.evil.example",
+            "localhost.evil",
+        ] {
+            assert!(!names_this_daemon(host, &allowed, "robot"), "{host}");
+        }
     }
 }

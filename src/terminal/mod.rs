@@ -32,19 +32,49 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
-use axum::http::StatusCode;
+use axum::http::{header, StatusCode};
 use axum::response::{Html, Response};
 use axum::routing::{get, post};
 use axum::Router;
 
-/// The page, embedded: no CDN, works offline.
+/// The page, embedded: no CDN, works offline. Its style and script are
+/// files of their own, so that the page's policy can forbid inline code.
 pub const PAGE: &str = include_str!("page.html");
+/// The page's style.
+pub const PAGE_CSS: &str = include_str!("page.css");
+/// The page's script.
+pub const PAGE_JS: &str = include_str!("page.js");
+
+/// What a page of this daemon may load and do: its own style, script and
+/// API, nothing inline, nothing from elsewhere, and it may not be framed
+/// (where a click on it could be a click on Calibrate).
+pub const CONTENT_SECURITY_POLICY: &str = "frame-ancestors 'none'; default-src 'none'; \
+script-src 'self'; style-src 'self'; connect-src 'self'; img-src 'self' data:; \
+base-uri 'none'; form-action 'none'";
 
 /// The router of the API and the page.
 pub fn router(state: AppState) -> Router {
     use handlers::*;
     Router::new()
         .route("/", get(|| async { Html(PAGE) }))
+        .route(
+            "/page.css",
+            get(|| async {
+                (
+                    [(header::CONTENT_TYPE, "text/css; charset=utf-8")],
+                    PAGE_CSS,
+                )
+            }),
+        )
+        .route(
+            "/page.js",
+            get(|| async {
+                (
+                    [(header::CONTENT_TYPE, "text/javascript; charset=utf-8")],
+                    PAGE_JS,
+                )
+            }),
+        )
         .route("/api/status", get(get_status))
         .route("/api/events", get(get_events))
         .route("/api/calibrations", get(get_history).post(post_start))
@@ -65,6 +95,10 @@ pub fn router(state: AppState) -> Router {
                 "no such endpoint (see docs/api.md)".into(),
             )
         })
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            auth::same_site_only,
+        ))
         .layer(axum::middleware::map_response(protective_headers))
         .with_state(state)
 }
@@ -74,14 +108,13 @@ pub fn router(state: AppState) -> Router {
 /// guess content types, and no address leaks to other sites.
 async fn protective_headers(mut response: Response) -> Response {
     use axum::http::header::{
-        HeaderValue, CONTENT_SECURITY_POLICY, REFERRER_POLICY, X_CONTENT_TYPE_OPTIONS,
-        X_FRAME_OPTIONS,
+        HeaderValue, REFERRER_POLICY, X_CONTENT_TYPE_OPTIONS, X_FRAME_OPTIONS,
     };
     let headers = response.headers_mut();
     headers.insert(X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
     headers.insert(
-        CONTENT_SECURITY_POLICY,
-        HeaderValue::from_static("frame-ancestors 'none'"),
+        header::CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static(CONTENT_SECURITY_POLICY),
     );
     headers.insert(X_CONTENT_TYPE_OPTIONS, HeaderValue::from_static("nosniff"));
     headers.insert(REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
