@@ -167,6 +167,10 @@ impl Config {
     /// The shipped simulation configuration (`config/sim.toml`) and its
     /// schedule, built into the binary so that `groundcal calibrate --robot sim
     /// --sensor sim` runs anywhere.
+    #[allow(
+        clippy::expect_used,
+        reason = "files built into the binary, parsed by the unit tests: not input"
+    )]
     pub fn embedded_sim() -> (Self, Schedule) {
         const CONFIG: &str = include_str!("../config/sim.toml");
         const SCHEDULE: &str = include_str!("../config/schedules/octopus-52.toml");

@@ -242,7 +242,10 @@ impl RosMount {
             ExportFormat::Urdf => self.to_urdf(),
             ExportFormat::RosStatic => self.to_ros_static_args() + "\n",
             ExportFormat::Json => {
-                // Only finite numbers and plain keys: encoding cannot fail.
+                #[allow(
+                    clippy::expect_used,
+                    reason = "only finite numbers and plain keys: encoding cannot fail"
+                )]
                 let mut text =
                     serde_json::to_string_pretty(&self.to_json()).expect("the export JSON encodes");
                 text.push('\n');

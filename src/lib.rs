@@ -26,6 +26,10 @@
 //! - [`systemd`]: sd_notify and the watchdog;
 //! - [`cli`]: the `groundcal` command's subcommands.
 
+// No unwrap or expect outside tests: external input and hardware fail with
+// an error that says what was wrong (scripts/test runs clippy with this).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 /// The calibration math, its own crate (`calib/`): no I/O.
 pub use groundcal_calib as calib;
 

@@ -1,6 +1,10 @@
 //! The `groundcal` command: parses arguments, sets up logging, and calls into
 //! the library (`groundcal::cli`). See `shared/spec/cli.md` for the contract.
 
+// No unwrap or expect outside tests: external input and hardware fail with
+// an error that says what was wrong (scripts/test runs clippy with this).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 

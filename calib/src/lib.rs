@@ -23,6 +23,9 @@
 // One exception, in `disparity`: the AVX2 build of the per-pixel loop, called
 // only after the processor was checked for AVX2.
 #![deny(unsafe_code)]
+// No unwrap or expect outside tests: external input and hardware fail with
+// an error that says what was wrong (scripts/test runs clippy with this).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod body;
 pub mod calibrate;

@@ -18,6 +18,9 @@
 //! crate). Nothing here may depend on the application (`groundcal`) above it.
 
 #![deny(unsafe_code)]
+// No unwrap or expect outside tests: external input and hardware fail with
+// an error that says what was wrong (scripts/test runs clippy with this).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod controller;
 pub mod error;

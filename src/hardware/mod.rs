@@ -169,11 +169,15 @@ struct SimParts {
     sim: SimConfig,
 }
 
-fn sim_parts(config: &Config) -> Result<SimParts, HardwareError> {
-    let sim = config.sim.clone().ok_or_else(|| HardwareError {
+fn no_sim_table() -> HardwareError {
+    HardwareError {
         kind: ErrorKind::DeviceMissing,
         message: "the simulated robot and Kinect need a [sim] table in the configuration".into(),
-    })?;
+    }
+}
+
+fn sim_parts(config: &Config) -> Result<SimParts, HardwareError> {
+    let sim = config.sim.clone().ok_or_else(no_sim_table)?;
     let robot = SimRobotConfig::reference(sim.seed, sim.time_scale);
     let true_pose = TruePose::new(robot.home.to_params().to_transform());
     Ok(SimParts { true_pose, sim })
@@ -212,7 +216,7 @@ pub async fn open(
             UdpBodyController::connect(&link).await.map_err(wrap)?,
         ))
     } else {
-        let parts = sim.as_ref().expect("made above for the simulated robot");
+        let parts = sim.as_ref().ok_or_else(no_sim_table)?;
         let mut robot = SimRobotConfig::reference(parts.sim.seed, parts.sim.time_scale);
         robot.sinking_foot = parts.sim.sinking_foot.map(|s| SinkingFoot {
             foot: s.foot,
@@ -227,7 +231,7 @@ pub async fn open(
 
     let sensor = match source {
         SensorSource::Sim => {
-            let parts = sim.as_ref().expect("made above for the simulated sensor");
+            let parts = sim.as_ref().ok_or_else(no_sim_table)?;
             if robot != RobotAddress::Sim {
                 tracing::warn!("the simulated Kinect sees the simulated body, which a real lower computer does not move");
             }
