@@ -34,6 +34,10 @@ pub struct Plan {
     pub poll: Duration,
     /// How long a motion may take beyond its nominal duration.
     pub motion_slack: Duration,
+    /// After a failure, how long to keep trying a lower computer that does
+    /// not answer, to halt the body and send it home once the link returns.
+    /// Meanwhile its own watchdog (1 s without a word) has halted the body.
+    pub link_recovery: Duration,
     /// For each pose of the schedule, the pose id sent and the frames
     /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
     /// recording's own, so that the session asks for what was recorded.
@@ -88,6 +92,7 @@ impl Plan {
                 .div_f64(scale.max(1.0))
                 .max(Duration::from_millis(5)),
             motion_slack: Duration::from_secs(5),
+            link_recovery: Duration::from_secs(30),
             recorded_poses: None,
         };
         if let Some(recording) = replay {

@@ -506,19 +506,46 @@ async fn wait_until_home<C: BodyController>(
     .await
 }
 
-/// Halts the body, then sends it home and waits until it is there (or the
-/// link is lost). Returns a description of how the robot was left.
+/// Halts the body, then sends it home and waits until it is there. A lower
+/// computer that does not answer (the link is down) is tried again, every
+/// half second for `plan.link_recovery`: its own watchdog has halted the body
+/// meanwhile, and once the link returns the body is sent home. Returns a
+/// description of how the robot was left.
 async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> String {
-    if let Err(e) = controller.halt().await {
+    let deadline = tokio::time::Instant::now() + plan.link_recovery;
+    let mut retries = 0u32;
+    let halted = loop {
+        match controller.halt().await {
+            Ok(()) => break Ok(()),
+            Err(e) if link_down(&e) && tokio::time::Instant::now() < deadline => {
+                retries += 1;
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(e) => break Err(e),
+        }
+    };
+    if let Err(e) = halted {
         return format!("could not halt the robot ({e}); check it");
     }
+    let after = if retries > 0 {
+        format!(" (the link came back after {retries} more tries)")
+    } else {
+        String::new()
+    };
     if let Err(e) = controller.home(millis(plan.motion)).await {
-        return format!("halted, but could not send it home ({e})");
+        return format!("halted{after}, but could not send it home ({e})");
     }
     match wait_until_home(controller, plan).await {
-        Ok(_) => "halted and sent home; it stands at the home stance".to_string(),
-        Err(e) => format!("halted and sent home, but it did not report the home stance: {e}"),
+        Ok(_) => format!("halted and sent home{after}; it stands at the home stance"),
+        Err(e) => {
+            format!("halted and sent home{after}, but it did not report the home stance: {e}")
+        }
     }
+}
+
+/// Whether an error says the lower computer did not answer (and may again).
+fn link_down<E: groundcal_hal::Error>(e: &E) -> bool {
+    matches!(e.kind(), ErrorKind::Timeout | ErrorKind::LinkLost)
 }
 
 /// Runs a calibration session. `abort` completes (with a reason) when the

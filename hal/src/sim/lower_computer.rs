@@ -16,6 +16,9 @@
 //!   computer moves on from this pose: at the first SET_POSE or HOME received
 //!   after it reported the body settled at this pose id. That request meets
 //!   the restarted lower computer and gets ACK 3;
+//! - `partition=POSE:MS`: the network goes dark both ways for MS
+//!   milliseconds, from the moment the robot starts its motion to pose POSE
+//!   (a Wi-Fi drop-out in the middle of a pose);
 //! - `seed`: the faults' own random stream (default: from `--seed`).
 //!
 //! With `GROUNDCAL_SIM_RECEIPTS=FILE`, every datagram the server handled is
@@ -69,6 +72,9 @@ pub struct FaultInjection {
     /// Restart the lower computer when the upper computer moves on from this
     /// pose (see the module's notes).
     pub restart_after_pose: Option<u16>,
+    /// Lose every datagram, both ways, for this long from the moment the
+    /// robot accepts the motion to this pose.
+    pub partition: Option<(u16, Duration)>,
     /// The faults' random stream; `None`: derived from the robot's seed.
     pub seed: Option<u64>,
 }
@@ -109,11 +115,18 @@ impl FaultInjection {
                         .map_err(|_| format!("{key}: \"{value}\" is not a pose id"))?;
                     faults.restart_after_pose = Some(pose);
                 }
+                "partition" => {
+                    let bad = || format!("{key}: \"{value}\" is not POSE:MILLISECONDS");
+                    let (pose, millis) = value.split_once(':').ok_or_else(bad)?;
+                    let pose = pose.trim().parse::<u16>().map_err(|_| bad())?;
+                    let millis = millis.trim().parse::<u64>().map_err(|_| bad())?;
+                    faults.partition = Some((pose, Duration::from_millis(millis)));
+                }
                 "seed" => faults.seed = Some(integer()?),
                 _ => {
                     return Err(format!(
                         "unknown key \"{key}\" (loss, loss_in, loss_out, dup, reorder, \
-                         delay_ms, restart_after_pose, seed)"
+                         delay_ms, restart_after_pose, partition, seed)"
                     ))
                 }
             }
@@ -141,6 +154,9 @@ impl FaultInjection {
         ];
         if let Some(pose) = self.restart_after_pose {
             items.push(format!("restart_after_pose={pose}"));
+        }
+        if let Some((pose, dark)) = self.partition {
+            items.push(format!("partition={pose}:{}", dark.as_millis()));
         }
         if let Some(seed) = self.seed {
             items.push(format!("seed={seed}"));
@@ -186,6 +202,8 @@ pub struct FaultCounters {
     pub lost_out: u64,
     pub duplicated: u64,
     pub reordered: u64,
+    /// Lost to a partition, both ways.
+    pub partitioned: u64,
 }
 
 /// The simulated lower computer's record of a run.
@@ -238,6 +256,8 @@ struct Impairment {
     held: [Option<Held>; 2],
     order: u64,
     counters: FaultCounters,
+    /// The network is dark until then (a partition).
+    dark_until: Option<Instant>,
 }
 
 /// The longest a reordered datagram waits for another to overtake it.
@@ -252,7 +272,17 @@ impl Impairment {
             held: [None, None],
             order: 0,
             counters: FaultCounters::default(),
+            dark_until: None,
         }
+    }
+
+    /// Whether the network is dark now (and counts the datagram lost if so).
+    fn partitioned(&mut self, now: Instant) -> bool {
+        let dark = self.dark_until.is_some_and(|until| now < until);
+        if dark {
+            self.counters.partitioned += 1;
+        }
+        dark
     }
 
     fn submit(&mut self, direction: Direction, bytes: Vec<u8>, address: SocketAddr, now: Instant) {
@@ -266,6 +296,9 @@ impl Impairment {
                 self.faults.loss_out
             }
         };
+        if self.partitioned(now) {
+            return;
+        }
         if self.rng.gen_bool(loss) {
             match direction {
                 Direction::ToRobot => self.counters.lost_in += 1,
@@ -515,6 +548,21 @@ impl SimServer {
                             ack: r.ack.map(|a| a.code()),
                             ..ReceiptLine::event("datagram", ms(epoch, now_std), life)
                         });
+                        if let Some((pose, dark)) = self.options.faults.partition {
+                            let starts = impairment.dark_until.is_none()
+                                && r.pose_id == Some(pose)
+                                && r.kind == Some(kind::SET_POSE)
+                                && matches!(r.outcome, crate::udp::server::Outcome::New);
+                            if starts {
+                                impairment.dark_until = Some(now_std + dark);
+                                tracing::info!("the network goes dark for {dark:?}");
+                                self.log(&ReceiptLine::event(
+                                    "partition",
+                                    ms(epoch, now_std),
+                                    life,
+                                ));
+                            }
+                        }
                         if let Some(reply) = handled.reply {
                             if let Some(pose) = self.options.faults.restart_after_pose {
                                 if stats.restarts == 0 && settled_at(&reply, pose) {
