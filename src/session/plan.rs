@@ -38,6 +38,9 @@ pub struct Plan {
     /// not answer, to halt the body and send it home once the link returns.
     /// Meanwhile its own watchdog (1 s without a word) has halted the body.
     pub link_recovery: Duration,
+    /// The longest the depth sensor may take to answer (a frame, the tilt,
+    /// the LED) before the session fails: a stalled stream must not hang it.
+    pub sensor_timeout: Duration,
     /// For each pose of the schedule, the pose id sent and the frames
     /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
     /// recording's own, so that the session asks for what was recorded.
@@ -93,6 +96,7 @@ impl Plan {
                 .max(Duration::from_millis(5)),
             motion_slack: Duration::from_secs(5),
             link_recovery: Duration::from_secs(30),
+            sensor_timeout: Duration::from_secs(10),
             recorded_poses: None,
         };
         if let Some(recording) = replay {

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use groundcal_hal::{
-    BodyController, BodyState, DepthFrame, DepthSensor, ErrorKind, Led, MotionState,
+    BodyController, BodyState, DepthFrame, DepthSensor, ErrorKind, Led, MotionState, SensorInfo,
 };
 use tokio::sync::mpsc::UnboundedSender;
 use tokio::task::JoinHandle;
@@ -322,11 +322,8 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
     // 2. Home stance and its feet; the Kinect tilted and still.
     let home = go_home(controller, plan).await?;
     send(events, Event::AtHome);
-    sensor
-        .set_tilt(plan.tilt_deg)
-        .await
-        .map_err(SessionError::sensor)?;
-    let _ = sensor.set_led(Led::BlinkGreen).await;
+    bounded(plan, "tilting the Kinect", sensor.set_tilt(plan.tilt_deg)).await?;
+    let _ = bounded(plan, "the LED", sensor.set_led(Led::BlinkGreen)).await;
     send(
         events,
         Event::SensorReady {
@@ -414,10 +411,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         }
         send(events, Event::Capturing { index, of });
         sensor.begin_pose(index);
-        let mut frames = Vec::with_capacity(frame_count);
-        for _ in 0..frame_count {
-            frames.push(sensor.next_frame().await.map_err(SessionError::sensor)?);
-        }
+        let frames = capture(sensor, plan, index, frame_count, &info).await?;
         let feet_mm: Vec<[f64; 3]> = settled.feet_mm.to_vec();
         if let Some(w) = writer.take() {
             let record = PoseRecord {
@@ -449,7 +443,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
 
     // 4. Home, then the solve.
     go_home(controller, plan).await?;
-    let _ = sensor.set_led(Led::Green).await;
+    let _ = bounded(plan, "the LED", sensor.set_led(Led::Green)).await;
     send(events, Event::Solving);
     report_finished(pending, &mut reported, of, events, true, plan).await;
     let mut observations = Vec::new();
@@ -505,6 +499,71 @@ async fn wait_until_home<C: BodyController>(
     )
     .await
 }
+
+/// A call to the depth sensor, bounded by `plan.sensor_timeout`: a device
+/// that stops answering fails the session (which halts the robot and sends
+/// it home) instead of hanging it.
+async fn bounded<T, E: groundcal_hal::Error>(
+    plan: &Plan,
+    what: &str,
+    call: impl Future<Output = Result<T, E>>,
+) -> Result<T, SessionError> {
+    match tokio::time::timeout(plan.sensor_timeout, call).await {
+        Ok(answer) => answer.map_err(SessionError::sensor),
+        Err(_) => Err(SessionError::Sensor {
+            kind: ErrorKind::Timeout,
+            message: format!(
+                "{what}: no answer from the depth sensor in {} s",
+                plan.sensor_timeout.as_secs_f64()
+            ),
+        }),
+    }
+}
+
+/// A pose's frames. A frame whose size is not the sensor's is corrupt and
+/// skipped; more than [`MAX_CORRUPT_FRAMES`] of them at one pose fail the
+/// session, as a stalled stream does.
+async fn capture<S: DepthSensor>(
+    sensor: &mut S,
+    plan: &Plan,
+    index: u16,
+    frame_count: usize,
+    info: &SensorInfo,
+) -> Result<Vec<DepthFrame>, SessionError> {
+    let (width, height) = (info.intrinsics.width, info.intrinsics.height);
+    let mut frames = Vec::with_capacity(frame_count);
+    let mut corrupt = 0;
+    while frames.len() < frame_count {
+        let frame = bounded(
+            plan,
+            &format!("pose {index}: waiting for a depth frame"),
+            sensor.next_frame(),
+        )
+        .await?;
+        if frame.width == width && frame.height == height && frame.raw.len() == width * height {
+            frames.push(frame);
+            continue;
+        }
+        corrupt += 1;
+        let what = format!(
+            "a corrupt depth frame at pose {index}: {}×{} with {} values, where the sensor gives {width}×{height}",
+            frame.width,
+            frame.height,
+            frame.raw.len()
+        );
+        if corrupt > MAX_CORRUPT_FRAMES {
+            return Err(SessionError::Sensor {
+                kind: ErrorKind::Protocol,
+                message: format!("{corrupt} corrupt frames at pose {index}; the last was {what}"),
+            });
+        }
+        tracing::warn!("{what}; skipped");
+    }
+    Ok(frames)
+}
+
+/// Corrupt frames skipped at one pose before the session fails.
+const MAX_CORRUPT_FRAMES: usize = 3;
 
 /// Halts the body, then sends it home and waits until it is there. A lower
 /// computer that does not answer (the link is down) is tried again, every
@@ -581,7 +640,7 @@ pub async fn run<S: DepthSensor, C: BodyController>(
         }
         Err(e) => {
             let left = stop_safely(controller, plan).await;
-            let _ = sensor.set_led(Led::Red).await;
+            let _ = bounded(plan, "the LED", sensor.set_led(Led::Red)).await;
             for fit in pending {
                 fit.handle.abort();
             }
