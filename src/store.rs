@@ -172,6 +172,45 @@ impl Store {
         Ok(self.history_dir().join(format!("{id}.json")))
     }
 
+    /// The marker of a calibration in progress (`running.json`): written
+    /// when one starts, removed when it ends. Found at start, it says that the
+    /// service stopped (a kill, a crash, a power cut) while one was running.
+    fn running_path(&self) -> PathBuf {
+        self.dir.join("running.json")
+    }
+
+    /// Marks a calibration as running: who started it and when.
+    pub fn mark_running(&self, by: &str, started: &str) -> Result<(), StoreError> {
+        let bytes = serde_json::to_vec(&serde_json::json!({ "by": by, "started": started }))
+            .map_err(|e| StoreError::Invalid {
+                path: self.running_path(),
+                message: e.to_string(),
+            })?;
+        crate::files::write_atomically(&self.running_path(), &bytes)?;
+        Ok(())
+    }
+
+    /// The calibration has ended, whatever its outcome.
+    pub fn clear_running(&self) {
+        let _ = fs::remove_file(self.running_path());
+    }
+
+    /// A calibration that was running when the service last stopped, as
+    /// (who started it, when), and the marker removed: it is said once.
+    pub fn take_interrupted(&self) -> Option<(String, String)> {
+        let text = fs::read_to_string(self.running_path()).ok()?;
+        self.clear_running();
+        let value: Value = serde_json::from_str(&text).unwrap_or(Value::Null);
+        let field = |key: &str| {
+            value
+                .get(key)
+                .and_then(Value::as_str)
+                .unwrap_or("?")
+                .to_string()
+        };
+        Some((field("by"), field("started")))
+    }
+
     /// Keeps a result in the history and returns its id.
     pub fn add(&self, result: &Value, created: &str) -> Result<String, StoreError> {
         let _turn = self.turn()?;

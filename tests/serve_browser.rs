@@ -75,3 +75,54 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     assert_eq!(code, 0, "groundcal serve at SIGTERM: {stderr}");
     let _ = fs::remove_dir_all(&dir);
 }
+
+/// The daemon killed mid-run: the page says within 3 s that it has lost
+/// contact (and disables its buttons); once the daemon is back, the page
+/// finds it again and shows the run as interrupted.
+#[test]
+fn a_dead_daemon_does_not_look_alive_and_its_cut_off_run_is_named() {
+    if !common::browser_ready("serve_browser") {
+        return;
+    }
+    let dir = common::temp_dir("serve-lost");
+    // Real time: the run must last until the daemon is killed.
+    let (server, addr) = common::spawn_serve(&dir, TOKEN, &[], &[]);
+    let shots = common::root().join("target/test-screenshots");
+    fs::create_dir_all(&shots).expect("screenshot directory");
+    let url = format!("http://{addr}/");
+    let restart = serde_json::json!([
+        env!("CARGO_BIN_EXE_groundcal"),
+        "serve",
+        "--config",
+        dir.join("groundcal.toml"),
+        "--listen",
+        addr,
+    ])
+    .to_string();
+    let pid = server.id().to_string();
+    let seen = common::run_browser_script(
+        "serve-lost.mjs",
+        &[
+            OsStr::new(&url),
+            OsStr::new(TOKEN),
+            shots.as_os_str(),
+            OsStr::new(&pid),
+            OsStr::new(&restart),
+        ],
+    );
+    let mut server = server;
+    let _ = server.wait();
+    if let Some(restarted) = seen["seen"]["restartedPid"].as_u64() {
+        let _ = std::process::Command::new("kill")
+            .args(["-TERM", &restarted.to_string()])
+            .status();
+    }
+    assert!(
+        seen["seen"]["lostAfterMs"].as_u64().unwrap() <= 3000,
+        "{seen}"
+    );
+    let reason = seen["seen"]["reason"].as_str().unwrap_or_default();
+    assert!(reason.contains("was interrupted"), "{seen}");
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let _ = fs::remove_dir_all(&dir);
+}

@@ -159,6 +159,9 @@ pub struct Status {
     pub result_id: Option<String>,
     /// Why the last session produced no result.
     pub error: Option<String>,
+    /// A calibration the service's last stop cut off, in words (until the
+    /// next one starts).
+    pub interrupted: Option<String>,
     /// Whether the hardware opened when the service started, in words (it
     /// is opened again for each calibration).
     pub hardware: String,

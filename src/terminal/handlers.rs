@@ -164,6 +164,9 @@ pub async fn post_start(
                 ),
             ));
         }
+        if let Err(e) = state.store().mark_running(&by, &now()) {
+            tracing::warn!("cannot mark the calibration as running: {e}");
+        }
         *status = Status {
             state: RunState::Running,
             by: Some(by.clone()),
@@ -191,6 +194,7 @@ pub async fn post_start(
                 .into_response())
         }
         Err(e) => {
+            state.store().clear_running();
             let mut status = state.status_mut();
             status.state = RunState::Idle;
             status.error = Some(format!("cannot start the session: {e}"));

@@ -85,15 +85,46 @@ function show(s) {
     charts(s.provisional || [], s.of || 1, 'so far: ');
   } else if (s.error) {
     charts([], 1, '');
-    $('verdict').textContent = 'No result'; $('verdict').className = 'rejected';
+    $('verdict').textContent = s.interrupted ? 'Interrupted' : 'No result'; $('verdict').className = 'rejected';
     $('reasons').innerHTML = ''; const li = document.createElement('li'); li.textContent = s.error; $('reasons').appendChild(li);
   }
 }
 
+// Contact with the daemon: a page that cannot reach it must not look alive.
+// Lost when a status request fails or the event stream breaks; found again
+// when a status request succeeds (both retry by themselves).
+let lostSince = null;
+function contactLost() {
+  if (lostSince === null) { lostSince = Date.now(); showContact(); }
+}
+function contactFound() {
+  if (lostSince !== null) { lostSince = null; showContact(); }
+}
+function showContact() {
+  const banner = $('lost');
+  if (lostSince === null) { banner.hidden = true; return; }
+  const seconds = Math.round((Date.now() - lostSince) / 1000);
+  const wasRunning = status && status.state === 'running';
+  banner.textContent = 'No contact with groundcal for ' + seconds + ' s: this page shows its last state, and its buttons cannot reach the robot.'
+    + (wasRunning ? ' A calibration was running: the robot\'s own watchdog stops the body within 1 s of losing its link.' : '')
+    + ' Reconnecting…';
+  banner.hidden = false;
+  for (const id of ['calibrate', 'abort', 'accept']) $(id).disabled = true;
+}
+setInterval(() => { if (lostSince !== null) showContact(); }, 1000);
+
 async function refresh() {
-  try { const r = await fetch('/api/status'); if (r.ok) show(await r.json()); } catch (e) { /* offline: retried */ }
+  try {
+    const r = await fetch('/api/status');
+    if (!r.ok) { contactLost(); return; }
+    const s = await r.json();
+    contactFound();
+    show(s);
+  } catch (e) { contactLost(); }
 }
 const events = new EventSource('/api/events');
+events.onerror = () => { contactLost(); refresh(); };
+events.onopen = () => refresh();
 events.onmessage = (m) => {
   let e; try { e = JSON.parse(m.data); } catch (x) { return; }
   if (e.type === 'provisional') {

@@ -58,6 +58,15 @@ impl AppState {
             ),
             Err(e) => tracing::warn!("cannot clean the store: {e}"),
         }
+        // A calibration cut off by the service's end (a kill, a crash, a
+        // power cut) is said, not forgotten.
+        let interrupted = store.take_interrupted().map(|(by, started)| {
+            let words = format!(
+                "the calibration started by {by} at {started} was interrupted: the service stopped before it finished. The robot's own watchdog halts the body once groundcal falls silent; check where it stands before you calibrate again"
+            );
+            tracing::warn!("{words}");
+            words
+        });
         AppState(Arc::new(Shared {
             config,
             schedule,
@@ -67,6 +76,8 @@ impl AppState {
             status: Mutex::new(Status {
                 state: RunState::Idle,
                 robot: "idle".into(),
+                error: interrupted.clone(),
+                interrupted,
                 ..Status::default()
             }),
             events,

@@ -80,6 +80,7 @@ pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
 }
 
 fn finish(state: &AppState, result: Result<Value, String>) {
+    state.store().clear_running();
     state.take_abort();
     // The provisional charts end with the session: the result replaces them.
     state.status_mut().provisional = None;
