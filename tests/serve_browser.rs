@@ -28,7 +28,13 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
 
     let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");
-    for step in ["1-idle", "2-progress", "3-verdict", "4-accepted"] {
+    for step in [
+        "1-idle",
+        "2-progress",
+        "3-verdict",
+        "4-accepted",
+        "7-aborted",
+    ] {
         let _ = fs::remove_file(shots.join(format!("serve-{step}.png")));
     }
     let url = format!("http://{addr}/");
@@ -48,6 +54,15 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
         "{seen}"
     );
     assert_eq!(seen["seen"]["storedToken"], TOKEN, "{seen}");
+    // Aborted: "aborting…", then "at home", in words said once.
+    assert_eq!(seen["seen"]["aborting"], "aborting…", "{seen}");
+    assert!(
+        seen["seen"]["aborted"]
+            .as_str()
+            .unwrap()
+            .contains("it stands at the home stance"),
+        "{seen}"
+    );
 
     let active: serde_json::Value = serde_json::from_str(
         &fs::read_to_string(state_dir.join("active.json")).expect("active.json written"),
@@ -64,7 +79,13 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     .unwrap();
     assert_eq!(stored["robot_from_sensor"], active["robot_from_sensor"]);
 
-    for step in ["1-idle", "2-progress", "3-verdict", "4-accepted"] {
+    for step in [
+        "1-idle",
+        "2-progress",
+        "3-verdict",
+        "4-accepted",
+        "7-aborted",
+    ] {
         let bytes = fs::read(shots.join(format!("serve-{step}.png"))).expect("screenshot saved");
         assert!(
             bytes.len() > 1000 && bytes.starts_with(b"\x89PNG\r\n\x1a\n"),

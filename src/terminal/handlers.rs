@@ -127,7 +127,7 @@ pub async fn post_abort(
     match abort {
         Some(abort) => {
             let _ = abort.send(format!(
-                "aborted by the operator ({})",
+                "stopped by the operator ({})",
                 client_name(&headers, addr)
             ));
             Ok((StatusCode::ACCEPTED, Json(json!({ "aborting": true }))).into_response())

@@ -18,7 +18,15 @@ async function call(method, url) {
   return r.ok;
 }
 $('calibrate').onclick = () => call('POST', '/api/calibrations');
-$('abort').onclick = () => call('POST', '/api/calibrations/current/abort');
+// Between Abort and the session's end the robot halts and walks home, which
+// takes seconds on a real robot: the page says so.
+let aborting = false;
+$('abort').onclick = async () => {
+  aborting = true;
+  $('progress').textContent = 'aborting…';
+  $('robot').textContent = 'halting the robot and sending it home';
+  if (!await call('POST', '/api/calibrations/current/abort')) aborting = false;
+};
 $('accept').onclick = async () => {
   if (status && status.result_id && await call('POST', '/api/calibrations/' + status.result_id + '/accept')) {
     $('message').textContent = 'accepted: ' + status.result_id + ' is now active';
@@ -67,8 +75,18 @@ function show(s) {
   const running = s.state === 'running';
   $('calibrate').disabled = running;
   $('abort').disabled = !running;
-  $('progress').textContent = running ? ('pose ' + (s.pose || 0) + ' of ' + (s.of || '?')) : 'idle';
-  $('robot').textContent = s.robot + (s.by ? ' — started by ' + s.by : '');
+  const stoppedAtHome = !running && /^aborted/.test(s.robot || '') && /stands at the home stance/.test(s.robot || '');
+  if (!running) aborting = false;
+  $('progress').textContent = running
+    ? (aborting ? 'aborting…' : 'pose ' + (s.pose || 0) + ' of ' + (s.of || '?'))
+    : (stoppedAtHome ? 'at home' : 'idle');
+  $('robot').textContent = running && aborting
+    ? 'halting the robot and sending it home'
+    : s.robot + (s.by ? ' — started by ' + s.by : '');
+  // What matters for safety stands out: a robot that may not have stopped.
+  const unsafe = [s.robot, s.error].find((t) => /could not halt|could not send it home/.test(t || ''));
+  $('safety').hidden = !unsafe;
+  $('safety').textContent = unsafe ? 'The robot may not have stopped: ' + unsafe + '. Check it before anything else.' : '';
   $('hardware').textContent = s.hardware ? 'hardware at start: ' + s.hardware : '';
   const r = s.result;
   $('accept').disabled = running || !r || r.status !== 'accepted' || !s.result_id;
@@ -129,7 +147,7 @@ events.onmessage = (m) => {
   let e; try { e = JSON.parse(m.data); } catch (x) { return; }
   if (e.type === 'provisional') {
     charts(e.poses, (status && status.of) || e.poses.length, 'so far: ');
-  } else if (e.type === 'moving' || e.type === 'capturing' || e.type === 'pose_done') {
+  } else if ((e.type === 'moving' || e.type === 'capturing' || e.type === 'pose_done') && !aborting) {
     $('progress').textContent = 'pose ' + e.index + ' of ' + e.of;
     $('robot').textContent = e.type === 'pose_done' ? (e.ok ? 'ground fitted' : e.error) : e.type;
   } else {

@@ -7,7 +7,8 @@
 // θ/e_d chart fill in, waits for the verdict, presses Accept. Checks: no
 // console error, no page error, no request leaving the server (the page works
 // offline). Saves serve-1-idle.png,
-// serve-2-progress.png, serve-3-verdict.png and serve-4-accepted.png. Prints
+// serve-2-progress.png, serve-3-verdict.png, serve-4-accepted.png and, after a second
+// calibration aborted, serve-7-aborted.png. Prints
 // one JSON line of what it saw; exits 0 when every check passes, 1 otherwise,
 // 2 on bad usage.
 
@@ -76,6 +77,18 @@ try {
   const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
   if (overflow > 1) problems.push(`the page is ${overflow} px wider than the screen`);
   await shot(page, '4-accepted');
+
+  // A second calibration, aborted: "aborting…" while the robot halts and
+  // walks home, then "at home".
+  await page.click('#calibrate');
+  await page.waitForFunction(() => /pose [2-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
+  await page.click('#abort');
+  seen.aborting = await page.locator('#progress').innerText();
+  if (seen.aborting !== 'aborting…') problems.push(`after Abort the page said ${JSON.stringify(seen.aborting)}`);
+  await page.waitForFunction(() => document.getElementById('progress').textContent === 'at home', null, { timeout: 60_000 });
+  seen.aborted = await page.locator('#robot').innerText();
+  if (/aborted: aborted/.test(seen.aborted)) problems.push(`the reason repeats itself: ${seen.aborted}`);
+  await shot(page, '7-aborted');
 } catch (error) {
   problems.push(`the browser failed: ${error.stack ?? error}`);
 } finally {
