@@ -80,6 +80,10 @@ enum Command {
         /// or paper (the paper's eigenvector fit in metres, to compare).
         #[arg(long, value_name = "disparity|paper", default_value = "disparity")]
         ground_fit: GroundFitMethod,
+        /// Judge by this configuration's quality gates (default: those the
+        /// recording stores from its live run, else the built-in ones).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
     },
     /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
     Export {
@@ -201,7 +205,13 @@ fn run(args: Args) -> ExitStatus {
             report,
             threads,
             ground_fit,
+            config,
         } => {
+            let gates = match config.as_deref().map(groundcal::config::Config::load) {
+                None => None,
+                Some(Ok((config, _))) => Some(config.calibration.gates),
+                Some(Err(e)) => return usage_error(e.to_string()),
+            };
             let nominal_mount =
                 match nominal_mount.map(|m| cli::parse_numbers::<6>("--nominal-mount", &m)) {
                     None => None,
@@ -213,6 +223,7 @@ fn run(args: Args) -> ExitStatus {
             let mut options = groundcal::replay::ReplayOptions {
                 nominal_mount,
                 threads,
+                gates,
                 ..Default::default()
             };
             options.pose.plane.method = ground_fit;

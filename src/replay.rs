@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use crate::calib::calibrate::CalibrationSettings;
 use crate::calib::observe::{BodyEstimate, ObserveSettings, PoseObserver};
 use crate::calib::plane::FitBuffers;
+use crate::calib::quality::Gates;
 use crate::calib::solve::Observation;
 use crate::output::ResultJson;
 use crate::recording::session::NominalMount;
@@ -23,7 +24,12 @@ pub struct ReplayOptions {
     /// Overrides the recording's nominal mount.
     pub nominal_mount: Option<NominalMount>,
     pub pose: ObserveSettings,
+    /// The solve's settings; its gates are used only for a recording that
+    /// stores none and when `gates` is not given.
     pub calibration: CalibrationSettings,
+    /// The gates to judge by (`replay --config`); otherwise the recording's
+    /// own (those of its live run), so that both give the same verdict.
+    pub gates: Option<Gates>,
     /// Worker threads; `None` uses every core.
     pub threads: Option<usize>,
 }
@@ -183,11 +189,18 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             Err(reason) => failed.push((outcome.index, reason)),
         }
     }
+    let settings = CalibrationSettings {
+        gates: options
+            .gates
+            .or(session.gates)
+            .unwrap_or(options.calibration.gates),
+        ..options.calibration
+    };
     let mut result = ResultJson::from_poses(
         &observations,
         &failed,
         recording.poses.len(),
-        &options.calibration,
+        &settings,
         session.kinect.tilt_deg,
     );
     if let Some(note) = processor.prior_note() {

@@ -249,3 +249,51 @@ fn mount_distance_is_exact_near_zero() {
     assert!((angle - 1e-7).abs() < 1e-12, "{angle}");
     assert_eq!(offset, 0.0);
 }
+
+/// A live calibration judged by stricter gates than the built-in ones: its
+/// recording keeps them, so `replay` gives the live verdict; `replay --config`
+/// judges by the configuration's gates, which give the same verdict too.
+#[test]
+fn replay_judges_by_the_gates_of_the_live_run() {
+    let strict = config_with(
+        "strict-gates",
+        &[("theta_max_deg = 1.0", "theta_max_deg = 0.001")],
+    );
+    let dir = std::env::temp_dir().join(format!("groundcal-gates-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (code, live) = groundcal_json(&[
+        "calibrate",
+        "--config",
+        strict.to_str().unwrap(),
+        "--json",
+        "--record",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 3, "{live}");
+    assert_eq!(live["status"], "rejected");
+    let (code, replayed) = groundcal_json(&["replay", dir.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 3, "the recording's gates: {replayed}");
+    assert_eq!(replayed["reasons"], live["reasons"]);
+    let (code, judged) = groundcal_json(&[
+        "replay",
+        dir.to_str().unwrap(),
+        "--config",
+        strict.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 3, "--config's gates: {judged}");
+    assert_eq!(judged["reasons"], live["reasons"]);
+    // The built-in gates accept the same run.
+    let lenient = config_with("lenient-gates", &[]);
+    let (code, judged) = groundcal_json(&[
+        "replay",
+        dir.to_str().unwrap(),
+        "--config",
+        lenient.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{judged}");
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(strict);
+    let _ = std::fs::remove_file(lenient);
+}

@@ -103,6 +103,7 @@ pub fn capture_session(sensor: &impl DepthSensor, tilt_deg: f64) -> Session {
         frames_per_pose: None,
         schedule: None,
         nominal_mount: None,
+        gates: None,
     }
 }
 

@@ -42,6 +42,11 @@ pub struct Session {
     pub schedule: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nominal_mount: Option<NominalMount>,
+    /// The quality gates the live calibration was judged by (a groundcal
+    /// extension of recording.md, whose readers ignore keys they do not
+    /// know): `replay` judges by the same ones unless told otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gates: Option<crate::calib::quality::Gates>,
 }
 
 /// Checks that feet are six finite triples.
@@ -102,6 +107,9 @@ impl Session {
             InputError::new(path, (e.line() > 0).then_some(e.line()), e.to_string())
         })?;
         let bad = |m: String| InputError::new(path, None, m);
+        if let Some(gates) = &session.gates {
+            gates.validate().map_err(|e| bad(e))?;
+        }
         check_feet(&session.home.feet_body_mm)
             .map_err(|e| bad(format!("home.feet_body_mm: {e}")))?;
         if !session.home.commanded.is_finite() {

@@ -366,6 +366,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
                 frames_per_pose: Some(plan.frames_per_pose as u32),
                 schedule: Some(schedule.name.clone()),
                 nominal_mount: plan.nominal_mount,
+                gates: Some(plan.calibration.gates),
             },
         )?),
         None => None,
