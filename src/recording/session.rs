@@ -108,7 +108,7 @@ impl Session {
         })?;
         let bad = |m: String| InputError::new(path, None, m);
         if let Some(gates) = &session.gates {
-            gates.validate().map_err(|e| bad(e))?;
+            gates.validate().map_err(&bad)?;
         }
         check_feet(&session.home.feet_body_mm)
             .map_err(|e| bad(format!("home.feet_body_mm: {e}")))?;
