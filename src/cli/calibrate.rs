@@ -51,8 +51,10 @@ fn show_progress(
         let bar = terminal.then(|| {
             let bar = indicatif::ProgressBar::new(0);
             bar.set_style(
+                // One line under 80 columns: the bar, the step in words
+                // ("pose 17/52: capturing"), the time so far and left.
                 indicatif::ProgressStyle::with_template(
-                    "{spinner} [{bar:30}] pose {pos}/{len} {msg}",
+                    "{spinner} [{bar:20}] {msg:30} {elapsed:>4} ~{eta} left",
                 )
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
@@ -104,8 +106,10 @@ fn show_progress(
                 None => eprintln!("groundcal calibrate: {line}"),
             }
         }
+        // The bar gives way to the result; the last step stays on screen.
         if let Some(bar) = bar {
-            bar.finish_and_clear();
+            bar.finish();
+            eprintln!();
         }
     })
 }
