@@ -14,29 +14,17 @@ mod common;
 use std::ffi::OsStr;
 use std::path::Path;
 
-use common::{groundcal, root, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
+use common::{groundcal, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
 use serde_json::Value;
 
 /// The simulation configuration towards the lower computer at `address`,
 /// with `retries` attempts 50 ms apart per request.
 fn config_for(address: &str, dir: &Path, retries: u32) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(root().join("config/sim.toml"))
-        .unwrap()
-        .replace(
-            "\naddress = \"sim\"\n",
-            &format!("\naddress = \"{address}\"\nretries = {retries}\nretry_interval_ms = 50\n"),
-        )
-        .replace("settle_ms = 300", "settle_ms = 30")
-        .replace(
-            "schedule = \"schedules/octopus-52.toml\"",
-            &format!(
-                "schedule = \"{}\"",
-                root().join("config/schedules/octopus-52.toml").display()
-            ),
-        );
-    let path = dir.join("groundcal.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+    common::config_towards(
+        address,
+        dir,
+        &format!("retries = {retries}\nretry_interval_ms = 50"),
+    )
 }
 
 struct Run {

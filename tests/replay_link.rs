@@ -13,34 +13,17 @@ use std::collections::BTreeMap;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
-use common::{groundcal_json, mount_of, root, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
+use common::{groundcal_json, mount_of, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
 use groundcal::recording::Recording;
 use serde_json::Value;
 
 const FAULTS: &str = "loss=0.2,dup=0.05,reorder=0.05,delay_ms=20,seed=3";
 
-/// The simulation configuration pointed at the lower computer at `address`,
-/// with a short settle delay (the replayed robot holds still at once).
+/// The simulation configuration towards the lower computer at `address`.
+/// 30 retries: at 20 % loss each way, a request and its reply both get
+/// through with p = 0.64; 31 attempts all failing is ~1e-14.
 fn config_for(address: &str, dir: &Path) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(root().join("config/sim.toml"))
-        .unwrap()
-        // 30 retries: at 20 % loss each way, a request and its reply both
-        // get through with p = 0.64; 31 attempts all failing is ~1e-14.
-        .replace(
-            "\naddress = \"sim\"\n",
-            &format!("\naddress = \"{address}\"\nretries = 30\n"),
-        )
-        .replace("settle_ms = 300", "settle_ms = 30")
-        .replace(
-            "schedule = \"schedules/octopus-52.toml\"",
-            &format!(
-                "schedule = \"{}\"",
-                root().join("config/schedules/octopus-52.toml").display()
-            ),
-        );
-    let path = dir.join("groundcal.toml");
-    std::fs::write(&path, text).unwrap();
-    path
+    common::config_towards(address, dir, "retries = 30")
 }
 
 /// Runs the live session on `recording` and checks it against the replay.

@@ -324,9 +324,15 @@ fn raw_head(addr: SocketAddr, method: &str, path: &str, headers: &str) -> String
         .unwrap_or(response)
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn no_other_site_can_frame_the_page() {
-    let dir = temp_dir("headers");
+/// The daemon on the built-in simulation, in process on 127.0.0.1:0 with its
+/// store in `dir`; stops when the sender is used or dropped.
+async fn serve_simulation(
+    dir: &std::path::Path,
+) -> (
+    SocketAddr,
+    tokio::sync::oneshot::Sender<()>,
+    tokio::task::JoinHandle<std::io::Result<()>>,
+) {
     let (config, schedule) = Config::embedded_sim();
     let state = AppState::new(
         config,
@@ -341,6 +347,13 @@ async fn no_other_site_can_frame_the_page() {
     let server = tokio::spawn(serve(listener, state, async move {
         let _ = stopped.await;
     }));
+    (addr, stop, server)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn no_other_site_can_frame_the_page() {
+    let dir = temp_dir("headers");
+    let (addr, stop, server) = serve_simulation(&dir).await;
     for path in ["/", "/page.js", "/api/status", "/no/such/endpoint"] {
         let head = tokio::task::spawn_blocking(move || head_of(addr, path))
             .await
@@ -369,20 +382,7 @@ async fn no_other_site_can_frame_the_page() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_page_elsewhere_can_neither_read_nor_write() {
     let dir = temp_dir("origin");
-    let (config, schedule) = Config::embedded_sim();
-    let state = AppState::new(
-        config,
-        schedule,
-        Selection::default(),
-        TOKEN.into(),
-        &dir.join("state"),
-    );
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
+    let (addr, stop, server) = serve_simulation(&dir).await;
     let ask = |method: &'static str, path: &'static str, headers: String| {
         tokio::task::spawn_blocking(move || raw_head(addr, method, path, &headers))
     };

@@ -339,3 +339,27 @@ pub fn browser_ready(test: &str) -> bool {
     prerequisite_missing(test, &message);
     false
 }
+
+/// The simulation configuration pointed at the lower computer at `address`,
+/// with `robot_keys` (TOML lines of `[robot]`, e.g. `retries = 30`) and a
+/// short settle delay (a recorded robot holds still at once), written into
+/// `dir`; its schedule path is absolute.
+pub fn config_towards(address: &str, dir: &Path, robot_keys: &str) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("config/sim.toml"))
+        .expect("config/sim.toml")
+        .replace(
+            "\naddress = \"sim\"\n",
+            &format!("\naddress = \"{address}\"\n{robot_keys}\n"),
+        )
+        .replace("settle_ms = 300", "settle_ms = 30")
+        .replace(
+            "schedule = \"schedules/octopus-52.toml\"",
+            &format!(
+                "schedule = \"{}\"",
+                root().join("config/schedules/octopus-52.toml").display()
+            ),
+        );
+    let path = dir.join("groundcal.toml");
+    std::fs::write(&path, text).expect("configuration written");
+    path
+}
