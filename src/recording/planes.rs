@@ -36,10 +36,15 @@ struct PlaneRecord {
 /// Parses a planes file's text into observations (the plane normalised and
 /// oriented to `d > 0`).
 pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputError> {
-    let file: PlanesFile = serde_json::from_str(text).map_err(|e| {
+    let not_planes = |e: serde_json::Error| {
         let line = (e.line() > 0).then_some(e.line());
         InputError::new(path, line, format!("not a groundcal-planes document: {e}"))
-    })?;
+    };
+    // serde_json skips the value of an unknown key without checking its
+    // string escapes (found by fuzzing): text that is not JSON is refused
+    // as such first.
+    serde_json::from_str::<serde_json::Value>(text).map_err(not_planes)?;
+    let file: PlanesFile = serde_json::from_str(text).map_err(not_planes)?;
     if file.format != "groundcal-planes" {
         return Err(InputError::new(
             path,
@@ -149,6 +154,19 @@ mod tests {
 
     fn parse(text: &str) -> Result<Vec<Observation>, InputError> {
         parse_planes(Path::new("t.json"), text)
+    }
+
+    /// Text that is not JSON is refused as such. (The fuzzer's input that
+    /// `parse_planes` accepted while not being JSON is kept in
+    /// fuzz/regressions/planes_file/; this simpler case was refused before
+    /// too.)
+    #[test]
+    fn text_that_is_not_json_is_refused_even_in_an_unknown_key() {
+        let bad = ONE.replacen('{', r#"{"comment": "\u12", "#, 1);
+        assert!(serde_json::from_str::<serde_json::Value>(&bad).is_err());
+        let e = parse(&bad).unwrap_err().to_string();
+        assert!(e.contains("not a groundcal-planes document"), "{e}");
+        assert!(parse(ONE).is_ok());
     }
 
     const ONE: &str = r#"{"format": "groundcal-planes", "version": 1, "observations": [
