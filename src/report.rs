@@ -1006,7 +1006,7 @@ figure svg { display: block; width: 100%; height: auto; }
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calib::calibrate::{calibrate as solve, CalibrationSettings as SolveSettings};
+    use crate::calib::calibrate::{calibrate, CalibrationSettings};
     use crate::calib::solve::SolveError;
     use crate::recording::planes::read_planes;
 
@@ -1017,14 +1017,15 @@ mod tests {
     }
 
     fn solved() -> ResultJson {
-        let calibration = solve(&table2(), &SolveSettings::default()).expect("Table 2 solves");
+        let calibration =
+            calibrate(&table2(), &CalibrationSettings::default()).expect("Table 2 solves");
         ResultJson::from_calibration(&calibration)
     }
 
     /// Two poses are too few: the solve gives up, as `groundcal solve` reports it.
     fn unsolved() -> ResultJson {
         let observations: Vec<_> = table2().into_iter().take(2).collect();
-        match solve(&observations, &SolveSettings::default()) {
+        match calibrate(&observations, &CalibrationSettings::default()) {
             Err(e @ SolveError::TooFewObservations { .. }) => {
                 let SolveError::TooFewObservations { outcomes, .. } = &e;
                 ResultJson::unsolved(e.to_string(), outcomes)

@@ -1,7 +1,7 @@
 //! Property tests of the identification: ground truths built with a seeded
 //! RNG, noise added, and the truth recovered within the predicted uncertainty.
 
-use groundcal::calib::calibrate::{calibrate as solve, CalibrationSettings as SolveSettings};
+use groundcal::calib::calibrate::{calibrate, CalibrationSettings};
 use groundcal::calib::geometry::{Plane, PoseParams};
 use groundcal::calib::outcome::{Calibration, Verdict};
 use groundcal::calib::solve::{predict, Observation};
@@ -98,7 +98,7 @@ fn observe(
 #[test]
 fn recovered_parameters_lie_within_four_predicted_sigma() {
     let mut rng = ChaCha8Rng::seed_from_u64(20261123);
-    let settings = SolveSettings::default();
+    let settings = CalibrationSettings::default();
     let (mut within, mut total, mut worst) = (0usize, 0usize, 0.0f64);
     for case in 0..400 {
         let mount = random_mount(&mut rng);
@@ -121,7 +121,7 @@ fn recovered_parameters_lie_within_four_predicted_sigma() {
                 o
             })
             .collect();
-        let result = solve(&observations, &settings).expect("enough poses");
+        let result = calibrate(&observations, &settings).expect("enough poses");
         let error = result.robot_from_sensor.to_vector() - mount.to_vector();
         let sigma = result.sigma();
         for k in 0..6 {
@@ -155,7 +155,9 @@ fn predicted_sigma_follows_the_noise() {
         let obs: Vec<Observation> = observe(&mount, &schedule, |truth| {
             measure(truth, sigma_n, 0.001, rng)
         });
-        solve(&obs, &SolveSettings::default()).unwrap().sigma()
+        calibrate(&obs, &CalibrationSettings::default())
+            .unwrap()
+            .sigma()
     };
     let noisy = solve_with(0.3f64.to_radians(), &mut rng);
     let quiet = solve_with(0.03f64.to_radians(), &mut rng);
@@ -174,7 +176,7 @@ fn schedule_result(schedule: &[PoseParams]) -> Calibration {
     let obs: Vec<Observation> = observe(&mount, schedule, |truth| {
         measure(truth, 0.001, 0.0005, &mut rng)
     });
-    solve(&obs, &SolveSettings::default()).unwrap()
+    calibrate(&obs, &CalibrationSettings::default()).unwrap()
 }
 
 #[test]
@@ -267,7 +269,7 @@ fn a_pose_set_aside_beforehand_keeps_its_reason_and_is_not_used() {
         .to_transform()
         * obs[4].ground_from_robot;
     obs[4].set_aside = Some("foot 3 slipped (31 mm)".into());
-    let result = solve(&obs, &SolveSettings::default()).unwrap();
+    let result = calibrate(&obs, &CalibrationSettings::default()).unwrap();
     let pose = &result.poses[4];
     assert!(!pose.used);
     assert_eq!(pose.reason.as_deref(), Some("foot 3 slipped (31 mm)"));
@@ -287,7 +289,7 @@ fn gross_errors_in_a_few_poses_are_set_aside_and_do_not_move_the_result() {
     obs[7].plane.normal.z = -obs[7].plane.normal.z;
     obs[20].plane.d -= 0.12;
     obs[33].ground_from_robot.translation.vector.y += 0.05;
-    let result = solve(&obs, &SolveSettings::default()).unwrap();
+    let result = calibrate(&obs, &CalibrationSettings::default()).unwrap();
     let aside: Vec<u32> = result
         .poses
         .iter()
@@ -320,7 +322,7 @@ proptest! {
         let mount = PoseParams::new(alpha.to_radians(), beta.to_radians(), gamma.to_radians(), Vector3::new(px, py, pz));
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let obs: Vec<Observation> = observe(&mount, &random_schedule(&mut rng, 12), |truth| *truth);
-        let result = solve(&obs, &SolveSettings::default()).unwrap();
+        let result = calibrate(&obs, &CalibrationSettings::default()).unwrap();
         prop_assert!((result.robot_from_sensor.to_vector() - mount.to_vector()).amax() < 1e-7);
         prop_assert!(result.poses.iter().all(|p| p.used));
     }
