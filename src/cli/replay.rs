@@ -35,10 +35,8 @@ pub fn run(
         match write_report(report_dir, &outcome.result, &provenance) {
             Ok(path) => eprintln!("groundcal replay: report written to {}", path.display()),
             Err(e) => {
-                eprintln!(
-                    "groundcal replay: cannot write the report to {}: {e}",
-                    report_dir.display()
-                );
+                // The error names the file and what failed on it.
+                eprintln!("groundcal replay: cannot write the report: {e}");
                 return ExitStatus::RuntimeFailure;
             }
         }

@@ -101,8 +101,6 @@ pub struct Connections {
     open: Mutex<BTreeMap<u64, Arc<Connection>>>,
     /// Told whenever a connection closes.
     closed: Notify,
-    /// Connections refused or closed to make room, for the figures.
-    pub evictions: AtomicU64,
 }
 
 impl Connections {
@@ -131,7 +129,6 @@ impl Connections {
                     .max_by_key(|c| c.idle_for(now))
                     .cloned()
             });
-            self.evictions.fetch_add(1, Ordering::Relaxed);
             match victim {
                 // It leaves the registry when its task ends; until then the
                 // new one may exceed the limit by the few being closed.

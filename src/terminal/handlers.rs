@@ -151,6 +151,7 @@ pub async fn post_start(
         ));
     }
     let by = client_name(&headers, addr);
+    let started = now();
     let (abort_tx, abort_rx) = oneshot::channel::<String>();
     {
         let mut status = state.status_mut();
@@ -164,18 +165,19 @@ pub async fn post_start(
                 ),
             ));
         }
-        if let Err(e) = state.store().mark_running(&by, &now()) {
-            tracing::warn!("cannot mark the calibration as running: {e}");
-        }
         *status = Status {
             state: RunState::Running,
             by: Some(by.clone()),
-            started: Some(now()),
+            started: Some(started.clone()),
             robot: "opening the hardware".into(),
             hardware: std::mem::take(&mut status.hardware),
             ..Status::default()
         };
         state.set_abort(abort_tx);
+    }
+    // Written once the status is released: a write waits for the disk.
+    if let Err(e) = state.store().mark_running(&by, &started) {
+        tracing::warn!("cannot mark the calibration as running: {e}");
     }
     // A finished worker of an earlier session is joined here.
     let worker_state = state.clone();

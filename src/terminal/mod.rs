@@ -130,16 +130,7 @@ pub async fn serve(
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    serve_with_limits(listener, state, shutdown, ConnectionLimits::default()).await
-}
-
-/// [`serve`] with other connection limits.
-pub async fn serve_with_limits(
-    listener: tokio::net::TcpListener,
-    state: AppState,
-    shutdown: impl Future<Output = ()> + Send + 'static,
-    limits: ConnectionLimits,
-) -> std::io::Result<()> {
+    let limits = ConnectionLimits::default();
     let notifier = crate::systemd::Notifier::from_env();
     let address = listener.local_addr()?;
     notifier.ready(&format!("listening on {address}"));
