@@ -11,21 +11,8 @@
 
 mod common;
 
-use std::ffi::OsStr;
-use std::path::Path;
-
-use common::{groundcal, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
+use common::{shared, temp_dir};
 use serde_json::Value;
-
-/// The simulation configuration towards the lower computer at `address`,
-/// with `retries` attempts 50 ms apart per request.
-fn config_for(address: &str, dir: &Path, retries: u32) -> std::path::PathBuf {
-    common::config_towards(
-        address,
-        dir,
-        &format!("retries = {retries}\nretry_interval_ms = 50"),
-    )
-}
 
 struct Run {
     code: i32,
@@ -41,31 +28,14 @@ struct Run {
 fn run(tag: &str, faults: &str, retries: u32) -> Run {
     let recording = shared().join("data/sample-12");
     let work = temp_dir(tag);
-    let receipts = work.join("receipts.jsonl");
-    let (robot, address) = spawn_sim_robot(
-        &[
-            "--time-scale",
-            "50",
-            "--replay",
-            recording.to_str().unwrap(),
-        ],
-        &[
-            ("GROUNDCAL_SIM_FAULTS", OsStr::new(faults)),
-            ("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str()),
-        ],
+    let live = common::calibrate_live(
+        &recording,
+        &work,
+        faults,
+        &format!("retries = {retries}\nretry_interval_ms = 50"),
     );
-    let config = config_for(&address, &work, retries);
-    let sensor = format!("replay:{}", recording.display());
-    let (code, stdout, said) = groundcal(&[
-        "calibrate",
-        "--config",
-        config.to_str().unwrap(),
-        "--sensor",
-        &sensor,
-        "--json",
-    ]);
-    let result = serde_json::from_str(&stdout).unwrap_or(Value::Null);
-    let stderr = stop_sim_robot(robot);
+    let (code, said, stderr, receipts) = (live.code, live.stderr, live.robot_stderr, live.receipts);
+    let result = serde_json::from_str(&live.stdout).unwrap_or(Value::Null);
     let stats: Value = serde_json::from_str(
         stderr
             .lines()

@@ -10,49 +10,27 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
-use common::{groundcal_json, mount_of, shared, spawn_sim_robot, stop_sim_robot, temp_dir};
+use common::{groundcal_json, mount_of, shared, temp_dir};
 use groundcal::recording::Recording;
 use serde_json::Value;
 
 const FAULTS: &str = "loss=0.2,dup=0.05,reorder=0.05,delay_ms=20,seed=3";
 
-/// The simulation configuration towards the lower computer at `address`.
-/// 30 retries: at 20 % loss each way, a request and its reply both get
-/// through with p = 0.64; 31 attempts all failing is ~1e-14.
-fn config_for(address: &str, dir: &Path) -> std::path::PathBuf {
-    common::config_towards(address, dir, "retries = 30")
-}
-
 /// Runs the live session on `recording` and checks it against the replay.
 fn live_session_matches_the_replay(tag: &str, recording: &Path) {
     let work = temp_dir(tag);
-    let receipts = work.join("receipts.jsonl");
-    let (robot, address) = spawn_sim_robot(
-        &[
-            "--time-scale",
-            "50",
-            "--replay",
-            recording.to_str().unwrap(),
-        ],
-        &[
-            ("GROUNDCAL_SIM_FAULTS", OsStr::new(FAULTS)),
-            ("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str()),
-        ],
-    );
-    let config = config_for(&address, &work);
-    let sensor = format!("replay:{}", recording.display());
-    let (code, live) = groundcal_json(&[
-        "calibrate",
-        "--config",
-        config.to_str().unwrap(),
-        "--sensor",
-        &sensor,
-        "--json",
-    ]);
-    let stderr = stop_sim_robot(robot);
+    // 30 retries: at 20 % loss each way, a request and its reply both get
+    // through with p = 0.64; 31 attempts all failing is ~1e-14.
+    let run = common::calibrate_live(recording, &work, FAULTS, "retries = 30");
+    let (code, stderr, receipts) = (run.code, run.robot_stderr, run.receipts);
+    let live: Value = serde_json::from_str(&run.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not one JSON document ({e}): {}\nstderr: {}",
+            run.stdout, run.stderr
+        )
+    });
     let (replay_code, replayed) =
         groundcal_json(&["replay", recording.to_str().unwrap(), "--json"]);
     assert_eq!(code, replay_code, "live {live}\nreplay {replayed}");

@@ -363,3 +363,53 @@ pub fn config_towards(address: &str, dir: &Path, robot_keys: &str) -> PathBuf {
     std::fs::write(&path, text).expect("configuration written");
     path
 }
+
+/// What a live calibration against a recorded robot gave.
+pub struct LiveRun {
+    pub code: i32,
+    pub stdout: String,
+    /// What `calibrate` said.
+    pub stderr: String,
+    /// What `sim-robot` said (its stats line last).
+    pub robot_stderr: String,
+    /// The datagrams the lower computer handled (JSON lines).
+    pub receipts: PathBuf,
+}
+
+/// `groundcal calibrate --json` of `recording`, live: its frames played back
+/// as the sensor, against `groundcal sim-robot --replay` in its own process
+/// (time-scaled 50×) through the network `faults`, with `robot_keys` in the
+/// configuration's `[robot]`. The configuration and receipts go into `work`.
+pub fn calibrate_live(recording: &Path, work: &Path, faults: &str, robot_keys: &str) -> LiveRun {
+    let receipts = work.join("receipts.jsonl");
+    let (robot, address) = spawn_sim_robot(
+        &[
+            "--time-scale",
+            "50",
+            "--replay",
+            recording.to_str().expect("a UTF-8 path"),
+        ],
+        &[
+            ("GROUNDCAL_SIM_FAULTS", OsStr::new(faults)),
+            ("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str()),
+        ],
+    );
+    let config = config_towards(&address, work, robot_keys);
+    let sensor = format!("replay:{}", recording.display());
+    let (code, stdout, stderr) = groundcal(&[
+        "calibrate",
+        "--config",
+        config.to_str().expect("a UTF-8 path"),
+        "--sensor",
+        &sensor,
+        "--json",
+    ]);
+    let robot_stderr = stop_sim_robot(robot);
+    LiveRun {
+        code,
+        stdout,
+        stderr,
+        robot_stderr,
+        receipts,
+    }
+}
