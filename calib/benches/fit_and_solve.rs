@@ -59,10 +59,7 @@ fn sample_frame() -> (Vec<u16>, DepthCamera) {
     let intrinsics = Intrinsics {
         fx: f,
         fy: f,
-        cx: 320.0,
-        cy: 240.0,
-        width: 640,
-        height: 480,
+        ..Intrinsics::default()
     };
     let camera = DepthCamera::new(
         DepthEncoding::Raw11(DepthModel::inverse_linear_default()),
