@@ -22,7 +22,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use axum::body::Body;
+use axum::body::{Body, HttpBody};
 use axum::extract::ConnectInfo;
 use axum::Router;
 use hyper::body::Incoming;
@@ -215,7 +215,12 @@ pub fn spawn(
             let mut app = app.clone();
             async move {
                 let response = app.call(request).await?;
-                // The request stays in flight while its body is sent.
+                // A body of known size goes out at once, with its length. A
+                // stream (the live events) stays in flight while it is sent,
+                // so that it is never taken for idle.
+                if HttpBody::size_hint(response.body()).exact().is_some() {
+                    return Ok(response);
+                }
                 Ok::<_, std::convert::Infallible>(response.map(|body| {
                     Body::from_stream(body.into_data_stream().map(move |chunk| {
                         let _ = &in_flight;
