@@ -53,6 +53,15 @@ pub enum SessionError {
 }
 
 impl SessionError {
+    /// Why the session stopped, for an `Aborted` event (which says "aborted"
+    /// itself): an operator's or a signal's reason as given.
+    fn cause(&self) -> String {
+        match self {
+            SessionError::Aborted(reason) => reason.clone(),
+            other => other.to_string(),
+        }
+    }
+
     fn robot<E: groundcal_hal::Error>(e: E) -> Self {
         SessionError::Robot {
             kind: e.kind(),
@@ -648,7 +657,7 @@ pub async fn run<S: DepthSensor, C: BodyController>(
             send(
                 events,
                 Event::Aborted {
-                    reason: format!("{e}; {left}"),
+                    reason: format!("{}; {left}", e.cause()),
                 },
             );
             Err(e)

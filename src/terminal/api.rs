@@ -202,11 +202,6 @@ impl Status {
                     if *accepted { "accepted" } else { "rejected" }
                 )
             }
-            // The session's own words start with "aborted" when it was
-            // stopped: not said twice.
-            EventJson::Aborted { reason } if reason.starts_with("aborted") => {
-                self.robot = reason.clone()
-            }
             EventJson::Aborted { reason } => self.robot = format!("aborted: {reason}"),
             EventJson::Stored { .. } | EventJson::Failed { .. } => {}
             EventJson::Provisional { poses } => self.provisional = Some(poses.clone()),
