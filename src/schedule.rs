@@ -25,6 +25,47 @@ pub struct Schedule {
     pub poses: Vec<PoseDegMm>,
 }
 
+/// A commanded body pose in an operator's words, as the page and the
+/// terminal say what the robot is doing: "rolled 20° right, pitched 2°
+/// nose up, body at 615 mm". Angles and shifts below 0.05 are left out.
+///
+/// The body frame is X forward, Y up, Z right (conventions.md): γ about X
+/// leans the top to the right (+Z), β about Z lifts the nose (+Y), α about Y
+/// turns the nose to the left (−Z).
+pub fn body_pose_in_words(pose: &PoseDegMm) -> String {
+    let mut parts = Vec::new();
+    let mut angle = |value: f64, positive: &str, negative: &str, verb: &str| {
+        if value.abs() >= 0.05 {
+            let side = if value > 0.0 { positive } else { negative };
+            parts.push(format!("{verb} {}° {side}", trim_number(value.abs())));
+        }
+    };
+    angle(pose.gamma_deg, "right", "left", "rolled");
+    angle(pose.beta_deg, "nose up", "nose down", "pitched");
+    angle(pose.alpha_deg, "left", "right", "turned");
+    for (value, positive, negative) in [
+        (pose.px_mm, "forward", "back"),
+        (pose.pz_mm, "right", "left"),
+    ] {
+        if value.abs() >= 0.05 {
+            let side = if value > 0.0 { positive } else { negative };
+            parts.push(format!("shifted {} mm {side}", trim_number(value.abs())));
+        }
+    }
+    parts.push(format!("body at {} mm", trim_number(pose.py_mm)));
+    parts.join(", ")
+}
+
+/// A number with at most one decimal, and none when it is whole.
+fn trim_number(value: f64) -> String {
+    let rounded = (value * 10.0).round() / 10.0;
+    if rounded.fract() == 0.0 {
+        format!("{rounded:.0}")
+    } else {
+        format!("{rounded:.1}")
+    }
+}
+
 /// The body's motion limits (hexapod-udp.md: WELCOME, and the configuration).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -238,6 +279,30 @@ mod tests {
         assert!(
             err.contains("cannot calibrate: rotation of the sensor about the ground normal"),
             "{err}"
+        );
+    }
+
+    #[test]
+    fn a_pose_in_words_names_each_motion_by_its_side() {
+        let pose = |alpha_deg, beta_deg, gamma_deg, px_mm, pz_mm| PoseDegMm {
+            alpha_deg,
+            beta_deg,
+            gamma_deg,
+            px_mm,
+            py_mm: 615.0,
+            pz_mm,
+        };
+        assert_eq!(
+            body_pose_in_words(&pose(0.0, 2.0, 20.0, 0.0, 0.0)),
+            "rolled 20° right, pitched 2° nose up, body at 615 mm"
+        );
+        assert_eq!(
+            body_pose_in_words(&pose(-3.5, -8.0, -19.0, 20.0, -10.0)),
+            "rolled 19° left, pitched 8° nose down, turned 3.5° right, shifted 20 mm forward, shifted 10 mm left, body at 615 mm"
+        );
+        assert_eq!(
+            body_pose_in_words(&pose(0.0, 0.0, 0.0, 0.0, 0.0)),
+            "body at 615 mm"
         );
     }
 

@@ -15,6 +15,18 @@ use std::fs;
 
 const TOKEN: &str = "browser-token";
 
+/// The screenshots `serve.mjs` saves, one per state of the page.
+const SHOTS: [&str; 8] = [
+    "1-idle",
+    "2-progress",
+    "3-verdict",
+    "3b-confirm",
+    "4-accepted",
+    "8-rollback",
+    "7-aborted",
+    "9-pad",
+];
+
 #[test]
 fn terminal_page_calibrates_and_accepts_in_chromium() {
     if !common::browser_ready("serve_browser") {
@@ -28,13 +40,7 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
 
     let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");
-    for step in [
-        "1-idle",
-        "2-progress",
-        "3-verdict",
-        "4-accepted",
-        "7-aborted",
-    ] {
+    for step in SHOTS {
         let _ = fs::remove_file(shots.join(format!("serve-{step}.png")));
     }
     let url = format!("http://{addr}/");
@@ -42,25 +48,85 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
         "serve.mjs",
         &[OsStr::new(&url), OsStr::new(TOKEN), shots.as_os_str()],
     );
-    assert_eq!(seen["seen"]["verdict"], "Accepted", "{seen}");
-    assert!(seen["seen"]["points"].as_u64().unwrap() > 6, "{seen}");
-    // The chart filled in while the poses went by, from a provisional solve.
-    assert!(seen["seen"]["livePoints"].as_u64().unwrap() >= 6, "{seen}");
-    assert!(
-        seen["seen"]["liveLabel"]
-            .as_str()
-            .unwrap()
-            .starts_with("so far"),
+    let seen = &seen["seen"];
+    let text = |key: &str| seen[key].as_str().unwrap_or_default().to_string();
+    // Idle: no empty result or chart card.
+    assert_eq!(
+        seen["idleCards"],
+        serde_json::json!(["run", "active-card", "history-card"]),
         "{seen}"
     );
-    assert_eq!(seen["seen"]["storedToken"], TOKEN, "{seen}");
-    // Aborted: "aborting…", then "at home", in words said once.
-    assert_eq!(seen["seen"]["aborting"], "aborting…", "{seen}");
+    // Progress: the step in words, the bar, the time so far and left, and
+    // charts with axes and the gate.
+    let step = text("step");
     assert!(
-        seen["seen"]["aborted"]
+        ["moving the body (", "capturing the ground", "ground found"]
+            .iter()
+            .any(|words| step.contains(words)),
+        "{seen}"
+    );
+    assert!(text("motion").contains("moving the body (rolled"), "{seen}");
+    assert!(seen["bar"].as_f64().unwrap() > 0.0, "{seen}");
+    assert!(
+        text("times").contains("so far") && text("times").contains("left"),
+        "{seen}"
+    );
+    assert!(seen["livePoints"].as_u64().unwrap() >= 6, "{seen}");
+    assert_eq!(text("liveTitle"), "Fit per pose, so far", "{seen}");
+    assert!(seen["gateLines"].as_u64().unwrap() >= 2, "{seen}");
+    assert!(
+        seen["axisLabels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|l| l == "pose"),
+        "{seen}"
+    );
+    // The verdict says the checks passed, not that anything was accepted,
+    // with the six values and their σ.
+    assert_eq!(text("verdict"), "Passed checks", "{seen}");
+    assert!(seen["points"].as_u64().unwrap() > 6, "{seen}");
+    assert_eq!(seen["values"].as_array().unwrap().len(), 7, "{seen}");
+    assert!(text("notActiveYet").starts_with("Not active yet"), "{seen}");
+    // Accept asks first, then shows Active and hides itself.
+    assert!(
+        text("confirmQuestion").contains("the active one?"),
+        "{seen}"
+    );
+    assert!(text("activeLine").contains("Active since"), "{seen}");
+    assert_eq!(seen["acceptHidden"], true, "{seen}");
+    assert_eq!(seen["storedToken"], TOKEN, "{seen}");
+    // The second result against the active (first) one, then Rollback.
+    assert!(
+        text("change").starts_with("Against the active calibration"),
+        "{seen}"
+    );
+    assert!(
+        text("rollbackQuestion").starts_with("Roll back to calibration"),
+        "{seen}"
+    );
+    let rollback = &seen["afterRollback"];
+    let history = rollback["history"].as_array().unwrap();
+    assert_eq!(history.len(), 2, "{seen}");
+    assert!(history[1].as_str().unwrap().ends_with("Active"), "{seen}");
+    assert!(history[0].as_str().unwrap().ends_with("Roll back to this"), "{seen}");
+    assert!(
+        rollback["active"]
             .as_str()
             .unwrap()
-            .contains("it stands at the home stance"),
+            .starts_with(rollback["first"].as_str().unwrap()),
+        "{seen}"
+    );
+    // Aborted: "aborting…", then "at home", in words said once.
+    assert_eq!(text("aborting"), "aborting…", "{seen}");
+    assert!(
+        text("aborted").contains("it stands at the home stance"),
+        "{seen}"
+    );
+    // A pad shows two columns side by side.
+    let columns = seen["padColumns"].as_array().unwrap();
+    assert!(
+        columns.len() == 2 && columns[1].as_u64() > columns[0].as_u64(),
         "{seen}"
     );
 
@@ -73,19 +139,15 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
         "{active}"
     );
     let id = active["id"].as_str().unwrap();
+    // Rolled back: the first calibration is active again.
+    assert_eq!(id, rollback["first"].as_str().unwrap());
     let stored: serde_json::Value = serde_json::from_str(
         &fs::read_to_string(state_dir.join(format!("history/{id}.json"))).unwrap(),
     )
     .unwrap();
     assert_eq!(stored["robot_from_sensor"], active["robot_from_sensor"]);
 
-    for step in [
-        "1-idle",
-        "2-progress",
-        "3-verdict",
-        "4-accepted",
-        "7-aborted",
-    ] {
+    for step in SHOTS {
         let bytes = fs::read(shots.join(format!("serve-{step}.png"))).expect("screenshot saved");
         assert!(
             bytes.len() > 1000 && bytes.starts_with(b"\x89PNG\r\n\x1a\n"),

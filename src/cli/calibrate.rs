@@ -42,24 +42,27 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
         .map_err(|e| format!("{e} (give --config FILE)"))
 }
 
-/// Prints progress as it happens.
+/// Prints progress as it happens. Returns how an abort left the robot (the
+/// `Aborted` event's words), which the command says last.
 fn show_progress(
     mut events: tokio::sync::mpsc::UnboundedReceiver<Event>,
-) -> tokio::task::JoinHandle<()> {
+) -> tokio::task::JoinHandle<Option<String>> {
     tokio::spawn(async move {
         let terminal = std::io::stderr().is_terminal();
         let bar = terminal.then(|| {
             let bar = indicatif::ProgressBar::new(0);
             bar.set_style(
-                // One line under 80 columns: the bar, the step in words
-                // ("pose 17/52: capturing"), the time so far and left.
+                // One line that fits the terminal: the bar, the step in
+                // words ("pose 17/52: capturing", cut to the room left), the
+                // time so far and left.
                 indicatif::ProgressStyle::with_template(
-                    "{spinner} [{bar:20}] {msg:30} {elapsed:>4} ~{eta} left",
+                    "{spinner} [{bar:20}] {wide_msg} {elapsed:>4} ~{eta} left",
                 )
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
             bar
         });
+        let mut aborted = None;
         while let Some(event) = events.recv().await {
             let line = match &event {
                 Event::Started { poses, schedule } => {
@@ -90,7 +93,7 @@ fn show_progress(
                         (t.max(p.theta_deg), e.max(p.e_d_mm))
                     });
                     format!(
-                        "so far over {} poses: θ max {theta:.3}°, e_d max {e_d:.2} mm",
+                        "{} poses so far: θ ≤ {theta:.3}°, e_d ≤ {e_d:.2} mm",
                         poses.len()
                     )
                 }
@@ -99,7 +102,10 @@ fn show_progress(
                     "finished: {}",
                     if *accepted { "accepted" } else { "rejected" }
                 ),
-                Event::Aborted { reason } => format!("ABORTED: {reason}"),
+                Event::Aborted { reason } => {
+                    aborted = Some(reason.clone());
+                    continue;
+                }
             };
             match &bar {
                 Some(bar) => bar.set_message(line),
@@ -111,6 +117,7 @@ fn show_progress(
             bar.finish();
             eprintln!();
         }
+        aborted
     })
 }
 
@@ -184,7 +191,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
         let outcome =
             session::run(&mut sensor, &mut controller, &plan, &events, stop_signal()).await;
         drop(events);
-        let _ = progress.await;
+        let aborted = progress.await.ok().flatten();
         match outcome {
             Ok(outcome) => {
                 if let Some(dir) = &outcome.recording {
@@ -199,10 +206,24 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
                 eprintln!("groundcal calibrate: refused before moving: {reason}");
                 ExitStatus::BadInput
             }
-            Err(e) => {
-                eprintln!("groundcal calibrate: {e}");
-                ExitStatus::RuntimeFailure
-            }
+            // Said last, with where the robot was left: "aborted:
+            // interrupted (SIGINT); halted and sent home; it stands at …"
+            // (the event's words are the error's cause and the robot's state).
+            Err(e) => match aborted {
+                Some(reason) => {
+                    let prefix = if matches!(e, SessionError::Aborted(_)) {
+                        "aborted: "
+                    } else {
+                        ""
+                    };
+                    eprintln!("groundcal calibrate: {prefix}{reason}");
+                    ExitStatus::RuntimeFailure
+                }
+                None => {
+                    eprintln!("groundcal calibrate: {e}");
+                    ExitStatus::RuntimeFailure
+                }
+            },
         }
     })
 }

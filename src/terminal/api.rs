@@ -2,10 +2,13 @@
 //! stream (docs/api.md), mirrored from the session's events.
 
 use std::collections::VecDeque;
+use std::time::Instant;
 
 use serde::Serialize;
 use serde_json::Value;
 
+use crate::calib::quality::Gates;
+use crate::schedule::body_pose_in_words;
 use crate::session::Event;
 
 /// A serializable mirror of [`Event`] for the API.
@@ -26,6 +29,8 @@ pub enum EventJson {
     Moving {
         index: u16,
         of: usize,
+        /// The commanded body pose in words ("rolled 20° right, …").
+        motion: String,
     },
     Capturing {
         index: u16,
@@ -84,9 +89,14 @@ impl From<&Event> for EventJson {
             Event::SensorReady { tilt_deg } => EventJson::SensorReady {
                 tilt_deg: *tilt_deg,
             },
-            Event::Moving { index, of, .. } => EventJson::Moving {
+            Event::Moving {
+                index,
+                of,
+                commanded,
+            } => EventJson::Moving {
                 index: *index,
                 of: *of,
+                motion: body_pose_in_words(commanded),
             },
             Event::Capturing { index, of } => EventJson::Capturing {
                 index: *index,
@@ -153,6 +163,17 @@ pub struct Status {
     pub of: Option<usize>,
     /// The robot's state in words (from the last event).
     pub robot: String,
+    /// What the calibration is doing now, in an operator's words ("walking
+    /// to pose 7 of 52: rolled 20° right, body at 615 mm").
+    pub step: String,
+    /// Seconds since the calibration started (while running).
+    pub elapsed_s: Option<f64>,
+    /// Seconds left, estimated from the poses' measured durations (once a
+    /// pose is done; while running).
+    pub remaining_s: Option<f64>,
+    /// The gates the result will be judged by (the charts draw θ's and
+    /// e_d's as lines).
+    pub gates: Option<Gates>,
     pub recent_events: VecDeque<EventJson>,
     /// The current or last result, with its store id.
     pub result: Option<Value>,
@@ -168,12 +189,83 @@ pub struct Status {
     /// The latest provisional θ and e_d per pose of a running session (kept
     /// here rather than among the recent events: it is replaced, not added).
     pub provisional: Option<Vec<ProvisionalPoseJson>>,
+    /// When the running calibration and its poses began.
+    #[serde(skip)]
+    pub clock: Option<RunClock>,
+}
+
+/// The times of a running calibration, for the time so far and left.
+#[derive(Debug, Clone, Copy)]
+pub struct RunClock {
+    pub started: Instant,
+    /// When the robot began walking to the first pose.
+    pub first_pose: Option<Instant>,
+    /// How many poses are done, and when the last one was.
+    pub poses_done: usize,
+    pub last_done: Option<Instant>,
+}
+
+impl RunClock {
+    pub fn start(now: Instant) -> Self {
+        RunClock {
+            started: now,
+            first_pose: None,
+            poses_done: 0,
+            last_done: None,
+        }
+    }
+
+    /// Seconds left for `of` poses: the poses done so far took this long
+    /// each, and so will the rest (walking home and solving take about one).
+    pub fn remaining_s(&self, of: usize) -> Option<f64> {
+        let per_pose = self
+            .last_done?
+            .duration_since(self.first_pose?)
+            .as_secs_f64()
+            / self.poses_done.max(1) as f64;
+        Some(per_pose * (of.saturating_sub(self.poses_done) + 1) as f64)
+    }
 }
 
 impl Status {
+    /// A snapshot to show at `now`: the status with its times.
+    pub fn at(&self, now: Instant) -> Status {
+        let mut shown = self.clone();
+        if let (RunState::Running, Some(clock)) = (self.state, self.clock) {
+            shown.elapsed_s = Some(now.duration_since(clock.started).as_secs_f64());
+            shown.remaining_s = self.of.and_then(|of| clock.remaining_s(of));
+        }
+        shown
+    }
+
     /// What an event changes in the status: the pose, the robot's state in
-    /// words, the provisional charts.
+    /// words, the step in words, the provisional charts.
     pub fn apply(&mut self, event: &EventJson) {
+        self.apply_at(event, Instant::now());
+    }
+
+    /// [`Status::apply`] for an event that came at `now`.
+    pub fn apply_at(&mut self, event: &EventJson, now: Instant) {
+        // An aborted session's words (why, and where the robot was left)
+        // stay: the failure that follows them says only "aborted".
+        let said_why = self.step.starts_with("aborted");
+        match step_in_words(event) {
+            Some(_) if said_why && matches!(event, EventJson::Failed { .. }) => {}
+            Some(step) => self.step = step,
+            None => {}
+        }
+        if let Some(clock) = &mut self.clock {
+            match event {
+                EventJson::Moving { .. } if clock.first_pose.is_none() => {
+                    clock.first_pose = Some(now)
+                }
+                EventJson::PoseDone { .. } => {
+                    clock.poses_done += 1;
+                    clock.last_done = Some(now);
+                }
+                _ => {}
+            }
+        }
         match event {
             EventJson::Started { poses, .. } => {
                 self.of = Some(*poses);
@@ -184,7 +276,7 @@ impl Status {
             EventJson::SensorReady { tilt_deg } => {
                 self.robot = format!("Kinect tilted to {tilt_deg}°")
             }
-            EventJson::Moving { index, of } => {
+            EventJson::Moving { index, of, .. } => {
                 self.pose = Some(*index);
                 self.of = Some(*of);
                 self.robot = "moving".into();
@@ -206,5 +298,91 @@ impl Status {
             EventJson::Stored { .. } | EventJson::Failed { .. } => {}
             EventJson::Provisional { poses } => self.provisional = Some(poses.clone()),
         }
+    }
+}
+
+/// What an event says the calibration is doing, in an operator's words; None
+/// for an event that does not change the step.
+fn step_in_words(event: &EventJson) -> Option<String> {
+    Some(match event {
+        EventJson::Started { poses, schedule } => {
+            format!("schedule \"{schedule}\" checked: {poses} poses; connecting to the robot")
+        }
+        EventJson::Connected { .. } => "connected; walking to the home stance".into(),
+        EventJson::AtHome => "at the home stance; tilting the Kinect".into(),
+        EventJson::SensorReady { tilt_deg } => {
+            format!("Kinect at {tilt_deg}°; starting the first pose")
+        }
+        EventJson::Moving { index, of, motion } => {
+            format!("pose {index} of {of}: moving the body ({motion})")
+        }
+        EventJson::Capturing { index, of } => {
+            format!("pose {index} of {of}: holding still, capturing the ground")
+        }
+        EventJson::PoseDone {
+            index,
+            of,
+            ok,
+            error,
+            ..
+        } => match (ok, error) {
+            (true, _) => format!("pose {index} of {of}: ground found"),
+            (false, Some(e)) => format!("pose {index} of {of}: set aside ({e})"),
+            (false, None) => format!("pose {index} of {of}: set aside"),
+        },
+        EventJson::Solving => "back at the home stance; solving".into(),
+        EventJson::Finished { accepted } => format!(
+            "finished: {}",
+            if *accepted {
+                "passed its checks"
+            } else {
+                "failed its checks"
+            }
+        ),
+        EventJson::Aborted { reason } => format!("aborted: {reason}"),
+        EventJson::Failed { error } => format!("stopped without a result: {error}"),
+        EventJson::Stored { .. } | EventJson::Provisional { .. } => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    /// The time left comes from the poses' measured durations.
+    #[test]
+    fn time_left_follows_the_poses_measured_durations() {
+        let t0 = Instant::now();
+        let mut status = Status {
+            state: RunState::Running,
+            clock: Some(RunClock::start(t0)),
+            ..Status::default()
+        };
+        let at = |s| t0 + Duration::from_secs(s);
+        let moving = |index| EventJson::Moving {
+            index,
+            of: 10,
+            motion: "body at 600 mm".into(),
+        };
+        status.apply_at(&moving(1), at(5));
+        assert_eq!(status.at(at(6)).remaining_s, None, "no pose done yet");
+        assert!(status.step.starts_with("pose 1 of 10: moving the body"));
+        for index in 1..=4u16 {
+            let done = EventJson::PoseDone {
+                index,
+                of: 10,
+                ok: true,
+                inliers: Some(100),
+                plane: None,
+                error: None,
+            };
+            status.apply_at(&done, at(5 + 3 * u64::from(index)));
+        }
+        let shown = status.at(at(20));
+        assert_eq!(shown.elapsed_s, Some(20.0));
+        // 4 poses in 12 s: 3 s each, 6 left and one for home and the solve.
+        assert_eq!(shown.remaining_s, Some(21.0));
+        assert_eq!(shown.step, "pose 4 of 10: ground found");
     }
 }

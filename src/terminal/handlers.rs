@@ -13,7 +13,7 @@ use serde_json::{json, Value};
 use tokio::sync::oneshot;
 use tokio_stream::StreamExt;
 
-use super::api::{RunState, Status};
+use super::api::{RunClock, RunState, Status};
 use super::state::{now, AppState};
 use super::worker;
 use crate::store::StoreError;
@@ -170,6 +170,9 @@ pub async fn post_start(
             by: Some(by.clone()),
             started: Some(started.clone()),
             robot: "opening the hardware".into(),
+            step: "opening the Kinect and connecting to the robot".into(),
+            clock: Some(RunClock::start(std::time::Instant::now())),
+            gates: status.gates,
             hardware: std::mem::take(&mut status.hardware),
             ..Status::default()
         };

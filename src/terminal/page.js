@@ -1,158 +1,443 @@
 // The terminal page's script (page.html): served from the daemon itself,
 // as the page's Content-Security-Policy allows no inline script.
+//
+// One model, one render: everything the page knows (the daemon's status, the
+// store's active calibration and history, the contact with the daemon, a
+// pending confirmation) is kept in `model`, and `render()` draws the whole
+// page from it. The event stream, the status polls and the buttons only
+// change the model.
 'use strict';
 const $ = (id) => document.getElementById(id);
+
+const model = {
+  status: null, // the last GET /api/status
+  contact: 'connecting', // 'connecting' | 'ok' | 'lost'
+  lostSince: null,
+  active: null, // GET /api/active, or null when none
+  history: [], // GET /api/calibrations
+  aborting: false, // Abort pressed; the session has not ended yet
+  confirm: null, // {kind: 'accept' | 'rollback', id}
+  message: null, // {text, kind: 'error' | 'ok'}
+  statusAt: 0, // when the status was read (for the time so far)
+};
+
+const PARAMS = [
+  ['alpha_deg', 'α', '°', 'rotation about the vertical'],
+  ['beta_deg', 'β', '°', 'pitch'],
+  ['gamma_deg', 'γ', '°', 'roll'],
+  ['px_mm', 'x', ' mm', 'forward'],
+  ['py_mm', 'y', ' mm', 'up'],
+  ['pz_mm', 'z', ' mm', 'right'],
+];
+
+// ---- the token and the calls that need it --------------------------------
+
 const tokenField = $('token');
 tokenField.value = localStorage.getItem('groundcal-token') || '';
+$('token-card').open = !tokenField.value;
 tokenField.addEventListener('input', () => localStorage.setItem('groundcal-token', tokenField.value.trim()));
-let status = null;
+
+// What an error answer means for an operator.
+function explain(response, body) {
+  const token = tokenField.value.trim();
+  if (response.status === 401) {
+    $('token-card').open = true;
+    return token
+      ? 'The token is not right. Copy it again from the robot\'s token file.'
+      : 'Type the token first (below): it is in the robot\'s token file.';
+  }
+  if (response.status === 403 || response.status === 421) {
+    return 'The robot refused this page: open it at the robot\'s own address.';
+  }
+  return (body && body.error) || ('the robot answered ' + response.status);
+}
 
 async function call(method, url) {
   const headers = { 'Authorization': 'Bearer ' + tokenField.value.trim(), 'X-Groundcal-Client': 'terminal page' };
-  const r = await fetch(url, { method, headers });
+  let response;
   let body = {};
-  try { body = await r.json(); } catch (e) { body = {}; }
-  $('message').style.color = r.ok ? '#2e7d32' : '#c62828';
-  if (!r.ok) { $('message').textContent = body.error || ('HTTP ' + r.status); } else { $('message').textContent = ''; }
-  refresh();
-  return r.ok;
+  try {
+    response = await fetch(url, { method, headers });
+    try { body = await response.json(); } catch (e) { body = {}; }
+  } catch (e) {
+    model.message = { text: 'The robot did not answer: the request did not reach it.', kind: 'error' };
+    lose();
+    return null;
+  }
+  model.message = response.ok ? null : { text: explain(response, body), kind: 'error' };
+  if (response.ok) $('token-card').open = false;
+  render();
+  return response.ok ? body : null;
 }
-$('calibrate').onclick = () => call('POST', '/api/calibrations');
+
+$('calibrate').onclick = async () => {
+  model.confirm = null;
+  if (await call('POST', '/api/calibrations')) refresh();
+};
 // Between Abort and the session's end the robot halts and walks home, which
 // takes seconds on a real robot: the page says so.
-let aborting = false;
 $('abort').onclick = async () => {
-  aborting = true;
-  $('progress').textContent = 'aborting…';
-  $('robot').textContent = 'halting the robot and sending it home';
-  if (!await call('POST', '/api/calibrations/current/abort')) aborting = false;
+  model.aborting = true;
+  render();
+  if (!await call('POST', '/api/calibrations/current/abort')) model.aborting = false;
+  refresh();
 };
-$('accept').onclick = async () => {
-  if (status && status.result_id && await call('POST', '/api/calibrations/' + status.result_id + '/accept')) {
-    $('message').textContent = 'accepted: ' + status.result_id + ' is now active';
+$('accept').onclick = () => {
+  const s = model.status;
+  if (s && s.result_id) { model.confirm = { kind: 'accept', id: s.result_id }; render(); }
+};
+$('confirm-no').onclick = () => { model.confirm = null; render(); };
+$('confirm-yes').onclick = async () => {
+  const c = model.confirm;
+  if (!c) return;
+  model.confirm = null;
+  const url = c.kind === 'accept' ? '/api/calibrations/' + c.id + '/accept' : '/api/rollback/' + c.id;
+  const active = await call('POST', url);
+  if (active) {
+    model.active = active;
+    model.message = { text: (c.kind === 'accept' ? 'Accepted: ' : 'Rolled back: ') + c.id + ' is now the active calibration.', kind: 'ok' };
+    loadStore();
   }
+  render();
 };
 
-// poses: [{index, value, used}]; the x axis runs over pose 1..count, so a
-// chart filled during a run grows from the left.
-function chart(svg, poses, count, label) {
-  while (svg.firstChild) svg.removeChild(svg.firstChild);
-  const pts = poses.filter((p) => typeof p.value === 'number');
-  svg.dataset.points = String(pts.length);
-  if (!pts.length) return;
-  const max = Math.max(...pts.map((p) => p.value), 1e-9);
-  const n = Math.max(count - 1, 1);
-  const x = (p) => ((p.index - 1) / n * 290 + 5).toFixed(1);
-  const y = (p) => (95 - p.value / max * 85).toFixed(1);
-  const ns = 'http://www.w3.org/2000/svg';
-  const used = pts.filter((p) => p.used);
-  const line = document.createElementNS(ns, 'polyline');
-  line.setAttribute('points', used.map((p) => x(p) + ',' + y(p)).join(' '));
-  line.setAttribute('fill', 'none'); line.setAttribute('stroke', '#1a6fd1'); line.setAttribute('stroke-width', '1.5');
-  svg.appendChild(line);
-  for (const p of pts) {
-    const c = document.createElementNS(ns, 'circle');
-    c.setAttribute('cx', x(p)); c.setAttribute('cy', y(p)); c.setAttribute('r', p.used ? '2' : '3');
-    c.setAttribute('fill', p.used ? '#1a6fd1' : 'none'); c.setAttribute('stroke', p.used ? 'none' : '#c0392b');
-    svg.appendChild(c);
+// ---- words and numbers ---------------------------------------------------
+
+function duration(seconds) {
+  const s = Math.max(0, Math.round(seconds));
+  if (s < 60) return s + ' s';
+  return Math.floor(s / 60) + ' min ' + String(s % 60).padStart(2, '0') + ' s';
+}
+function when(rfc3339) {
+  const t = new Date(rfc3339);
+  return isNaN(t) ? (rfc3339 || '?') : t.toLocaleString([], { dateStyle: 'medium', timeStyle: 'medium' });
+}
+function fixed(value, unit) { return value.toFixed(unit === '°' ? 3 : 1); }
+
+// How a result differs from the active calibration, in words: the largest
+// change of an angle and of a position.
+function changeInWords(mount, active) {
+  if (!active || !active.robot_from_sensor) return '';
+  let angle = null;
+  let shift = null;
+  for (const [key, name, unit] of PARAMS) {
+    const delta = mount[key] - active.robot_from_sensor[key];
+    const slot = { name, delta, unit };
+    if (unit === '°') { if (!angle || Math.abs(delta) > Math.abs(angle.delta)) angle = slot; } else if (!shift || Math.abs(delta) > Math.abs(shift.delta)) shift = slot;
   }
-  const t = document.createElementNS(ns, 'text');
-  t.setAttribute('x', '5'); t.setAttribute('y', '10'); t.setAttribute('font-size', '9');
-  t.textContent = label + 'max ' + max.toPrecision(3) + (used.length < pts.length ? ' (red: set aside)' : '');
-  svg.appendChild(t);
+  return 'Against the active calibration (' + active.id + '): angles differ by up to ' + Math.abs(angle.delta).toFixed(3)
+    + '° (' + angle.name + '), positions by up to ' + Math.abs(shift.delta).toFixed(1) + ' mm (' + shift.name + ').';
+}
+
+function valuesTable(table, mount, sigma, active) {
+  table.innerHTML = '';
+  const head = table.insertRow();
+  for (const h of ['', 'value', '±σ', active ? 'change' : '']) { const th = document.createElement('th'); th.textContent = h; head.appendChild(th); }
+  for (const [key, name, unit, words] of PARAMS) {
+    const row = table.insertRow();
+    const label = row.insertCell();
+    const small = document.createElement('span'); small.className = 'small'; small.textContent = ' ' + words;
+    label.append(name, small);
+    row.insertCell().textContent = fixed(mount[key], unit) + unit;
+    row.insertCell().textContent = sigma ? fixed(sigma[key], unit) + unit : '';
+    const change = active && active.robot_from_sensor ? mount[key] - active.robot_from_sensor[key] : null;
+    const shown = change === null ? '' : fixed(Math.abs(change), unit);
+    const sign = change === null || Number(shown) === 0 ? '' : (change > 0 ? '+' : '−');
+    row.insertCell().textContent = change === null ? '' : sign + shown + unit;
+  }
+}
+
+// ---- charts ----------------------------------------------------------------
+
+const NS = 'http://www.w3.org/2000/svg';
+function svgEl(parent, name, attributes, text) {
+  const e = document.createElementNS(NS, name);
+  for (const [k, v] of Object.entries(attributes)) e.setAttribute(k, String(v));
+  if (text !== undefined) e.textContent = text;
+  parent.appendChild(e);
+  return e;
+}
+
+// The scale: the smallest of a tenth, a quarter, a half or 1.25 × the gate
+// that holds every used pose, so noise well under the gate looks small and
+// a set-aside pose far above it does not flatten the rest (it is drawn at
+// the top, with its value).
+function scaleTop(values, gate) {
+  const largest = Math.max(0, ...values);
+  for (const f of [0.1, 0.25, 0.5, 1.25]) if (largest <= gate * f) return gate * f;
+  return largest * 1.1;
+}
+
+// points: [{index, value, used}] over poses 1..count; gate: the limit.
+function chart(svg, points, count, gate, unit) {
+  while (svg.firstChild) svg.removeChild(svg.firstChild);
+  const pts = points.filter((p) => typeof p.value === 'number');
+  svg.dataset.points = String(pts.length);
+  const left = 44; const right = 312; const top = 12; const bottom = 126;
+  const yTop = scaleTop(pts.filter((p) => p.used).map((p) => p.value), gate);
+  svg.dataset.top = String(yTop);
+  const x = (i) => left + (count > 1 ? (i - 1) / (count - 1) : 0.5) * (right - left);
+  const y = (v) => bottom - Math.min(v, yTop) / yTop * (bottom - top);
+  const decimals = unit === '°' ? (yTop < 0.1 ? 3 : 2) : (yTop < 1 ? 2 : 1);
+  for (const f of [0, 0.5, 1]) {
+    const v = yTop * f;
+    svgEl(svg, 'line', { x1: left, x2: right, y1: y(v), y2: y(v), stroke: '#ddd' });
+    svgEl(svg, 'text', { x: left - 4, y: y(v) + 3, 'text-anchor': 'end' }, v.toFixed(decimals));
+  }
+  for (const i of [...new Set([1, Math.round((count + 1) / 2), count])]) {
+    svgEl(svg, 'text', { x: x(i), y: bottom + 12, 'text-anchor': 'middle' }, String(i));
+  }
+  svgEl(svg, 'text', { x: right, y: bottom + 22, 'text-anchor': 'end' }, 'pose');
+  svgEl(svg, 'line', { x1: left, x2: left, y1: top, y2: bottom, stroke: '#888' });
+  svgEl(svg, 'line', { x1: left, x2: right, y1: bottom, y2: bottom, stroke: '#888' });
+  if (gate <= yTop) {
+    svgEl(svg, 'line', { class: 'gate', x1: left, x2: right, y1: y(gate), y2: y(gate), stroke: '#c62828', 'stroke-dasharray': '4 3' });
+    svgEl(svg, 'text', { x: right - 2, y: y(gate) - 3, 'text-anchor': 'end', fill: '#c62828' }, 'gate ' + gate + unit);
+  } else {
+    svgEl(svg, 'text', { x: right - 2, y: top + 8, 'text-anchor': 'end', fill: '#c62828' }, 'gate ' + gate + unit + ' is above this scale');
+  }
+  const used = pts.filter((p) => p.used);
+  if (used.length > 1) {
+    svgEl(svg, 'polyline', { points: used.map((p) => x(p.index).toFixed(1) + ',' + y(p.value).toFixed(1)).join(' '), fill: 'none', stroke: '#1a6fd1', 'stroke-width': 1.2 });
+  }
+  for (const p of pts) {
+    svgEl(svg, 'circle', { cx: x(p.index).toFixed(1), cy: y(p.value).toFixed(1), r: p.used ? 2 : 3.5, fill: p.used ? '#1a6fd1' : 'none', stroke: p.used ? 'none' : '#c62828', 'stroke-width': 1.5 });
+    if (!p.used && p.value > yTop) {
+      svgEl(svg, 'text', { x: x(p.index).toFixed(1), y: top + 2, 'text-anchor': 'middle', fill: '#c62828' }, '↑' + p.value.toFixed(unit === '°' ? 2 : 0));
+    }
+  }
 }
 
 // θ and e_d per pose: the result's, or while running the provisional solve's.
-function charts(poses, count, label) {
-  // Pose ids may have gaps (a replayed recording): the axis reaches the last.
+function charts(poses, count, provisional) {
+  const gates = (model.status && model.status.gates) || { theta_max_deg: 1, e_d_max_mm: 5 };
   count = Math.max(count || 1, ...poses.map((p) => p.index));
-  chart($('theta'), poses.map((p) => ({ index: p.index, value: p.theta_deg, used: p.used })), count, label);
-  chart($('ed'), poses.map((p) => ({ index: p.index, value: p.e_d_mm, used: p.used })), count, label);
-}
-
-function show(s) {
-  status = s;
-  const running = s.state === 'running';
-  $('calibrate').disabled = running;
-  $('abort').disabled = !running;
-  const stoppedAtHome = !running && /^aborted/.test(s.robot || '') && /stands at the home stance/.test(s.robot || '');
-  if (!running) aborting = false;
-  $('progress').textContent = running
-    ? (aborting ? 'aborting…' : 'pose ' + (s.pose || 0) + ' of ' + (s.of || '?'))
-    : (stoppedAtHome ? 'at home' : 'idle');
-  $('robot').textContent = running && aborting
-    ? 'halting the robot and sending it home'
-    : s.robot + (s.by ? ' — started by ' + s.by : '');
-  // What matters for safety stands out: a robot that may not have stopped.
-  const unsafe = [s.robot, s.error].find((t) => /could not halt|could not send it home/.test(t || ''));
-  $('safety').hidden = !unsafe;
-  $('safety').textContent = unsafe ? 'The robot may not have stopped: ' + unsafe + '. Check it before anything else.' : '';
-  $('hardware').textContent = s.hardware ? 'hardware at start: ' + s.hardware : '';
-  const r = s.result;
-  $('accept').disabled = running || !r || r.status !== 'accepted' || !s.result_id;
-  if (r && !running) {
-    $('verdict').textContent = r.status === 'accepted' ? 'Accepted' : 'Rejected';
-    $('verdict').className = r.status;
-    $('reasons').innerHTML = '';
-    for (const reason of r.reasons || []) { const li = document.createElement('li'); li.textContent = reason; $('reasons').appendChild(li); }
-    $('resultid').textContent = s.result_id ? 'result ' + s.result_id : '';
-    const poses = r.poses || [];
-    charts(poses, Math.max(s.of || 0, ...poses.map((p) => p.index)), '');
-  } else if (running) {
-    $('verdict').textContent = ''; $('verdict').className = ''; $('reasons').innerHTML = ''; $('resultid').textContent = '';
-    charts(s.provisional || [], s.of || 1, 'so far: ');
-  } else if (s.error) {
-    charts([], 1, '');
-    $('verdict').textContent = s.interrupted ? 'Interrupted' : 'No result'; $('verdict').className = 'rejected';
-    $('reasons').innerHTML = ''; const li = document.createElement('li'); li.textContent = s.error; $('reasons').appendChild(li);
+  chart($('theta'), poses.map((p) => ({ index: p.index, value: p.theta_deg, used: p.used })), count, gates.theta_max_deg, '°');
+  chart($('ed'), poses.map((p) => ({ index: p.index, value: p.e_d_mm, used: p.used })), count, gates.e_d_max_mm, ' mm');
+  $('charts-title').textContent = provisional ? 'Fit per pose, so far' : 'Fit per pose';
+  const fitted = poses.filter((p) => typeof p.theta_deg === 'number').length;
+  // No empty charts: without a run or a result there is nothing to draw.
+  $('charts').hidden = !provisional && !fitted;
+  $('charts-note').textContent = provisional
+    ? (fitted ? 'Each pose against the mount the poses so far give; it settles as poses arrive. Red rings: set aside.'
+      : 'The charts start once six poses have a ground' + (model.status && model.status.pose ? ' (pose ' + model.status.pose + ' now).' : '.'))
+    : (fitted ? 'Each pose against the result. Red rings: set aside.' : '');
+  const aside = $('aside');
+  aside.innerHTML = '';
+  for (const p of poses.filter((q) => !q.used)) {
+    const li = document.createElement('li');
+    li.textContent = 'pose ' + p.index + ' set aside: ' + (p.reason || 'an outlier against the others');
+    aside.appendChild(li);
   }
 }
 
-// Contact with the daemon: a page that cannot reach it must not look alive.
-// Lost when a status request fails or the event stream breaks; found again
-// when a status request succeeds (both retry by themselves).
-let lostSince = null;
-function contactLost() {
-  if (lostSince === null) { lostSince = Date.now(); showContact(); }
-}
-function contactFound() {
-  if (lostSince !== null) { lostSince = null; showContact(); }
-}
-function showContact() {
-  const banner = $('lost');
-  if (lostSince === null) { banner.hidden = true; return; }
-  const seconds = Math.round((Date.now() - lostSince) / 1000);
-  const wasRunning = status && status.state === 'running';
-  banner.textContent = 'No contact with groundcal for ' + seconds + ' s: this page shows its last state, and its buttons cannot reach the robot.'
-    + (wasRunning ? ' A calibration was running: the robot\'s own watchdog stops the body within 1 s of losing its link.' : '')
-    + ' Reconnecting…';
-  banner.hidden = false;
-  for (const id of ['calibrate', 'abort', 'accept']) $(id).disabled = true;
-}
-setInterval(() => { if (lostSince !== null) showContact(); }, 1000);
+// ---- render ----------------------------------------------------------------
 
+// Redraws a part of the page only when what it shows has changed: a button
+// rebuilt every second would slip from under the operator's finger.
+const drawn = new Map();
+function redraw(id, key, draw) {
+  if (drawn.get(id) === key) return;
+  drawn.set(id, key);
+  draw();
+}
+
+function render() {
+  const s = model.status;
+  const lost = model.contact === 'lost';
+  const running = !!s && s.state === 'running';
+  if (s && !running) model.aborting = false;
+
+  $('contact').textContent = model.contact === 'ok' ? 'connected' : (lost ? 'no contact' : 'connecting…');
+  const banner = $('lost');
+  banner.hidden = !lost;
+  if (lost) {
+    const seconds = Math.round((Date.now() - model.lostSince) / 1000);
+    banner.textContent = 'Connection lost ' + seconds + ' s ago: this page shows its last state, and its buttons cannot reach the robot.'
+      + (running ? ' A calibration was running: the robot\'s own watchdog stops the body within 1 s of losing its link.' : '')
+      + ' Reconnecting…';
+  }
+
+  // What matters for safety stands out: a robot that may not have stopped.
+  const unsafe = s && [s.step, s.robot, s.error].find((t) => /could not halt|could not send it home/.test(t || ''));
+  $('safety').hidden = !unsafe;
+  $('safety').textContent = unsafe ? 'The robot may not have stopped: ' + unsafe + '. Check it before anything else.' : '';
+
+  // Progress.
+  const stoppedAtHome = s && !running && /^aborted/.test(s.robot || '') && /stands at the home stance/.test(s.robot || '');
+  let title = 'connecting…';
+  if (s) {
+    if (running) title = model.aborting ? 'aborting…' : (s.pose ? 'pose ' + s.pose + ' of ' + s.of : 'starting');
+    else title = stoppedAtHome ? 'at home' : (s.result ? 'finished' : 'idle');
+  }
+  $('progress').textContent = title;
+  $('bar').hidden = !running;
+  if (running) $('bar-fill').style.width = (s.of ? 100 * Math.max(0, (s.pose || 1) - 1) / s.of : 0) + '%';
+  // The step without the "pose i of N" the title already says.
+  const step = ((s && s.step) || '').replace(/^pose \d+ of \d+: /, '');
+  $('step').textContent = !s ? '' : (running && model.aborting ? 'halting the robot and sending it home' : step + (running && s.by ? ' — started by ' + s.by : ''));
+  if (running && typeof s.elapsed_s === 'number') {
+    const elapsed = s.elapsed_s + (Date.now() - model.statusAt) / 1000;
+    $('times').textContent = duration(elapsed) + ' so far · '
+      + (typeof s.remaining_s === 'number' ? 'about ' + duration(Math.max(0, s.remaining_s - (Date.now() - model.statusAt) / 1000)) + ' left' : 'time left: after the first pose');
+  } else {
+    $('times').textContent = '';
+  }
+  $('hardware').textContent = s && !running && s.hardware ? 'Hardware at the service\'s start: ' + s.hardware : '';
+  $('calibrate').disabled = lost || !s || running;
+  $('abort').disabled = lost || !running || model.aborting;
+  const m = $('message');
+  m.textContent = model.message ? model.message.text : '';
+  m.className = model.message ? model.message.kind : '';
+
+  // The result, or why there is none.
+  const r = s && s.result;
+  const card = $('result');
+  const verdict = $('verdict');
+  const reasons = $('reasons');
+  reasons.innerHTML = '';
+  const say = (text) => { const li = document.createElement('li'); li.textContent = text; reasons.appendChild(li); };
+  let activeHere = false;
+  if (s && !running && r) {
+    card.hidden = false;
+    const passed = r.status === 'accepted';
+    verdict.textContent = passed ? 'Passed checks' : 'Failed checks';
+    verdict.className = passed ? 'passed' : 'failed';
+    for (const reason of r.reasons || []) say(reason);
+    const against = model.active && model.active.id !== s.result_id ? model.active : null;
+    redraw('values', JSON.stringify([s.result_id, against && against.id]), () => {
+      if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against);
+      else $('values').innerHTML = '';
+    });
+    activeHere = !!model.active && model.active.id === s.result_id;
+    $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, model.active) : '';
+    $('activeline').innerHTML = '';
+    if (activeHere) {
+      const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active';
+      $('activeline').append(badge, ' since ' + when(model.active.activated));
+    } else {
+      $('activeline').textContent = passed ? 'Not active yet: Accept makes it the calibration the robot uses.' : 'It failed its checks, so it cannot become active.';
+    }
+    $('resultid').textContent = s.result_id ? 'calibration ' + s.result_id : '';
+    redraw('charts', 'result ' + s.result_id, () => charts(r.poses || [], s.of, false));
+  } else if (s && !running && s.error && !stoppedAtHome) {
+    card.hidden = false;
+    verdict.textContent = s.interrupted ? 'Interrupted' : 'No result';
+    verdict.className = s.interrupted ? 'interrupted' : 'failed';
+    say(s.error);
+    redraw('values', 'none', () => { $('values').innerHTML = ''; });
+    $('change').textContent = ''; $('activeline').textContent = ''; $('resultid').textContent = '';
+    redraw('charts', 'none', () => charts([], 1, false));
+  } else {
+    card.hidden = true;
+    if (running) redraw('charts', JSON.stringify(['running', s.provisional, s.of, s.pose]), () => charts(s.provisional || [], s.of || 1, true));
+    else redraw('charts', 'none', () => charts([], 1, false));
+  }
+  $('accept').hidden = activeHere || !(r && r.status === 'accepted');
+  $('accept').disabled = lost || running || !r || r.status !== 'accepted' || !s.result_id || activeHere;
+
+  const c = model.confirm;
+  $('confirm').hidden = !c;
+  if (c) {
+    $('confirm-text').textContent = (c.kind === 'accept' ? 'Make calibration ' + c.id + ' the active one?' : 'Roll back to calibration ' + c.id + '?')
+      + ' The robot\'s other programs use the active calibration from their next start.';
+    $('confirm').scrollIntoView({ block: 'nearest' });
+  }
+  $('confirm-yes').disabled = lost;
+
+  // The active calibration and the history.
+  const a = model.active;
+  $('active').textContent = a ? a.id + ', active since ' + when(a.activated) : 'None yet: the robot uses no calibration from groundcal.';
+  redraw('history', JSON.stringify([model.history.slice(0, 20), !!a, lost || running]), () => {
+    const history = $('history');
+    history.innerHTML = '';
+    if (!model.history.length) history.insertRow().insertCell().textContent = 'No calibrations yet.';
+    for (const h of model.history.slice(0, 20)) {
+      const row = history.insertRow();
+      row.insertCell().textContent = when(h.created);
+      row.insertCell().textContent = h.status === 'accepted' ? 'passed' : h.status === 'rejected' ? 'failed or rejected' : h.status;
+      const cell = row.insertCell();
+      if (h.active) {
+        const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active'; cell.appendChild(badge);
+      } else if (h.status === 'accepted') {
+        const b = document.createElement('button');
+        b.className = 'small rollback'; b.textContent = a ? 'Roll back to this' : 'Make active';
+        b.dataset.id = h.id; b.disabled = lost || running;
+        b.onclick = () => { model.confirm = { kind: 'rollback', id: h.id }; render(); };
+        cell.appendChild(b);
+      }
+      row.title = h.id;
+    }
+  });
+}
+
+// ---- contact with the daemon ----------------------------------------------
+
+// A page that cannot reach the daemon must not look alive. Lost when a
+// status request fails or the event stream breaks; found again when a status
+// request succeeds. Reconnection backs off from 1 s to 5 s.
+function lose() {
+  if (model.contact !== 'lost') { model.contact = 'lost'; model.lostSince = Date.now(); }
+  render();
+}
+let retry = 1000;
 async function refresh() {
   try {
     const r = await fetch('/api/status');
-    if (!r.ok) { contactLost(); return; }
+    if (!r.ok) { lose(); return false; }
     const s = await r.json();
-    contactFound();
-    show(s);
-  } catch (e) { contactLost(); }
+    const wasLost = model.contact !== 'ok';
+    model.status = s;
+    model.statusAt = Date.now();
+    model.contact = 'ok';
+    model.lostSince = null;
+    retry = 1000;
+    if (wasLost) loadStore();
+    render();
+    return true;
+  } catch (e) { lose(); return false; }
 }
-const events = new EventSource('/api/events');
-events.onerror = () => { contactLost(); refresh(); };
-events.onopen = () => refresh();
-events.onmessage = (m) => {
-  let e; try { e = JSON.parse(m.data); } catch (x) { return; }
-  if (e.type === 'provisional') {
-    charts(e.poses, (status && status.of) || e.poses.length, 'so far: ');
-  } else if ((e.type === 'moving' || e.type === 'capturing' || e.type === 'pose_done') && !aborting) {
-    $('progress').textContent = 'pose ' + e.index + ' of ' + e.of;
-    $('robot').textContent = e.type === 'pose_done' ? (e.ok ? 'ground fitted' : e.error) : e.type;
-  } else {
-    refresh();
-  }
-};
+// The history says which calibration is active; only then is there an
+// active.json to read (GET /api/active answers 404 when none is).
+async function loadStore() {
+  try {
+    const history = await fetch('/api/calibrations');
+    model.history = history.ok ? (await history.json()).calibrations || [] : [];
+    let active = null;
+    if (model.history.some((h) => h.active)) {
+      const r = await fetch('/api/active');
+      active = r.ok ? await r.json() : null;
+    }
+    model.active = active;
+    render();
+  } catch (e) { lose(); }
+}
+
+let events = null;
+function listen() {
+  events = new EventSource('/api/events');
+  events.onopen = () => refresh();
+  events.onerror = () => {
+    // EventSource retries by itself, but not after some failures: start over
+    // with a back-off.
+    events.close();
+    lose();
+    setTimeout(listen, retry);
+    retry = Math.min(retry * 2, 5000);
+  };
+  events.onmessage = (m) => {
+    let e; try { e = JSON.parse(m.data); } catch (x) { return; }
+    if (e.type === 'provisional' && model.status) {
+      model.status.provisional = e.poses;
+      render();
+    } else {
+      if (e.type === 'stored' || e.type === 'failed') loadStore();
+      refresh();
+    }
+  };
+}
+
+listen();
 refresh();
-setInterval(refresh, 2000);
+setInterval(() => { if (model.contact === 'ok') refresh(); else render(); }, 1000);
+setInterval(() => { if (model.contact !== 'ok') refresh(); }, 1500);

@@ -67,6 +67,7 @@ impl AppState {
             tracing::warn!("{words}");
             words
         });
+        let gates = config.calibration.gates;
         AppState(Arc::new(Shared {
             config,
             schedule,
@@ -76,6 +77,8 @@ impl AppState {
             status: Mutex::new(Status {
                 state: RunState::Idle,
                 robot: "idle".into(),
+                step: "idle".into(),
+                gates: Some(gates),
                 error: interrupted.clone(),
                 interrupted,
                 ..Status::default()
@@ -90,7 +93,7 @@ impl AppState {
 
     /// A snapshot of the status.
     pub fn status(&self) -> Status {
-        self.status_mut().clone()
+        self.status_mut().at(Instant::now())
     }
 
     /// The status, to change it.

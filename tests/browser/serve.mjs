@@ -3,14 +3,18 @@
 //
 //   node tests/browser/serve.mjs URL TOKEN SCREENSHOT_DIR
 //
-// Types the token, presses Calibrate, watches "pose i of N" and the live
-// θ/e_d chart fill in, waits for the verdict, presses Accept. Checks: no
-// console error, no page error, no request leaving the server (the page works
-// offline). Saves serve-1-idle.png,
-// serve-2-progress.png, serve-3-verdict.png, serve-4-accepted.png and, after a second
-// calibration aborted, serve-7-aborted.png. Prints
-// one JSON line of what it saw; exits 0 when every check passes, 1 otherwise,
-// 2 on bad usage.
+// Types the token, presses Calibrate, watches the bar, the time left, the
+// step in words and the live θ/e_d chart fill in, waits for the verdict with
+// the six values, presses Accept and confirms: the result shows as Active. A
+// second calibration is accepted, then the first is rolled back to from the
+// history. A third is aborted: "aborting…", then "at home". Last the same
+// page at pad size (1024×1366) must show two columns. Checks: no console
+// error, no page error, no request leaving the server (the page works
+// offline), no page wider than the screen. Saves serve-1-idle.png,
+// serve-2-progress.png, serve-3-verdict.png, serve-3b-confirm.png,
+// serve-4-accepted.png, serve-8-rollback.png, serve-7-aborted.png and
+// serve-9-pad.png. Prints one JSON line of what it saw; exits 0 when every
+// check passes, 1 otherwise, 2 on bad usage.
 
 import { resolve } from 'node:path';
 
@@ -50,45 +54,104 @@ try {
 
   await page.goto(url, { waitUntil: 'load', timeout: 30_000 });
   await page.waitForFunction(() => document.getElementById('progress').textContent === 'idle');
+  seen.idleCards = await page.$$eval('section.card:not([hidden])', (n) => n.map((c) => c.id));
   await shot(page, '1-idle');
 
+  const text = (id) => page.locator('#' + id).innerText();
+  const overflow = async (where) => {
+    const wider = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
+    if (wider > 1) problems.push(`${where}: the page is ${wider} px wider than the screen`);
+  };
+  // Waits for a calibration's verdict and returns its id.
+  const verdict = async () => {
+    await page.waitForFunction(() => ['Passed checks', 'Failed checks'].includes(document.getElementById('verdict').textContent)
+      && !document.getElementById('result').hidden, null, { timeout: 180_000 });
+    return (await text('resultid')).replace('calibration ', '');
+  };
+  // Presses a button that asks for confirmation, then confirms.
+  const confirmed = async (selector, shotName) => {
+    await page.click(selector);
+    await page.waitForSelector('#confirm:not([hidden])');
+    const question = await text('confirm-text');
+    if (shotName) await shot(page, shotName);
+    await page.click('#confirm-yes');
+    return question;
+  };
+
+  if (!await page.$eval('#token-card', (d) => d.open)) await page.click('#token-card summary');
   await page.fill('#token', token);
   await page.click('#calibrate');
   await page.waitForFunction(() => /pose [1-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
-  seen.progress = await page.locator('#progress').innerText();
-  seen.robot = await page.locator('#robot').innerText();
-  // The live chart: θ and e_d of the provisional solve while poses go by.
+  seen.step = await text('step');
+  // The motion in words ("rolled 20° right, …"): every pose of the paper's
+  // schedule rolls the body.
+  seen.motion = await (await page.waitForFunction(() => {
+    const step = document.getElementById('step').textContent;
+    return /moving the body \(rolled/.test(step) && step;
+  }, null, { timeout: 60_000 })).jsonValue();
+  // The live chart: θ and e_d of the provisional solve while poses go by,
+  // and the time left once poses are done.
   await page.waitForFunction(() => Number(document.getElementById('theta').dataset.points || 0) >= 6
-    && document.getElementById('verdict').textContent === '', null, { timeout: 60_000 });
+    && /left/.test(document.getElementById('times').textContent)
+    && document.getElementById('result').hidden, null, { timeout: 60_000 });
   seen.livePoints = await page.$$eval('#theta circle', (n) => n.length);
-  seen.liveProgress = await page.locator('#progress').innerText();
-  seen.liveLabel = await page.locator('#theta text').textContent();
+  seen.liveProgress = await text('progress');
+  seen.liveTitle = await text('charts-title');
+  seen.times = await text('times');
+  seen.bar = await page.$eval('#bar-fill', (e) => parseFloat(e.style.width));
+  seen.gateLines = await page.$$eval('svg line.gate, svg text', (n) => n.filter((e) => /gate/.test(e.getAttribute('class') || e.textContent)).length);
+  seen.axisLabels = await page.$$eval('#theta text', (n) => n.map((e) => e.textContent));
   await shot(page, '2-progress');
 
-  await page.waitForFunction(() => ['Accepted', 'Rejected'].includes(document.getElementById('verdict').textContent), null, { timeout: 180_000 });
-  seen.verdict = await page.locator('#verdict').innerText();
+  const first = await verdict();
+  seen.verdict = await text('verdict');
   seen.points = await page.$$eval('#theta circle', (n) => n.length);
+  seen.values = await page.$$eval('#values tr', (rows) => rows.map((r) => r.innerText));
+  seen.notActiveYet = await text('activeline');
   await shot(page, '3-verdict');
 
-  await page.click('#accept');
-  await page.waitForFunction(() => document.getElementById('message').textContent.startsWith('accepted'), null, { timeout: 30_000 });
-  seen.message = await page.locator('#message').innerText();
+  seen.confirmQuestion = await confirmed('#accept', '3b-confirm');
+  await page.waitForFunction(() => /Active/.test(document.getElementById('activeline').textContent), null, { timeout: 30_000 });
+  seen.activeLine = await text('activeline');
+  seen.acceptHidden = await page.$eval('#accept', (b) => b.hidden);
+  seen.message = await text('message');
   seen.storedToken = await page.evaluate(() => localStorage.getItem('groundcal-token'));
-  const overflow = await page.evaluate(() => document.documentElement.scrollWidth - window.innerWidth);
-  if (overflow > 1) problems.push(`the page is ${overflow} px wider than the screen`);
+  await overflow('accepted');
   await shot(page, '4-accepted');
 
-  // A second calibration, aborted: "aborting…" while the robot halts and
+  // A second calibration, accepted; then roll back to the first.
+  await page.click('#calibrate');
+  await page.waitForFunction(() => /pose \d+ of \d+/.test(document.getElementById('progress').textContent)
+    && document.getElementById('result').hidden, null, { timeout: 60_000 });
+  const second = await verdict();
+  seen.change = await text('change');
+  await confirmed('#accept');
+  await page.waitForFunction((id) => document.getElementById('active').textContent.startsWith(id), second, { timeout: 30_000 });
+  seen.rollbackQuestion = await confirmed(`button.rollback[data-id="${first}"]`);
+  await page.waitForFunction((id) => document.getElementById('active').textContent.startsWith(id)
+    && /Active/.test(document.querySelector(`#history tr[title="${id}"]`)?.textContent || ''), first, { timeout: 30_000 });
+  seen.afterRollback = { active: await text('active'), first, second, history: await page.$$eval('#history tr', (rows) => rows.map((r) => r.innerText)) };
+  await shot(page, '8-rollback');
+
+  // A third calibration, aborted: "aborting…" while the robot halts and
   // walks home, then "at home".
   await page.click('#calibrate');
   await page.waitForFunction(() => /pose [2-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
   await page.click('#abort');
-  seen.aborting = await page.locator('#progress').innerText();
+  seen.aborting = await text('progress');
   if (seen.aborting !== 'aborting…') problems.push(`after Abort the page said ${JSON.stringify(seen.aborting)}`);
   await page.waitForFunction(() => document.getElementById('progress').textContent === 'at home', null, { timeout: 60_000 });
-  seen.aborted = await page.locator('#robot').innerText();
+  seen.aborted = await text('step');
   if (/aborted: aborted/.test(seen.aborted)) problems.push(`the reason repeats itself: ${seen.aborted}`);
+  await overflow('aborted');
   await shot(page, '7-aborted');
+
+  // A pad: two columns side by side.
+  await page.setViewportSize({ width: 1024, height: 1366 });
+  await page.waitForTimeout(300);
+  seen.padColumns = await page.$$eval('main > .column', (cols) => cols.map((c) => Math.round(c.getBoundingClientRect().left)));
+  await overflow('pad');
+  await shot(page, '9-pad');
 } catch (error) {
   problems.push(`the browser failed: ${error.stack ?? error}`);
 } finally {
