@@ -45,7 +45,20 @@ impl From<HardwareArgs> for groundcal::hardware::Selection {
 #[command(
     name = "groundcal",
     version,
-    about = "Calibrates where a depth camera sits on a legged robot, using the ground"
+    about = "Calibrates where a depth camera sits on a legged robot, using the ground",
+    after_help = "\
+Exit statuses (every command):
+  0  done; for a calibration, accepted by its quality gates
+  1  failed at run time: hardware, link, disk
+  2  bad input or usage; the message names the file, line, key or flag
+  3  solved but rejected: unobservable, residuals or σ beyond the gates (the output says why)
+
+Examples:
+  groundcal calibrate --robot sim --sensor sim      a whole simulated calibration
+  groundcal replay DIR --report out/                a recording, offline, with its HTML report
+  groundcal serve --config /etc/groundcal/groundcal.toml
+
+`groundcal help COMMAND` shows each command's flags and an example."
 )]
 struct Args {
     #[command(subcommand)]
@@ -55,15 +68,22 @@ struct Args {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Solve robot_from_sensor from plane observations (groundcal-planes).
+    #[command(after_help = "Example:\n  groundcal solve planes.json --json > result.json")]
     Solve {
+        /// The plane observations (shared/spec/recording.md, groundcal-planes).
         file: PathBuf,
         /// One JSON document on stdout.
         #[arg(long)]
         json: bool,
     },
     /// Solve a recording (session.json, poses.jsonl, kinect/) offline.
+    #[command(
+        after_help = "Example:\n  groundcal replay ../shared/data/sample-12 --report /tmp/report --config /etc/groundcal/groundcal.toml"
+    )]
     Replay {
+        /// The recording's directory.
         dir: PathBuf,
+        /// One JSON document on stdout.
         #[arg(long)]
         json: bool,
         /// The rough robot_from_sensor (degrees, millimetres) that tells which
@@ -86,13 +106,18 @@ enum Command {
         config: Option<PathBuf>,
     },
     /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
+    #[command(after_help = "Example:\n  groundcal export result.json --format urdf > sensor_mount.urdf")]
     Export {
         /// A result document (`groundcal solve|replay|calibrate --json`).
         file: PathBuf,
+        /// The format to write on stdout.
         #[arg(long, value_enum)]
         format: groundcal::export::ExportFormat,
     },
     /// One calibration in the foreground (the daemon's session logic).
+    #[command(
+        after_help = "Ctrl-C (or SIGTERM) aborts: the robot is halted and sent home, and the last line says where it stands.\n\nExamples:\n  groundcal calibrate --robot sim --sensor sim\n  groundcal calibrate --config /etc/groundcal/groundcal.toml --record /var/lib/groundcal/rec-1 --json"
+    )]
     Calibrate {
         /// The configuration (default: built-in simulation with --robot sim, else /etc/groundcal/groundcal.toml).
         #[arg(long, value_name = "FILE")]
@@ -102,6 +127,7 @@ enum Command {
         /// Write everything as a recording into this new directory, as it goes.
         #[arg(long, value_name = "DIR")]
         record: Option<PathBuf>,
+        /// One JSON document on stdout (progress stays on stderr).
         #[arg(long)]
         json: bool,
         /// The ground fit, overriding calibration.ground_fit: disparity or paper.
@@ -109,6 +135,7 @@ enum Command {
         ground_fit: Option<GroundFitMethod>,
     },
     /// The simulated lower computer (hexapod-udp.md) on a UDP socket, until SIGINT or SIGTERM.
+    #[command(after_help = "Example:\n  groundcal sim-robot --listen 127.0.0.1:7400 --time-scale 50")]
     SimRobot {
         /// The address to listen on, e.g. 127.0.0.1:7400 (port 0: any free port; the
         /// bound address is printed on stdout as `listening on IP:PORT`).
@@ -126,7 +153,11 @@ enum Command {
         replay: Option<PathBuf>,
     },
     /// The daemon for the phone/pad terminal: HTTP API and page, sd_notify.
+    #[command(
+        after_help = "SIGTERM or SIGINT aborts a running calibration (the robot is halted and sent home), then the service exits.\n\nExample:\n  groundcal serve --config /etc/groundcal/groundcal.toml --listen 0.0.0.0:8080"
+    )]
     Serve {
+        /// The configuration ([serve]: listen, token_file, state_dir, allowed_hosts).
         #[arg(long)]
         config: PathBuf,
         #[command(flatten)]
@@ -136,8 +167,13 @@ enum Command {
         listen: Option<String>,
     },
     /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
-    CheckConfig { file: PathBuf },
+    #[command(after_help = "Example:\n  groundcal check-config /etc/groundcal/groundcal.toml")]
+    CheckConfig {
+        /// The configuration file.
+        file: PathBuf,
+    },
     /// Record N depth frames from the sensor as a recording whose kinect/ is a fakenect dump.
+    #[command(after_help = "Example:\n  groundcal capture --sensor kinect --frames 30 --out /tmp/still")]
     Capture {
         /// The configuration (sensor, library); the flags override it.
         #[arg(long, value_name = "FILE")]
@@ -156,9 +192,14 @@ enum Command {
         out: PathBuf,
     },
     /// Fit the ground in one depth image.
-    #[command(allow_negative_numbers = true)]
+    #[command(
+        allow_negative_numbers = true,
+        after_help = "Example:\n  groundcal plane frame.png --units mm --fx 525 --fy 525 --cx 319.5 --cy 239.5 --json"
+    )]
     Plane {
+        /// The depth image: fakenect PGM, 16-bit PGM, PNG or TIFF.
         file: PathBuf,
+        /// One JSON document on stdout.
         #[arg(long)]
         json: bool,
         /// raw11 (fakenect .pgm), mm, or tum (5000 per metre).
@@ -167,12 +208,16 @@ enum Command {
         /// zero-plane or inverse-linear:A,B (raw11 only).
         #[arg(long, default_value = "zero-plane")]
         model: String,
+        /// Focal length along x, pixels (default: the Kinect's).
         #[arg(long)]
         fx: Option<f64>,
+        /// Focal length along y, pixels (default: the Kinect's).
         #[arg(long)]
         fy: Option<f64>,
+        /// Principal point x, pixels (default: the Kinect's).
         #[arg(long)]
         cx: Option<f64>,
+        /// Principal point y, pixels (default: the Kinect's).
         #[arg(long)]
         cy: Option<f64>,
         /// Expected up direction in the optical frame.
@@ -335,4 +380,39 @@ fn main() -> ExitCode {
         .init();
     let args = Args::parse();
     ExitCode::from(run(args).code() as u8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// `--help` documents every flag and argument of every command, gives
+    /// each command an example, and the top level lists the exit statuses.
+    #[test]
+    fn help_documents_every_flag_with_an_example_per_command() {
+        let top = Args::command();
+        let statuses = top.get_after_help().map(|h| h.to_string()).unwrap_or_default();
+        for status in ["0 ", "1 ", "2 ", "3 "] {
+            assert!(statuses.contains(&format!("\n  {status}")), "{statuses}");
+        }
+        let mut undocumented = Vec::new();
+        for command in top.get_subcommands() {
+            let name = command.get_name();
+            let after = command.get_after_help().map(|h| h.to_string()).unwrap_or_default();
+            if !after.contains("Example") {
+                undocumented.push(format!("{name}: no example"));
+            }
+            if !after.contains(&format!("groundcal {name}")) {
+                undocumented.push(format!("{name}: the example does not run it"));
+            }
+            for arg in command.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id != "help" && arg.get_help().is_none() {
+                    undocumented.push(format!("{name} {id}"));
+                }
+            }
+        }
+        assert!(undocumented.is_empty(), "undocumented: {undocumented:?}");
+    }
 }
