@@ -275,7 +275,10 @@ function render() {
   if (running) $('bar-fill').style.width = (s.of ? 100 * Math.max(0, (s.pose || 1) - 1) / s.of : 0) + '%';
   // The step without the "pose i of N" the title already says.
   const step = ((s && s.step) || '').replace(/^pose \d+ of \d+: /, '');
-  $('step').textContent = !s ? '' : (running && model.aborting ? 'halting the robot and sending it home' : step + (running && s.by ? ' — started by ' + s.by : ''));
+  let stepText = step + (running && s.by ? ' — started by ' + s.by : '');
+  if (!s || step === title) stepText = '';
+  if (running && model.aborting) stepText = 'halting the robot and sending it home';
+  $('step').textContent = stepText;
   if (running && typeof s.elapsed_s === 'number') {
     const elapsed = s.elapsed_s + (Date.now() - model.statusAt) / 1000;
     $('times').textContent = duration(elapsed) + ' so far · '
