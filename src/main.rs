@@ -106,7 +106,9 @@ enum Command {
         config: Option<PathBuf>,
     },
     /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
-    #[command(after_help = "Example:\n  groundcal export result.json --format urdf > sensor_mount.urdf")]
+    #[command(
+        after_help = "Example:\n  groundcal export result.json --format urdf > sensor_mount.urdf"
+    )]
     Export {
         /// A result document (`groundcal solve|replay|calibrate --json`).
         file: PathBuf,
@@ -135,7 +137,9 @@ enum Command {
         ground_fit: Option<GroundFitMethod>,
     },
     /// The simulated lower computer (hexapod-udp.md) on a UDP socket, until SIGINT or SIGTERM.
-    #[command(after_help = "Example:\n  groundcal sim-robot --listen 127.0.0.1:7400 --time-scale 50")]
+    #[command(
+        after_help = "Example:\n  groundcal sim-robot --listen 127.0.0.1:7400 --time-scale 50"
+    )]
     SimRobot {
         /// The address to listen on, e.g. 127.0.0.1:7400 (port 0: any free port; the
         /// bound address is printed on stdout as `listening on IP:PORT`).
@@ -173,7 +177,9 @@ enum Command {
         file: PathBuf,
     },
     /// Record N depth frames from the sensor as a recording whose kinect/ is a fakenect dump.
-    #[command(after_help = "Example:\n  groundcal capture --sensor kinect --frames 30 --out /tmp/still")]
+    #[command(
+        after_help = "Example:\n  groundcal capture --sensor kinect --frames 30 --out /tmp/still"
+    )]
     Capture {
         /// The configuration (sensor, library); the flags override it.
         #[arg(long, value_name = "FILE")]
@@ -392,14 +398,20 @@ mod tests {
     #[test]
     fn help_documents_every_flag_with_an_example_per_command() {
         let top = Args::command();
-        let statuses = top.get_after_help().map(|h| h.to_string()).unwrap_or_default();
+        let statuses = top
+            .get_after_help()
+            .map(|h| h.to_string())
+            .unwrap_or_default();
         for status in ["0 ", "1 ", "2 ", "3 "] {
             assert!(statuses.contains(&format!("\n  {status}")), "{statuses}");
         }
         let mut undocumented = Vec::new();
         for command in top.get_subcommands() {
             let name = command.get_name();
-            let after = command.get_after_help().map(|h| h.to_string()).unwrap_or_default();
+            let after = command
+                .get_after_help()
+                .map(|h| h.to_string())
+                .unwrap_or_default();
             if !after.contains("Example") {
                 undocumented.push(format!("{name}: no example"));
             }

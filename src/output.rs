@@ -12,7 +12,9 @@
 use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::calib::geometry::{Plane, PoseDegMm, PoseParams};
-use crate::calib::outcome::{Calibration, PoseOutcome, Verdict};
+use crate::calib::observe::NominalMount;
+use crate::calib::outcome::{Calibration, GateCheck, PoseOutcome, Verdict};
+use crate::calib::sensor::{DepthModel, Intrinsics};
 
 /// `robot_from_sensor` as cli.md prints it.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -132,6 +134,11 @@ pub struct PoseJson {
     /// A pose kept with a remark: a slipped foot left out of its body pose.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+    /// The body pose that was asked for (`ground_from_robot`'s parameters:
+    /// yaw α′, pitch β′, roll γ′, position; a recording's `commanded`), when
+    /// the input has it (`replay`; not a planes file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commanded: Option<PoseDegMm>,
 }
 
 impl PoseJson {
@@ -147,6 +154,7 @@ impl PoseJson {
             plane: None,
             predicted_plane: None,
             note: None,
+            commanded: None,
         }
     }
 }
@@ -163,6 +171,7 @@ impl From<&PoseOutcome> for PoseJson {
             plane: Some((&p.measured).into()),
             predicted_plane: Some((&p.predicted).into()),
             note: p.note.clone(),
+            commanded: None,
         }
     }
 }
@@ -187,6 +196,85 @@ pub struct ObservabilityJson {
     pub rotation_singular_values: [f64; 3],
     #[serde(deserialize_with = "three_or_nan")]
     pub translation_singular_values: [f64; 3],
+    /// The rotation axis (robot frame, unit) the schedule pins down least:
+    /// that of the smallest rotation singular value.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "some_three_or_nan"
+    )]
+    pub rotation_weakest_axis: Option<[f64; 3]>,
+    /// The direction of the position (robot frame, unit) it pins down least.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "some_three_or_nan"
+    )]
+    pub translation_weakest_axis: Option<[f64; 3]>,
+}
+
+/// One quality gate as it was checked (`gate_checks[]`): the limit and the
+/// value measured are in the unit of the gate's key (`theta_max_deg`:
+/// degrees; `min_used_fraction`: a fraction; `observable`: the smallest
+/// singular value, about the sine of the tilts' RMS spread).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GateCheckJson {
+    pub gate: String,
+    #[serde(deserialize_with = "number_or_nan")]
+    pub limit: f64,
+    #[serde(deserialize_with = "number_or_nan")]
+    pub measured: f64,
+    /// The measured value must be at least the limit (else at most).
+    #[serde(default)]
+    pub at_least: bool,
+    pub passed: bool,
+    /// Where the measured value comes from: "pose 7", "β", a direction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<String>,
+}
+
+impl From<&GateCheck> for GateCheckJson {
+    fn from(c: &GateCheck) -> Self {
+        Self {
+            gate: c.gate.to_string(),
+            limit: c.limit,
+            measured: c.measured,
+            at_least: c.at_least,
+            passed: c.passed,
+            at: c.at.clone(),
+        }
+    }
+}
+
+/// How the input was made and solved, when it says (`replay` of a
+/// recording; a planes file says none of it).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct SetupJson {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<String>,
+    /// The schedule's name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<String>,
+    /// Poses in the input.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub poses: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames_per_pose: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_model: Option<DepthModel>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intrinsics: Option<Intrinsics>,
+    /// The rough mount the ground search started from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal_mount: Option<NominalMount>,
+    /// Where the nominal mount came from: `recording` or `flag`
+    /// (`--nominal-mount`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal_mount_from: Option<String>,
+    /// Where the gates came from: `config` (`--config`), `recording` (its
+    /// live run's) or `built-in`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gates_from: Option<String>,
 }
 
 /// The verdict (`"accepted"` or `"rejected"`).
@@ -247,6 +335,13 @@ pub struct ResultJson {
     /// Things the operator should know that are not reasons to reject.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// Every quality gate with its limit, the value measured and whether it
+    /// passed (empty when nothing was solved).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub gate_checks: Vec<GateCheckJson>,
+    /// How the input was made and solved, when it says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setup: Option<SetupJson>,
 }
 
 impl ResultJson {
@@ -281,9 +376,13 @@ impl ResultJson {
             observability: Some(ObservabilityJson {
                 rotation_singular_values: c.observability.rotation_singular_values,
                 translation_singular_values: c.observability.translation_singular_values,
+                rotation_weakest_axis: Some(c.observability.rotation_weakest_axis),
+                translation_weakest_axis: Some(c.observability.translation_weakest_axis),
             }),
             kinect_tilt_deg: None,
             notes: Vec::new(),
+            gate_checks: c.checks.iter().map(GateCheckJson::from).collect(),
+            setup: None,
         }
     }
 
@@ -300,6 +399,8 @@ impl ResultJson {
             observability: None,
             kinect_tilt_deg: None,
             notes: Vec::new(),
+            gate_checks: Vec::new(),
+            setup: None,
         }
     }
 
@@ -357,30 +458,9 @@ impl ResultJson {
     pub fn to_table(&self) -> String {
         use std::fmt::Write;
         let mut out = String::new();
-        let _ = writeln!(out, "status: {}", self.status.as_str().to_uppercase());
-        for reason in &self.reasons {
-            let _ = writeln!(out, "  - {reason}");
-        }
-        for note in &self.notes {
-            let _ = writeln!(out, "  note: {note}");
-        }
-        if let Some(tilt) = self.kinect_tilt_deg {
-            let _ = writeln!(out, "  for the Kinect tilted {tilt}°");
-        }
-        if let (Some(m), Some(s)) = (&self.robot_from_sensor, &self.sigma) {
-            let _ = writeln!(out, "\nrobot_from_sensor            value        σ");
-            for (name, v, sv, unit) in [
-                ("alpha", m.alpha_deg, s.alpha_deg, "°"),
-                ("beta", m.beta_deg, s.beta_deg, "°"),
-                ("gamma", m.gamma_deg, s.gamma_deg, "°"),
-                ("px", m.px_mm, s.px_mm, " mm"),
-                ("py", m.py_mm, s.py_mm, " mm"),
-                ("pz", m.pz_mm, s.pz_mm, " mm"),
-            ] {
-                let _ = writeln!(out, "  {name:<8} {v:>22.4}{unit:<3} {sv:>9.4}{unit}");
-            }
-        }
-        let _ = writeln!(out, "\npose  used   θ (°)   e_d (mm)  note");
+        // The poses first and the verdict with the six values last, so that
+        // a long schedule does not push the verdict off the screen.
+        let _ = writeln!(out, "pose  used   θ (°)   e_d (mm)  note");
         for p in &self.poses {
             let number = |v: Option<f64>, width: usize, decimals: usize| match v {
                 Some(v) => format!("{v:>width$.decimals$}"),
@@ -407,6 +487,29 @@ impl ResultJson {
                 s.e_d_mm_mean,
                 s.e_d_mm_max
             );
+        }
+        let _ = writeln!(out, "\nstatus: {}", self.status.as_str().to_uppercase());
+        for reason in &self.reasons {
+            let _ = writeln!(out, "  - {reason}");
+        }
+        for note in &self.notes {
+            let _ = writeln!(out, "  note: {note}");
+        }
+        if let Some(tilt) = self.kinect_tilt_deg {
+            let _ = writeln!(out, "  for the Kinect tilted {tilt}°");
+        }
+        if let (Some(m), Some(s)) = (&self.robot_from_sensor, &self.sigma) {
+            let _ = writeln!(out, "\nrobot_from_sensor            value        σ");
+            for (name, v, sv, unit) in [
+                ("alpha", m.alpha_deg, s.alpha_deg, "°"),
+                ("beta", m.beta_deg, s.beta_deg, "°"),
+                ("gamma", m.gamma_deg, s.gamma_deg, "°"),
+                ("px", m.px_mm, s.px_mm, " mm"),
+                ("py", m.py_mm, s.py_mm, " mm"),
+                ("pz", m.pz_mm, s.pz_mm, " mm"),
+            ] {
+                let _ = writeln!(out, "  {name:<8} {v:>22.4}{unit:<3} {sv:>9.4}{unit}");
+            }
         }
         out
     }
@@ -485,9 +588,117 @@ fn three_or_nan<'de, D: Deserializer<'de>>(deserializer: D) -> Result<[f64; 3], 
     Ok(values.map(|x| x.unwrap_or(f64::NAN)))
 }
 
+fn some_three_or_nan<'de, D: Deserializer<'de>>(
+    deserializer: D,
+) -> Result<Option<[f64; 3]>, D::Error> {
+    three_or_nan(deserializer).map(Some)
+}
+
 fn some_6x6_or_nan<'de, D: Deserializer<'de>>(
     deserializer: D,
 ) -> Result<Option<[[f64; 6]; 6]>, D::Error> {
     let rows: [[Option<f64>; 6]; 6] = Deserialize::deserialize(deserializer)?;
     Ok(Some(rows.map(|row| row.map(|x| x.unwrap_or(f64::NAN)))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::calibrate::{calibrate, CalibrationSettings};
+    use crate::recording::planes::read_planes;
+
+    fn table2() -> ResultJson {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/paper-table2-printed.json");
+        let observations = read_planes(&path).expect("Table 2 reads");
+        ResultJson::from_calibration(
+            &calibrate(&observations, &CalibrationSettings::default()).expect("Table 2 solves"),
+        )
+    }
+
+    /// The keys added for the report come after cli.md's, which are written
+    /// as before; a document without them (an older groundcal's) still reads.
+    #[test]
+    fn the_added_keys_are_optional_and_last() {
+        let result = table2();
+        let text = serde_json::to_string(&result).unwrap();
+        let at = |key: &str| {
+            text.find(&format!("\"{key}\":"))
+                .unwrap_or_else(|| panic!("no {key}"))
+        };
+        let order = [
+            "status",
+            "reasons",
+            "robot_from_sensor",
+            "sigma",
+            "correlations",
+            "poses",
+            "summary",
+            "observability",
+            "rotation_singular_values",
+            "translation_singular_values",
+            "rotation_weakest_axis",
+            "translation_weakest_axis",
+            "gate_checks",
+        ];
+        for pair in order.windows(2) {
+            assert!(at(pair[0]) < at(pair[1]), "{pair:?} in {text}");
+        }
+        assert!(!text.contains("\"setup\"") && !text.contains("\"commanded\""));
+        let doc = serde_json::to_value(&result).unwrap();
+        assert_eq!(doc["gate_checks"][1]["gate"], "e_d_max_mm");
+        assert_eq!(doc["gate_checks"][1]["passed"], false);
+        assert_eq!(doc["gate_checks"][1]["at"], "pose 15");
+
+        let mut old = doc.clone();
+        let object = old.as_object_mut().unwrap();
+        object.remove("gate_checks");
+        let o = object["observability"].as_object_mut().unwrap();
+        o.remove("rotation_weakest_axis");
+        o.remove("translation_weakest_axis");
+        let read = ResultJson::parse(old).expect("an older document reads");
+        assert!(read.gate_checks.is_empty() && read.setup.is_none());
+        let o = read.observability.unwrap();
+        assert!(o.rotation_weakest_axis.is_none() && o.translation_weakest_axis.is_none());
+        assert!(read.poses.iter().all(|p| p.commanded.is_none()));
+    }
+
+    #[test]
+    fn the_setup_and_commanded_poses_round_trip() {
+        let mut result = table2();
+        result.setup = Some(SetupJson {
+            robot: Some("octopus".into()),
+            schedule: Some("sample".into()),
+            poses: Some(6),
+            frames_per_pose: Some(2),
+            depth_model: Some(DepthModel::InverseLinear { a: 3.3, b: -0.003 }),
+            intrinsics: Some(Intrinsics::default()),
+            nominal_mount: Some(NominalMount::from_values([
+                4.5, -30.7, -2.0, 491.3, 331.6, 8.7,
+            ])),
+            nominal_mount_from: Some("recording".into()),
+            gates_from: Some("built-in".into()),
+        });
+        result.poses[0].commanded = Some(PoseDegMm {
+            alpha_deg: 0.0,
+            beta_deg: 2.0,
+            gamma_deg: 20.0,
+            px_mm: 0.0,
+            py_mm: 615.0,
+            pz_mm: 0.0,
+        });
+        let doc = serde_json::to_value(&result).unwrap();
+        let read = ResultJson::parse(doc.clone()).expect("reads");
+        assert_eq!(serde_json::to_value(&read).unwrap(), doc);
+        assert_eq!(read.poses[0].commanded.unwrap().gamma_deg, 20.0);
+        assert_eq!(
+            read.setup.unwrap().depth_model,
+            result.setup.unwrap().depth_model
+        );
+        // A wrong added key is named like any other.
+        let mut doc = doc;
+        doc["gate_checks"][0]["passed"] = serde_json::json!("yes");
+        let e = ResultJson::parse(doc).unwrap_err();
+        assert!(e.contains("gate_checks[0].passed"), "{e}");
+    }
 }

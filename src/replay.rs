@@ -14,7 +14,7 @@ use crate::calib::observe::{BodyEstimate, ObserveSettings, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::quality::Gates;
 use crate::calib::solve::Observation;
-use crate::output::ResultJson;
+use crate::output::{ResultJson, SetupJson};
 use crate::recording::session::NominalMount;
 use crate::recording::{InputError, Recording};
 
@@ -189,11 +189,13 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             Err(reason) => failed.push((outcome.index, reason)),
         }
     }
+    let (gates, gates_from) = match (options.gates, session.gates) {
+        (Some(gates), _) => (gates, "config"),
+        (None, Some(gates)) => (gates, "recording"),
+        (None, None) => (options.calibration.gates, "built-in"),
+    };
     let settings = CalibrationSettings {
-        gates: options
-            .gates
-            .or(session.gates)
-            .unwrap_or(options.calibration.gates),
+        gates,
         ..options.calibration
     };
     let mut result = ResultJson::from_poses(
@@ -206,6 +208,28 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     if let Some(note) = processor.prior_note() {
         result.notes.insert(0, note);
     }
+    for pose in &mut result.poses {
+        pose.commanded = recording
+            .poses
+            .iter()
+            .find(|r| r.index == pose.index)
+            .map(|r| r.commanded);
+    }
+    result.setup = Some(SetupJson {
+        robot: Some(session.robot.clone()).filter(|r| !r.is_empty()),
+        schedule: session.schedule.clone(),
+        poses: Some(recording.poses.len()),
+        frames_per_pose: session.frames_per_pose,
+        depth_model: Some(session.kinect.depth_model),
+        intrinsics: Some(session.kinect.intrinsics),
+        nominal_mount: nominal,
+        nominal_mount_from: match (options.nominal_mount, session.nominal_mount) {
+            (Some(_), _) => Some("flag".into()),
+            (None, Some(_)) => Some("recording".into()),
+            (None, None) => None,
+        },
+        gates_from: Some(gates_from.into()),
+    });
     if recording.truncated_tail {
         result.notes.push("poses.jsonl ends in a line cut off part-way (the recording was interrupted): it was left out".into());
     }

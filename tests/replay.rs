@@ -265,7 +265,24 @@ fn replay_writes_a_self_contained_report() {
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     let _ = std::fs::remove_dir_all(&out);
     assert!(html.contains("ACCEPTED"));
-    assert_eq!(html.matches("<svg").count(), 4);
+    // θ, e_d, Δd, a/b/c, d and the schedule's tilts.
+    assert_eq!(html.matches("<svg").count(), 6);
+    // What only a recording tells: its setup, nominal mount, commanded poses.
+    assert!(html.contains("“sample”, 12 poses, 2 depth frames per pose"));
+    assert!(html.contains("<table class=\"nominal\">"));
+    assert_eq!(
+        html.matches("<td class=\"dd\">").count(),
+        12,
+        "a Δd per pose"
+    );
+    let commanded = &html[html.find("<table class=\"commanded\">").unwrap()..];
+    let commanded = &commanded[..commanded.find("</table>").unwrap()];
+    assert_eq!(
+        commanded.matches("<tr><td>").count(),
+        12,
+        "a commanded pose per pose"
+    );
+    assert_eq!(html.matches("✓ pass").count(), 7, "every gate passed");
     assert!(!html.contains("http://") && !html.contains("https://"));
     // Provenance: the version and the input's digest.
     assert!(html.contains(env!("CARGO_PKG_VERSION")));

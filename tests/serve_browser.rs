@@ -109,7 +109,10 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     let history = rollback["history"].as_array().unwrap();
     assert_eq!(history.len(), 2, "{seen}");
     assert!(history[1].as_str().unwrap().ends_with("Active"), "{seen}");
-    assert!(history[0].as_str().unwrap().ends_with("Roll back to this"), "{seen}");
+    assert!(
+        history[0].as_str().unwrap().ends_with("Roll back to this"),
+        "{seen}"
+    );
     assert!(
         rollback["active"]
             .as_str()

@@ -42,8 +42,100 @@ pub struct Observability {
     pub rotation_singular_values: [f64; 3],
     /// The same for the translation block.
     pub translation_singular_values: [f64; 3],
+    /// The rotation axis (a unit vector in the robot frame, its largest
+    /// component positive) of the smallest rotation singular value: the
+    /// rotation the schedule pins down least ([`rotation_words`]).
+    pub rotation_weakest_axis: [f64; 3],
+    /// The same for the translation: the direction of the position the
+    /// schedule pins down least ([`position_words`]).
+    pub translation_weakest_axis: [f64; 3],
+    /// The smallest singular value that counts as observable (the solve's
+    /// `min_spread`, about the sine of the tilts' RMS spread).
+    pub min_singular_value: f64,
     /// Operator-readable descriptions of unobservable directions.
     pub problems: Vec<String>,
+}
+
+/// The axes of the robot frame in an operator's words: the direction's
+/// name and the axis's letter.
+pub fn axis_words(axis: usize) -> (&'static str, &'static str) {
+    match axis {
+        0 => ("forward", "X"),
+        1 => ("vertical", "Y"),
+        _ => ("sideways", "Z"),
+    }
+}
+
+/// A position along one axis of the robot frame in words, as the reasons
+/// name it: `forward (p_x)`.
+pub fn position_axis_words(axis: usize) -> String {
+    format!(
+        "{} (p_{})",
+        axis_words(axis).0,
+        ["x", "y", "z"][axis.min(2)]
+    )
+}
+
+/// A rotation about one axis of the robot frame in words, with the
+/// parameter it mostly moves: α turns about the body's vertical exactly; β
+/// about the sideways axis turned by α (nearly Z, α being small); γ about
+/// the forward axis turned by β and α, hence "mostly".
+pub fn rotation_axis_words(axis: usize) -> String {
+    match axis {
+        0 => "rotation about the body's forward axis X (roll of the sensor, mostly γ)".into(),
+        1 => "rotation about the body's vertical axis Y (yaw of the sensor, α)".into(),
+        _ => "rotation about the body's sideways axis Z (pitch of the sensor, mostly β)".into(),
+    }
+}
+
+/// The axis a direction lies along (the largest component, when it is
+/// within 25° of it), or the two it lies between.
+fn nearest_axes(direction: &[f64; 3]) -> Result<usize, (usize, usize)> {
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| direction[b].abs().total_cmp(&direction[a].abs()));
+    let norm = direction.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if norm > 0.0 && direction[order[0]].abs() / norm >= 25f64.to_radians().cos() {
+        Ok(order[0])
+    } else {
+        let (a, b) = (order[0].min(order[1]), order[0].max(order[1]));
+        Err((a, b))
+    }
+}
+
+/// A rotation axis of the robot frame in an operator's words: "rotation
+/// about the body's vertical axis Y (yaw of the sensor, α)", or about an
+/// axis between two, with its components.
+pub fn rotation_words(axis: &[f64; 3]) -> String {
+    match nearest_axes(axis) {
+        Ok(a) => rotation_axis_words(a),
+        Err((a, b)) => format!(
+            "rotation about the axis ({:.2}, {:.2}, {:.2}) of the body, between its {} {} and {} {} axes",
+            axis[0],
+            axis[1],
+            axis[2],
+            axis_words(a).0,
+            axis_words(a).1,
+            axis_words(b).0,
+            axis_words(b).1
+        ),
+    }
+}
+
+/// A direction of the sensor's position in the robot frame in an operator's
+/// words: "the sensor's forward (p_x) position", or along a direction
+/// between two axes, with its components.
+pub fn position_words(direction: &[f64; 3]) -> String {
+    match nearest_axes(direction) {
+        Ok(a) => format!("the sensor's {} position", position_axis_words(a)),
+        Err((a, b)) => format!(
+            "the sensor's position along ({:.2}, {:.2}, {:.2}), between {} and {}",
+            direction[0],
+            direction[1],
+            direction[2],
+            position_axis_words(a),
+            position_axis_words(b)
+        ),
+    }
 }
 
 /// The result of a calibration.
@@ -61,6 +153,29 @@ pub struct Calibration {
     pub variance_factors: (f64, f64),
     /// Levenberg-Marquardt's evaluations and termination.
     pub iterations: usize,
+    /// Each quality gate with its limit and what was measured, in the
+    /// order of [`crate::quality::check_gates`].
+    pub checks: Vec<GateCheck>,
+}
+
+/// One quality gate as it was checked: its limit, the value measured and
+/// whether it passed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GateCheck {
+    /// The gate's key in `[calibration.gates]` (`theta_max_deg`), or
+    /// `observable` for the solve's observability threshold.
+    pub gate: &'static str,
+    /// In the unit of the key's suffix (degrees, millimetres, a count, a
+    /// fraction; a singular value for `observable`).
+    pub limit: f64,
+    pub measured: f64,
+    /// Whether the measured value must be at least the limit (the fewest
+    /// poses, observability) rather than at most.
+    pub at_least: bool,
+    pub passed: bool,
+    /// Where the measured value comes from, in words: the worst pose
+    /// ("pose 7"), parameter ("β") or direction.
+    pub at: Option<String>,
 }
 
 impl Calibration {

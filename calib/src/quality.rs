@@ -4,7 +4,10 @@
 use nalgebra::Vector6;
 use serde::{Deserialize, Serialize};
 
-use crate::outcome::{Calibration, Observability, PoseOutcome, Solution, Summary, Verdict};
+use crate::outcome::{
+    position_words, rotation_words, Calibration, GateCheck, Observability, PoseOutcome, Solution,
+    Summary, Verdict,
+};
 
 /// Thresholds a calibration must meet to be accepted. Degrees and millimetres,
 /// as an operator would set them in the configuration.
@@ -73,12 +76,19 @@ impl Gates {
 pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibration {
     let mut summary = summarise(&solution.poses);
     summary.poses_total = summary.poses_total.max(poses_total);
-    let reasons = judge(
+    let checks = check_gates(
         gates,
         &summary,
         &solution.poses,
         &solution.sigma(),
         &solution.observability,
+    );
+    let reasons = judge_checked(
+        gates,
+        &summary,
+        &solution.sigma(),
+        &solution.observability,
+        &checks,
     );
     Calibration {
         verdict: if reasons.is_empty() {
@@ -94,6 +104,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         observability: solution.observability,
         variance_factors: solution.variance_factors,
         iterations: solution.iterations,
+        checks,
     }
 }
 
@@ -114,6 +125,113 @@ pub fn summarise(poses: &[PoseOutcome]) -> Summary {
 const ANGLE_NAMES: [&str; 3] = ["α", "β", "γ"];
 const POSITION_NAMES: [&str; 3] = ["p_x", "p_y", "p_z"];
 
+/// Whether a value is within an upper limit (NaN is not).
+fn at_most(value: f64, limit: f64) -> bool {
+    value <= limit
+}
+
+/// Each gate with its limit, the value measured and whether it passed, in
+/// a fixed order: θ, e_d, σ of the angles and of the positions (the worst of
+/// each), the poses used, their fraction, and observability (which is the
+/// solve's threshold rather than a gate of the configuration). `sigma` is
+/// in radians and metres; the checks are in degrees and millimetres.
+pub fn check_gates(
+    gates: &Gates,
+    summary: &Summary,
+    poses: &[PoseOutcome],
+    sigma: &Vector6<f64>,
+    observability: &Observability,
+) -> Vec<GateCheck> {
+    let worst_pose = |key: fn(&PoseOutcome) -> f64| {
+        poses
+            .iter()
+            .filter(|p| p.used)
+            .max_by(|a, b| key(a).total_cmp(&key(b)))
+            .map(|p| format!("pose {}", p.index))
+    };
+    // The worst σ of three, NaN (unobservable) first.
+    let worst_sigma = |offset: usize, scale: f64, names: [&str; 3]| {
+        let (k, s) = (0..3)
+            .map(|k| (k, sigma[offset + k] * scale))
+            .max_by(|a, b| match (a.1.is_nan(), b.1.is_nan()) {
+                (true, false) => std::cmp::Ordering::Greater,
+                (false, true) => std::cmp::Ordering::Less,
+                _ => a.1.total_cmp(&b.1),
+            })
+            .unwrap_or((0, f64::NAN));
+        (s, Some(names[k].to_string()))
+    };
+    let max = |gate, limit, (measured, at): (f64, Option<String>)| GateCheck {
+        gate,
+        limit,
+        measured,
+        at_least: false,
+        passed: at_most(measured, limit),
+        at,
+    };
+    let theta = summary.theta_max.to_degrees();
+    let e_d = summary.e_d_max * 1e3;
+    let fraction = summary.poses_used as f64 / summary.poses_total.max(1) as f64;
+    let weakest_rotation = observability.rotation_singular_values[2];
+    let weakest_translation = observability.translation_singular_values[2];
+    let (weakest, weakest_words) = if weakest_translation < weakest_rotation {
+        (
+            weakest_translation,
+            position_words(&observability.translation_weakest_axis),
+        )
+    } else {
+        (
+            weakest_rotation,
+            rotation_words(&observability.rotation_weakest_axis),
+        )
+    };
+    vec![
+        max(
+            "theta_max_deg",
+            gates.theta_max_deg,
+            (theta, worst_pose(|p| p.theta)),
+        ),
+        max("e_d_max_mm", gates.e_d_max_mm, (e_d, worst_pose(|p| p.e_d))),
+        max(
+            "sigma_angle_max_deg",
+            gates.sigma_angle_max_deg,
+            worst_sigma(0, 180.0 / std::f64::consts::PI, ANGLE_NAMES),
+        ),
+        max(
+            "sigma_position_max_mm",
+            gates.sigma_position_max_mm,
+            worst_sigma(3, 1e3, POSITION_NAMES),
+        ),
+        GateCheck {
+            gate: "min_poses_used",
+            limit: gates.min_poses_used as f64,
+            measured: summary.poses_used as f64,
+            at_least: true,
+            passed: summary.poses_used >= gates.min_poses_used,
+            at: None,
+        },
+        GateCheck {
+            gate: "min_used_fraction",
+            limit: gates.min_used_fraction,
+            measured: fraction,
+            at_least: true,
+            passed: fraction >= gates.min_used_fraction,
+            at: Some(format!(
+                "{} of {} poses",
+                summary.poses_used, summary.poses_total
+            )),
+        },
+        GateCheck {
+            gate: "observable",
+            limit: observability.min_singular_value,
+            measured: weakest,
+            at_least: true,
+            passed: observability.problems.is_empty(),
+            at: Some(weakest_words),
+        },
+    ]
+}
+
 /// The reasons, in an operator's words, why a result must not be used; empty
 /// when it passes every gate. `sigma` is in radians and metres.
 pub fn judge(
@@ -123,15 +241,27 @@ pub fn judge(
     sigma: &Vector6<f64>,
     observability: &Observability,
 ) -> Vec<String> {
+    let checks = check_gates(gates, summary, poses, sigma, observability);
+    judge_checked(gates, summary, sigma, observability, &checks)
+}
+
+/// [`judge`] from the checks of [`check_gates`].
+fn judge_checked(
+    gates: &Gates,
+    summary: &Summary,
+    sigma: &Vector6<f64>,
+    observability: &Observability,
+    checks: &[GateCheck],
+) -> Vec<String> {
+    let failed = |gate: &str| checks.iter().find(|c| c.gate == gate).filter(|c| !c.passed);
     let mut reasons: Vec<String> = observability.problems.clone();
-    if summary.poses_used < gates.min_poses_used {
+    if failed("min_poses_used").is_some() {
         reasons.push(format!(
             "only {} poses could be used, at least {} are needed",
             summary.poses_used, gates.min_poses_used
         ));
     }
-    let fraction = summary.poses_used as f64 / summary.poses_total.max(1) as f64;
-    if fraction < gates.min_used_fraction {
+    if failed("min_used_fraction").is_some() {
         reasons.push(format!(
             "only {} of {} poses could be used (at least {:.0}% are needed): see the reasons given for each pose",
             summary.poses_used,
@@ -139,26 +269,27 @@ pub fn judge(
             100.0 * gates.min_used_fraction
         ));
     }
-    let worst = |key: fn(&PoseOutcome) -> f64| {
-        poses
-            .iter()
-            .filter(|p| p.used)
-            .max_by(|a, b| key(a).total_cmp(&key(b)))
-            .map(|p| p.index)
+    let worst = |check: &GateCheck| {
+        check
+            .at
+            .as_deref()
+            .and_then(|at| at.strip_prefix("pose "))
+            .unwrap_or("0")
+            .to_string()
     };
-    if summary.theta_max.to_degrees() > gates.theta_max_deg {
+    if let Some(check) = failed("theta_max_deg") {
         reasons.push(format!(
             "the measured ground disagrees with the result by up to {:.2}° (pose {}), more than the {:.2}° allowed: the ground may not be flat, or the body pose is wrong",
-            summary.theta_max.to_degrees(),
-            worst(|p| p.theta).unwrap_or(0),
+            check.measured,
+            worst(check),
             gates.theta_max_deg
         ));
     }
-    if summary.e_d_max * 1e3 > gates.e_d_max_mm {
+    if let Some(check) = failed("e_d_max_mm") {
         reasons.push(format!(
             "the measured ground height disagrees with the result by up to {:.1} mm (pose {}), more than the {:.1} mm allowed: the ground may not be flat, or the body pose is wrong",
-            summary.e_d_max * 1e3,
-            worst(|p| p.e_d).unwrap_or(0),
+            check.measured,
+            worst(check),
             gates.e_d_max_mm
         ));
     }
@@ -167,14 +298,14 @@ pub fn judge(
         for k in 0..3 {
             let s = sigma[k].to_degrees();
             // NaN (an unobservable direction) fails the gate too.
-            if s.is_nan() || s > gates.sigma_angle_max_deg {
+            if !at_most(s, gates.sigma_angle_max_deg) {
                 reasons.push(format!(
                     "the angle {} is uncertain (σ = {:.3}°, at most {:.3}° allowed): add poses with larger tilts or more frames per pose",
                     ANGLE_NAMES[k], s, gates.sigma_angle_max_deg
                 ));
             }
             let s = sigma[3 + k] * 1e3;
-            if s.is_nan() || s > gates.sigma_position_max_mm {
+            if !at_most(s, gates.sigma_position_max_mm) {
                 reasons.push(format!(
                     "the position {} is uncertain (σ = {:.2} mm, at most {:.2} mm allowed): add poses with larger tilts or more frames per pose",
                     POSITION_NAMES[k], s, gates.sigma_position_max_mm
@@ -183,4 +314,173 @@ pub fn judge(
         }
     }
     reasons
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Plane;
+    use nalgebra::Vector3;
+
+    fn pose(index: u32, used: bool, theta_deg: f64, e_d_mm: f64) -> PoseOutcome {
+        let plane = Plane {
+            normal: Vector3::y(),
+            d: 1.0,
+        };
+        PoseOutcome {
+            index,
+            used,
+            reason: None,
+            measured: plane,
+            predicted: plane,
+            theta: theta_deg.to_radians(),
+            e_d: e_d_mm / 1e3,
+            inliers: None,
+            note: None,
+        }
+    }
+
+    fn observability(weakest_rotation: f64, problems: Vec<String>) -> Observability {
+        Observability {
+            rotation_singular_values: [1.0, 0.9, weakest_rotation],
+            translation_singular_values: [1.0, 0.3, 0.2],
+            rotation_weakest_axis: [0.0, 1.0, 0.0],
+            translation_weakest_axis: [0.0, 0.0, 1.0],
+            min_singular_value: 1f64.to_radians().sin(),
+            problems,
+        }
+    }
+
+    fn sigma(angle_deg: f64, position_mm: f64) -> Vector6<f64> {
+        let a = angle_deg.to_radians();
+        let p = position_mm / 1e3;
+        Vector6::new(a / 2.0, a, a / 3.0, p, p / 2.0, p / 4.0)
+    }
+
+    #[test]
+    fn every_gate_is_checked_with_its_limit_and_worst_place() {
+        let gates = Gates::default();
+        let poses = vec![
+            pose(1, true, 0.2, 1.0),
+            pose(2, true, 0.4, 0.5),
+            pose(3, false, 9.0, 90.0),
+        ];
+        let summary = Summary {
+            poses_total: 3,
+            ..summarise(&poses)
+        };
+        let checks = check_gates(
+            &gates,
+            &summary,
+            &poses,
+            &sigma(0.05, 1.0),
+            &observability(0.1, Vec::new()),
+        );
+        let keys: Vec<&str> = checks.iter().map(|c| c.gate).collect();
+        assert_eq!(
+            keys,
+            [
+                "theta_max_deg",
+                "e_d_max_mm",
+                "sigma_angle_max_deg",
+                "sigma_position_max_mm",
+                "min_poses_used",
+                "min_used_fraction",
+                "observable"
+            ]
+        );
+        let by = |k: &str| checks.iter().find(|c| c.gate == k).unwrap();
+        assert!((by("theta_max_deg").measured - 0.4).abs() < 1e-12);
+        assert_eq!(by("theta_max_deg").at.as_deref(), Some("pose 2"));
+        assert_eq!(by("e_d_max_mm").at.as_deref(), Some("pose 1"));
+        assert!(by("theta_max_deg").passed && by("e_d_max_mm").passed);
+        assert_eq!(by("sigma_angle_max_deg").at.as_deref(), Some("β"));
+        assert!((by("sigma_angle_max_deg").measured - 0.05).abs() < 1e-12);
+        assert_eq!(by("sigma_position_max_mm").at.as_deref(), Some("p_x"));
+        // Two poses used of six needed; two of three is under 70 %.
+        assert!(!by("min_poses_used").passed && by("min_poses_used").at_least);
+        assert_eq!(by("min_poses_used").limit, 6.0);
+        assert!(!by("min_used_fraction").passed);
+        assert_eq!(by("min_used_fraction").at.as_deref(), Some("2 of 3 poses"));
+        let observable = by("observable");
+        assert!(observable.passed && observable.at_least);
+        assert_eq!(
+            observable.at.as_deref(),
+            Some("rotation about the body's vertical axis Y (yaw of the sensor, α)")
+        );
+    }
+
+    /// The table of checks and the reasons never disagree: a check fails
+    /// exactly when the reasons name its gate.
+    #[test]
+    fn the_checks_agree_with_the_reasons() {
+        let gates = Gates::default();
+        for (theta, e_d, angle, position, used, problems) in [
+            (0.1, 1.0, 0.01, 0.1, 10, vec![]),
+            (1.5, 1.0, 0.01, 0.1, 10, vec![]),
+            (0.1, 7.0, 0.01, 0.1, 10, vec![]),
+            (0.1, 1.0, 0.5, 0.1, 10, vec![]),
+            (0.1, 1.0, 0.01, 9.0, 10, vec![]),
+            (0.1, 1.0, f64::NAN, 0.1, 10, vec![]),
+            (0.1, 1.0, 0.01, 0.1, 4, vec![]),
+            (0.1, 1.0, 0.01, 0.1, 10, vec!["not observable".to_string()]),
+        ] {
+            let mut poses: Vec<PoseOutcome> = (1..=10)
+                .map(|i| {
+                    pose(
+                        i,
+                        i <= used,
+                        theta * f64::from(i) / 10.0,
+                        e_d / f64::from(i),
+                    )
+                })
+                .collect();
+            poses.push(pose(11, false, 50.0, 50.0));
+            let summary = summarise(&poses);
+            let weakest = if problems.is_empty() { 0.1 } else { 0.001 };
+            let obs = observability(weakest, problems.clone());
+            let s = sigma(angle, position);
+            let checks = check_gates(&gates, &summary, &poses, &s, &obs);
+            let reasons = judge(&gates, &summary, &poses, &s, &obs);
+            assert_eq!(
+                checks.iter().all(|c| c.passed),
+                reasons.is_empty(),
+                "{checks:?} {reasons:?}"
+            );
+            let failed = |k: &str| !checks.iter().find(|c| c.gate == k).unwrap().passed;
+            let text = reasons.join("\n");
+            assert_eq!(
+                failed("theta_max_deg"),
+                text.contains("the measured ground disagrees"),
+                "{text}"
+            );
+            assert_eq!(
+                failed("e_d_max_mm"),
+                text.contains("ground height disagrees"),
+                "{text}"
+            );
+            assert_eq!(
+                failed("min_poses_used"),
+                text.contains("at least 6 are needed"),
+                "{text}"
+            );
+            assert_eq!(
+                failed("observable"),
+                text.contains("not observable"),
+                "{text}"
+            );
+            if problems.is_empty() {
+                assert_eq!(
+                    failed("sigma_angle_max_deg"),
+                    text.contains("the angle"),
+                    "{text}"
+                );
+                assert_eq!(
+                    failed("sigma_position_max_mm"),
+                    text.contains("the position"),
+                    "{text}"
+                );
+            }
+        }
+    }
 }

@@ -28,7 +28,7 @@ use super::geometry::{
     angle_between, d_rot_x, d_rot_y, d_rot_z, ground_in_sensor, rot_x, rot_y, rot_z, Plane,
     PoseParams, Transform,
 };
-use crate::outcome::{Observability, PoseOutcome, Solution};
+use crate::outcome::{position_axis_words, Observability, PoseOutcome, Solution};
 
 /// One pose's evidence.
 #[derive(Debug, Clone, PartialEq)]
@@ -619,13 +619,15 @@ fn outcomes(
         .collect()
 }
 
-/// Names a direction of the robot frame in an operator's words.
-fn axis_words(axis: usize) -> (&'static str, &'static str) {
-    match axis {
-        0 => ("forward", "X"),
-        1 => ("vertical", "Y"),
-        _ => ("sideways", "Z"),
-    }
+/// An eigenvector with a fixed sign (its largest component positive), so
+/// that equal directions print equally.
+fn signed_axis(v: &Vector3<f64>) -> [f64; 3] {
+    let largest = v
+        .iter()
+        .copied()
+        .fold(0.0, |m: f64, x| if x.abs() > m.abs() { x } else { m });
+    let sign = if largest < 0.0 { -1.0 } else { 1.0 };
+    [v.x * sign, v.y * sign, v.z * sign]
 }
 
 /// Singular values of the per-observation Jacobian blocks and the words for
@@ -710,10 +712,7 @@ pub fn observability(used: &[&Observation], settings: &SolveSettings) -> Observa
             .take(weak_translations.len())
             .map(|(a, _)| *a)
             .collect();
-        let position_words: Vec<String> = named
-            .iter()
-            .map(|&a| format!("{} (p_{})", axis_words(a).0, ["x", "y", "z"][a]))
-            .collect();
+        let position_words: Vec<String> = named.iter().map(|&a| position_axis_words(a)).collect();
         let what = format!(
             "the sensor's {} position{}",
             position_words.join(" and "),
@@ -736,6 +735,9 @@ pub fn observability(used: &[&Observation], settings: &SolveSettings) -> Observa
     Observability {
         rotation_singular_values: [rotation[0].0, rotation[1].0, rotation[2].0],
         translation_singular_values: [translation[0].0, translation[1].0, translation[2].0],
+        rotation_weakest_axis: signed_axis(&rotation[2].1),
+        translation_weakest_axis: signed_axis(&translation[2].1),
+        min_singular_value: settings.min_spread,
         problems,
     }
 }
@@ -837,6 +839,57 @@ mod tests {
         assert!(
             text.contains("forward (p_x)") && text.contains("sideways (p_z)"),
             "{text}"
+        );
+    }
+
+    /// The weakest directions in words: a schedule that rolls and pitches
+    /// pins the yaw down least, and one that only pitches cannot tell the
+    /// sideways position.
+    #[test]
+    fn names_the_weakest_directions() {
+        use crate::outcome::{position_words, rotation_words};
+        let truth = PoseParams::new(0.01, -0.6, 0.02, Vector3::new(0.5, 0.36, 0.01));
+        let settings = SolveSettings::default();
+        let obs = exact_observations(&truth);
+        let used: Vec<&Observation> = obs.iter().collect();
+        let o = observability(&used, &settings);
+        assert!(o.problems.is_empty(), "{:?}", o.problems);
+        assert_eq!(o.min_singular_value, settings.min_spread);
+        assert!(
+            o.rotation_weakest_axis[1] > 0.95,
+            "{:?}",
+            o.rotation_weakest_axis
+        );
+        assert_eq!(
+            rotation_words(&o.rotation_weakest_axis),
+            "rotation about the body's vertical axis Y (yaw of the sensor, α)"
+        );
+        assert!(position_words(&o.translation_weakest_axis).starts_with("the sensor's "));
+
+        let pitched: Vec<Observation> = [-15.0f64, -8.0, 0.0, 7.0, 16.0]
+            .iter()
+            .enumerate()
+            .map(|(i, beta)| {
+                let g = PoseParams::new(0.0, beta.to_radians(), 0.0, Vector3::new(0.0, 0.62, 0.0))
+                    .to_transform();
+                Observation::new(i as u32 + 1, g, predict(&truth, &g))
+            })
+            .collect();
+        let used: Vec<&Observation> = pitched.iter().collect();
+        let o = observability(&used, &settings);
+        assert_eq!(
+            position_words(&o.translation_weakest_axis),
+            "the sensor's sideways (p_z) position"
+        );
+        assert!(o.translation_singular_values[2] < o.min_singular_value);
+        // Between two axes, the components are given.
+        assert_eq!(
+            position_words(&[0.62, 0.03, 0.78]),
+            "the sensor's position along (0.62, 0.03, 0.78), between forward (p_x) and sideways (p_z)"
+        );
+        assert_eq!(
+            rotation_words(&[0.71, 0.0, 0.71]),
+            "rotation about the axis (0.71, 0.00, 0.71) of the body, between its forward X and sideways Z axes"
         );
     }
 }
