@@ -99,6 +99,10 @@ pub struct CalibrationConfig {
     /// default) or `paper` (the paper's eigenvector fit in metres).
     #[serde(default)]
     pub ground_fit: crate::calib::plane::GroundFitMethod,
+    /// The noise of one pose's ground, for `plan`'s predictions (default:
+    /// the solve's floors, a conservative real robot).
+    #[serde(default)]
+    pub noise: Option<crate::calib::plan::NoiseModel>,
 }
 
 fn default_slip_mm() -> f64 {
@@ -188,6 +192,18 @@ impl Config {
 
     /// The semantic checks; returns the schedule, checked against the limits.
     pub fn validate(&self, path: &Path) -> Result<Schedule, InputError> {
+        self.validate_settings(path)?;
+        let schedule_path = self.schedule_path(path);
+        let schedule = Schedule::read(&schedule_path)?;
+        schedule
+            .validate(&self.robot.limits)
+            .map_err(|e| InputError::new(&schedule_path, None, e.to_string()))?;
+        Ok(schedule)
+    }
+
+    /// The semantic checks of everything but the schedule (which `plan`
+    /// judges itself).
+    pub fn validate_settings(&self, path: &Path) -> Result<(), InputError> {
         let bad = |key: &str, m: String| InputError::new(path, None, format!("{key}: {m}"));
         let l = &self.robot.limits;
         if ![
@@ -257,6 +273,9 @@ impl Config {
             m.validate().map_err(|e| bad("calibration", e))?;
         }
         c.gates.validate().map_err(|e| bad("calibration", e))?;
+        if let Some(noise) = &c.noise {
+            noise.validate().map_err(|e| bad("calibration.noise", e))?;
+        }
         if let Some(sim) = &self.sim {
             if !(sim.time_scale.is_finite() && sim.time_scale > 0.0 && sim.time_scale <= 1000.0) {
                 return Err(bad(
@@ -297,12 +316,7 @@ impl Config {
                 .parse::<std::net::SocketAddr>()
                 .map_err(|e| bad("serve.listen", format!("\"{}\": {e}", serve.listen)))?;
         }
-        let schedule_path = self.schedule_path(path);
-        let schedule = Schedule::read(&schedule_path)?;
-        schedule
-            .validate(&self.robot.limits)
-            .map_err(|e| InputError::new(&schedule_path, None, e.to_string()))?;
-        Ok(schedule)
+        Ok(())
     }
 }
 

@@ -171,6 +171,20 @@ enum Command {
         listen: Option<String>,
     },
     /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
+    /// Predict a schedule's σ, correlations and observability before the robot moves; exit 3 when it would be rejected.
+    #[command(
+        after_help = "Example:\n  groundcal plan --config /etc/groundcal/groundcal.toml config/schedules/octopus-52.toml --json"
+    )]
+    Plan {
+        /// The configuration (nominal mount, limits, gates, [calibration.noise]); default /etc/groundcal/groundcal.toml.
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// The schedule to judge (default: the configuration's).
+        schedule: Option<PathBuf>,
+        /// One JSON document on stdout.
+        #[arg(long)]
+        json: bool,
+    },
     #[command(after_help = "Example:\n  groundcal check-config /etc/groundcal/groundcal.toml")]
     CheckConfig {
         /// The configuration file.
@@ -246,6 +260,11 @@ fn usage_error(message: String) -> ExitStatus {
 
 fn run(args: Args) -> ExitStatus {
     match args.command {
+        Command::Plan {
+            config,
+            schedule,
+            json,
+        } => cli::plan::run(config.as_deref(), schedule.as_deref(), json),
         Command::Solve { file, json } => {
             cli::solve::run(&file, json, &CalibrationSettings::default())
         }

@@ -34,6 +34,7 @@ pub mod disparity;
 pub mod geometry;
 pub mod observe;
 pub mod outcome;
+pub mod plan;
 pub mod plane;
 pub mod quality;
 pub mod sensor;

@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod capture;
 pub mod check_config;
 pub mod export;
+pub mod plan;
 pub mod plane;
 pub mod replay;
 pub mod serve;

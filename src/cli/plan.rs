@@ -1,0 +1,239 @@
+//! `groundcal plan [--config FILE] [SCHEDULE] [--json]`: what a schedule will
+//! give, before the robot moves (cli.md): each parameter's predicted σ, their
+//! correlations, the observability and the θ and e_d to expect, from the
+//! commanded poses, the nominal mount and the configuration's noise model
+//! (`calib::plan`).
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use super::ExitStatus;
+use crate::calib::outcome::Observability;
+use crate::calib::plan::{predict_schedule, NoiseModel, Prediction};
+use crate::config::Config;
+use crate::output::SigmaJson;
+use crate::recording::read_bounded;
+use crate::schedule::{Schedule, ScheduleError};
+
+/// What `plan --json` prints.
+#[derive(Debug, Serialize)]
+pub struct PlanJson {
+    /// `observable` or `not_observable`.
+    pub status: &'static str,
+    /// Why the schedule would not do, in an operator's words.
+    pub reasons: Vec<String>,
+    pub schedule: String,
+    pub poses: usize,
+    /// Predicted one-σ of each parameter (degrees, millimetres).
+    pub sigma: SigmaJson,
+    /// Predicted correlations, in the order α, β, γ, px, py, pz.
+    pub correlations: [[f64; 6]; 6],
+    pub observability: ObservabilityJson,
+    /// The mean θ and e_d a pose should show.
+    pub expected: ExpectedJson,
+    /// The noise the prediction assumes per pose.
+    pub noise: NoiseModel,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ObservabilityJson {
+    pub rotation_singular_values: [f64; 3],
+    pub translation_singular_values: [f64; 3],
+    /// The weakest rotation and position, in words.
+    pub weakest_rotation: String,
+    pub weakest_position: String,
+    pub min_singular_value: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ExpectedJson {
+    pub theta_deg: f64,
+    pub e_d_mm: f64,
+}
+
+/// Runs the command.
+pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool) -> ExitStatus {
+    let config_path = config_path
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("/etc/groundcal/groundcal.toml"));
+    let (config, schedule) = match load(&config_path, schedule_path) {
+        Ok(loaded) => loaded,
+        Err(e) => {
+            eprintln!("groundcal plan: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let mut reasons = Vec::new();
+    // Limits first: a pose the robot may not take is bad input, named.
+    match schedule.validate(&config.robot.limits) {
+        Ok(()) => {}
+        Err(ScheduleError::Unobservable { reason, .. }) => reasons.push(reason),
+        Err(e) => {
+            eprintln!("groundcal plan: {e}");
+            return ExitStatus::BadInput;
+        }
+    }
+    let Some(nominal) = config.calibration.nominal_mount else {
+        eprintln!(
+            "groundcal plan: {}: calibration.nominal_mount is needed to predict (the planes depend on the mount)",
+            config_path.display()
+        );
+        return ExitStatus::BadInput;
+    };
+    let noise = config
+        .calibration
+        .noise
+        .unwrap_or_else(NoiseModel::solve_floors);
+    let poses: Vec<_> = schedule.poses.iter().map(|p| p.to_params()).collect();
+    let prediction = match predict_schedule(&poses, &nominal.pose().to_params(), &noise) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("groundcal plan: the schedule cannot be solved: {e}");
+            return ExitStatus::Rejected;
+        }
+    };
+    for problem in &prediction.observability.problems {
+        if !reasons.contains(problem) {
+            reasons.push(problem.clone());
+        }
+    }
+    let sigma = prediction.sigma_deg_mm();
+    let gates = &config.calibration.gates;
+    let worst_angle = sigma[..3].iter().cloned().fold(0.0, f64::max);
+    let worst_position = sigma[3..].iter().cloned().fold(0.0, f64::max);
+    if worst_angle > gates.sigma_angle_max_deg {
+        reasons.push(format!(
+            "the predicted σ of an angle is {worst_angle:.3}°, beyond the gate of {}°",
+            gates.sigma_angle_max_deg
+        ));
+    }
+    if worst_position > gates.sigma_position_max_mm {
+        reasons.push(format!(
+            "the predicted σ of a position is {worst_position:.2} mm, beyond the gate of {} mm",
+            gates.sigma_position_max_mm
+        ));
+    }
+    if schedule.poses.len() < gates.min_poses_used {
+        reasons.push(format!(
+            "{} poses, fewer than the {} the gates ask for",
+            schedule.poses.len(),
+            gates.min_poses_used
+        ));
+    }
+    let plan = to_json(&schedule, &prediction, noise, reasons);
+    let printed = if json {
+        super::print_json(&plan)
+    } else {
+        print!("{}", to_text(&plan));
+        Ok(())
+    };
+    if let Err(e) = printed {
+        eprintln!("groundcal plan: {e}");
+        return ExitStatus::RuntimeFailure;
+    }
+    if plan.reasons.is_empty() {
+        ExitStatus::Success
+    } else {
+        ExitStatus::Rejected
+    }
+}
+
+/// The configuration (every check but the schedule's) and the schedule to
+/// judge: the one given, else the configuration's.
+fn load(config_path: &Path, schedule_path: Option<&Path>) -> Result<(Config, Schedule), String> {
+    let bytes = read_bounded(config_path, 1 << 20).map_err(|e| e.to_string())?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| format!("{}: not UTF-8: {e}", config_path.display()))?;
+    let config = Config::parse(config_path, text).map_err(|e| e.to_string())?;
+    config
+        .validate_settings(config_path)
+        .map_err(|e| e.to_string())?;
+    let schedule_path = schedule_path
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| config.schedule_path(config_path));
+    let schedule = Schedule::read(&schedule_path).map_err(|e| e.to_string())?;
+    Ok((config, schedule))
+}
+
+fn to_json(
+    schedule: &Schedule,
+    prediction: &Prediction,
+    noise: NoiseModel,
+    reasons: Vec<String>,
+) -> PlanJson {
+    let s = prediction.sigma_deg_mm();
+    let o: &Observability = &prediction.observability;
+    PlanJson {
+        status: if o.problems.is_empty() {
+            "observable"
+        } else {
+            "not_observable"
+        },
+        reasons,
+        schedule: schedule.name.clone(),
+        poses: schedule.poses.len(),
+        sigma: SigmaJson {
+            alpha_deg: s[0],
+            beta_deg: s[1],
+            gamma_deg: s[2],
+            px_mm: s[3],
+            py_mm: s[4],
+            pz_mm: s[5],
+        },
+        correlations: prediction.correlations(),
+        observability: ObservabilityJson {
+            rotation_singular_values: o.rotation_singular_values,
+            translation_singular_values: o.translation_singular_values,
+            weakest_rotation: crate::calib::outcome::rotation_words(&o.rotation_weakest_axis),
+            weakest_position: crate::calib::outcome::position_words(&o.translation_weakest_axis),
+            min_singular_value: o.min_singular_value,
+        },
+        expected: ExpectedJson {
+            theta_deg: prediction.expected_theta_deg,
+            e_d_mm: prediction.expected_e_d_mm,
+        },
+        noise,
+    }
+}
+
+fn to_text(plan: &PlanJson) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let s = &plan.sigma;
+    let _ = writeln!(
+        out,
+        "schedule \"{}\": {} poses; noise per pose {}° and {} mm",
+        plan.schedule, plan.poses, plan.noise.normal_sigma_deg, plan.noise.offset_sigma_mm
+    );
+    let _ = writeln!(out, "\npredicted σ");
+    for (name, value, unit) in [
+        ("alpha", s.alpha_deg, "°"),
+        ("beta", s.beta_deg, "°"),
+        ("gamma", s.gamma_deg, "°"),
+        ("px", s.px_mm, " mm"),
+        ("py", s.py_mm, " mm"),
+        ("pz", s.pz_mm, " mm"),
+    ] {
+        let _ = writeln!(out, "  {name:<8} {value:>10.4}{unit}");
+    }
+    let _ = writeln!(
+        out,
+        "\nweakest rotation: {}\nweakest position: {}",
+        plan.observability.weakest_rotation, plan.observability.weakest_position
+    );
+    let _ = writeln!(
+        out,
+        "expected per pose: θ {:.3}°, e_d {:.2} mm",
+        plan.expected.theta_deg, plan.expected.e_d_mm
+    );
+    if plan.reasons.is_empty() {
+        let _ = writeln!(out, "\nstatus: OBSERVABLE, within the gates");
+    } else {
+        let _ = writeln!(out, "\nstatus: WOULD BE REJECTED");
+        for reason in &plan.reasons {
+            let _ = writeln!(out, "  - {reason}");
+        }
+    }
+    out
+}
