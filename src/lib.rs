@@ -36,6 +36,7 @@ pub use groundcal_calib as calib;
 pub mod cli;
 pub mod config;
 pub mod depth_image;
+pub mod design;
 pub mod export;
 pub mod files;
 pub mod hardware;

@@ -173,7 +173,7 @@ enum Command {
     /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
     /// Predict a schedule's σ, correlations and observability before the robot moves; exit 3 when it would be rejected.
     #[command(
-        after_help = "Example:\n  groundcal plan --config /etc/groundcal/groundcal.toml config/schedules/octopus-52.toml --json"
+        after_help = "Examples:\n  groundcal plan --config /etc/groundcal/groundcal.toml config/schedules/octopus-52.toml --json\n  groundcal plan --design 16 --config config/sim.toml --out config/schedules/designed-16.toml"
     )]
     Plan {
         /// The configuration (nominal mount, limits, gates, [calibration.noise]); default /etc/groundcal/groundcal.toml.
@@ -181,6 +181,12 @@ enum Command {
         config: Option<PathBuf>,
         /// The schedule to judge (default: the configuration's).
         schedule: Option<PathBuf>,
+        /// Design a schedule of N poses within the robot's limits instead (needs --out).
+        #[arg(long, value_name = "N", requires = "out")]
+        design: Option<usize>,
+        /// Where --design writes the schedule (a config/schedules/*.toml file).
+        #[arg(long, value_name = "FILE")]
+        out: Option<PathBuf>,
         /// One JSON document on stdout.
         #[arg(long)]
         json: bool,
@@ -263,8 +269,14 @@ fn run(args: Args) -> ExitStatus {
         Command::Plan {
             config,
             schedule,
+            design,
+            out,
             json,
-        } => cli::plan::run(config.as_deref(), schedule.as_deref(), json),
+        } => match (design, out) {
+            (Some(count), Some(out)) => cli::plan::run_design(config.as_deref(), count, &out, json),
+            (None, None) => cli::plan::run(config.as_deref(), schedule.as_deref(), json),
+            _ => usage_error("plan: --design N and --out FILE go together".into()),
+        },
         Command::Solve { file, json } => {
             cli::solve::run(&file, json, &CalibrationSettings::default())
         }

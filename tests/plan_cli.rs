@@ -173,3 +173,79 @@ fn a_pose_beyond_the_limits_is_named() {
     assert!(said.contains("pose 1"), "{said}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The shipped designed schedule is what `plan --design 16` makes of the
+/// robot's configuration, every time; it passes `check-config` and
+/// calibrates the simulated robot, accepted.
+#[test]
+fn the_designed_schedule_is_reproducible_valid_and_calibrates() {
+    let dir = temp_dir("plan-design");
+    let config = root().join("config/groundcal.toml");
+    let mut made = Vec::new();
+    for run in 0..2 {
+        let out = dir.join(format!("designed-{run}.toml"));
+        let (code, stdout, said) = groundcal(&[
+            "plan",
+            "--design",
+            "16",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]);
+        assert_eq!(code, 0, "{stdout}{said}");
+        let report: Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(report["designed"]["poses"], 16);
+        // A third of the paper's robot time.
+        let designed = report["designed"]["wall_time_s"].as_f64().unwrap();
+        let configured = report["configured"]["wall_time_s"].as_f64().unwrap();
+        assert!(designed * 3.0 <= configured + 1e-9, "{report:#}");
+        made.push(std::fs::read_to_string(&out).unwrap());
+    }
+    assert_eq!(made[0], made[1], "the same input designed two schedules");
+    let without_comments = |text: &str| -> String {
+        text.lines()
+            .filter(|l| !l.starts_with('#'))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let shipped =
+        std::fs::read_to_string(root().join("config/schedules/designed-16.toml")).unwrap();
+    assert_eq!(
+        without_comments(&made[0]),
+        without_comments(&shipped),
+        "config/schedules/designed-16.toml is not what plan --design 16 makes of config/groundcal.toml"
+    );
+
+    let designed = root().join("config/schedules/designed-16.toml");
+    let config = sim_config(
+        &dir,
+        &[(
+            &format!(
+                "schedule = \"{}\"",
+                root().join("config/schedules/octopus-52.toml").display()
+            ),
+            &format!("schedule = \"{}\"", designed.display()),
+        )],
+    );
+    std::fs::write(dir.join("token.sim"), "a-token\n").unwrap();
+    let (code, stdout, said) = groundcal(&["check-config", config.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stdout}{said}");
+    let (code, result) =
+        groundcal_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{result:#}");
+    assert_eq!(result["summary"]["poses_used"], 16, "{result:#}");
+    let (code, plan) = groundcal_json(&["plan", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{plan:#}");
+    // Achieved within four predicted σ of the truth, parameter by parameter.
+    for (k, key) in KEYS.iter().enumerate() {
+        let error = (result["robot_from_sensor"][key].as_f64().unwrap() - TRUTH[k]).abs();
+        let sigma = plan["sigma"][key].as_f64().unwrap();
+        assert!(
+            error <= 4.0 * sigma,
+            "{key}: off by {error}, predicted σ {sigma}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

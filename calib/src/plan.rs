@@ -133,6 +133,89 @@ pub fn predict_schedule(
     })
 }
 
+/// Chooses `count` of `candidates` (commanded body poses) whose predicted
+/// σ are smallest against `reference` (one σ per parameter, in radians and
+/// metres: the configured schedule's, or the gates'): the mean of
+/// (σᵢ / referenceᵢ)² is minimised.
+///
+/// Backward elimination from every candidate (the pose whose loss costs
+/// least goes first), then exchange passes (a chosen pose swapped for an
+/// unchosen one while that helps). Deterministic: the same input gives the
+/// same choice. Returns the chosen indices into `candidates`, in candidate
+/// order, and the largest ratio σᵢ / referenceᵢ.
+pub fn design(
+    candidates: &[PoseParams],
+    count: usize,
+    nominal: &PoseParams,
+    noise: &NoiseModel,
+    reference: &[f64; 6],
+) -> Option<(Vec<usize>, f64)> {
+    if count < 3 || count > candidates.len() {
+        return None;
+    }
+    let objective = |chosen: &[usize]| -> f64 {
+        let poses: Vec<PoseParams> = chosen.iter().map(|&i| candidates[i]).collect();
+        match predict_schedule(&poses, nominal, noise) {
+            // The mean of the squared ratios (A-optimal, each parameter in
+            // units of its reference): smooth, so the search does not stall
+            // on whichever parameter is worst at the moment.
+            Ok(p) if p.observability.problems.is_empty() => {
+                (0..6)
+                    .map(|i| p.covariance[(i, i)].max(0.0) / reference[i].powi(2))
+                    .sum::<f64>()
+                    / 6.0
+            }
+            _ => f64::INFINITY,
+        }
+    };
+    let mut chosen: Vec<usize> = (0..candidates.len()).collect();
+    while chosen.len() > count {
+        let mut best: Option<(usize, f64)> = None;
+        for k in 0..chosen.len() {
+            let mut without = chosen.clone();
+            without.remove(k);
+            let value = objective(&without);
+            if best.is_none_or(|(_, b)| value < b) {
+                best = Some((k, value));
+            }
+        }
+        let (k, _) = best?;
+        chosen.remove(k);
+    }
+    let mut value = objective(&chosen);
+    for _pass in 0..4 {
+        let mut improved = false;
+        for slot in 0..chosen.len() {
+            for candidate in 0..candidates.len() {
+                if chosen.contains(&candidate) {
+                    continue;
+                }
+                let mut trial = chosen.clone();
+                trial[slot] = candidate;
+                let trial_value = objective(&trial);
+                if trial_value < value * (1.0 - 1e-9) {
+                    chosen = trial;
+                    value = trial_value;
+                    improved = true;
+                }
+            }
+        }
+        if !improved {
+            break;
+        }
+    }
+    chosen.sort_unstable();
+    if !value.is_finite() {
+        return None;
+    }
+    let poses: Vec<PoseParams> = chosen.iter().map(|&i| candidates[i]).collect();
+    let prediction = predict_schedule(&poses, nominal, noise).ok()?;
+    let worst = (0..6)
+        .map(|i| prediction.covariance[(i, i)].max(0.0).sqrt() / reference[i])
+        .fold(0.0, f64::max);
+    Some((chosen, worst))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

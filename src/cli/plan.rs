@@ -237,3 +237,201 @@ fn to_text(plan: &PlanJson) -> String {
     }
     out
 }
+
+/// What `plan --design N --json` prints.
+#[derive(Debug, Serialize)]
+pub struct DesignJson {
+    pub out: PathBuf,
+    pub designed: ScheduleSummaryJson,
+    pub configured: ScheduleSummaryJson,
+    /// Candidate poses considered, and those the Kinect could not see the
+    /// ground from.
+    pub candidates: usize,
+    pub candidates_unseen: usize,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ScheduleSummaryJson {
+    pub schedule: String,
+    pub poses: usize,
+    /// Predicted one-σ (null when the schedule cannot observe all six).
+    pub sigma: Option<SigmaJson>,
+    /// Estimated robot time: per pose the motion, the settling and the
+    /// frames.
+    pub wall_time_s: f64,
+}
+
+fn sigma_json(sigma: &[f64; 6]) -> SigmaJson {
+    SigmaJson {
+        alpha_deg: sigma[0].to_degrees(),
+        beta_deg: sigma[1].to_degrees(),
+        gamma_deg: sigma[2].to_degrees(),
+        px_mm: sigma[3] * 1000.0,
+        py_mm: sigma[4] * 1000.0,
+        pz_mm: sigma[5] * 1000.0,
+    }
+}
+
+/// `plan --design N --out FILE`: designs a schedule of N poses and writes it.
+pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bool) -> ExitStatus {
+    let config_path = config_path
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("/etc/groundcal/groundcal.toml"));
+    let (config, configured) = match load(&config_path, None) {
+        Ok(loaded) => loaded,
+        Err(e) => {
+            eprintln!("groundcal plan: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let Some(nominal) = config.calibration.nominal_mount else {
+        eprintln!(
+            "groundcal plan: {}: calibration.nominal_mount is needed to design a schedule",
+            config_path.display()
+        );
+        return ExitStatus::BadInput;
+    };
+    let nominal = nominal.pose().to_params();
+    let noise = config
+        .calibration
+        .noise
+        .unwrap_or_else(NoiseModel::solve_floors);
+    let gates = &config.calibration.gates;
+    let configured_sigma = crate::design::predicted_sigma(&configured, &nominal, &noise);
+    // Against the configured schedule when it observes all six, else the gates.
+    let reference = configured_sigma.unwrap_or([
+        gates.sigma_angle_max_deg.to_radians(),
+        gates.sigma_angle_max_deg.to_radians(),
+        gates.sigma_angle_max_deg.to_radians(),
+        gates.sigma_position_max_mm / 1000.0,
+        gates.sigma_position_max_mm / 1000.0,
+        gates.sigma_position_max_mm / 1000.0,
+    ]);
+    let design = match crate::design::design_schedule(
+        count,
+        &config.robot.limits,
+        &configured,
+        &nominal,
+        &noise,
+        &reference,
+    ) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("groundcal plan: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    let designed_sigma = crate::design::predicted_sigma(&design.schedule, &nominal, &noise);
+    let c = &config.calibration;
+    let per_pose_s =
+        (f64::from(c.motion_ms) + c.settle_ms as f64) / 1000.0 + c.frames_per_pose as f64 / 30.0;
+    let how = format!(
+        "Designed by `groundcal plan --design {count}` from {config}: of {candidates} candidate\n\
+         body poses (roll and pitch at 0, ±45 % and ±90 % of the ±{tilt}° tilt limit, three\n\
+         heights within {lo}..{hi} mm; {unseen} left out where the Kinect would see the ground\n\
+         farther than in \"{reference}\"), the {count} that minimise the mean squared ratio of\n\
+         each parameter's predicted σ to that of \"{reference}\" (backward elimination, then\n\
+         exchange), visited nearest first. Largest ratio {ratio:.2}; total motion {deg:.0}° of\n\
+         tilt and {mm:.0} mm of height. Noise per pose: {n_deg}° and {n_mm} mm.",
+        config = config_path.display(),
+        candidates = design.candidates,
+        tilt = config.robot.limits.max_tilt_deg,
+        lo = config.robot.limits.min_height_mm,
+        hi = config.robot.limits.max_height_mm,
+        unseen = design.unseen,
+        reference = configured.name,
+        ratio = design.worst_ratio,
+        deg = design.motion_deg,
+        mm = design.motion_mm,
+        n_deg = noise.normal_sigma_deg,
+        n_mm = noise.offset_sigma_mm,
+    );
+    if let Err(e) =
+        crate::files::write_atomically(out, crate::design::to_toml(&design, &how).as_bytes())
+    {
+        eprintln!("groundcal plan: {}: {e}", out.display());
+        return ExitStatus::RuntimeFailure;
+    }
+    let summary = |schedule: &Schedule, sigma: Option<[f64; 6]>| ScheduleSummaryJson {
+        schedule: schedule.name.clone(),
+        poses: schedule.poses.len(),
+        sigma: sigma.as_ref().map(sigma_json),
+        wall_time_s: per_pose_s * schedule.poses.len() as f64,
+    };
+    let report = DesignJson {
+        out: out.to_path_buf(),
+        designed: summary(&design.schedule, designed_sigma),
+        configured: summary(&configured, configured_sigma),
+        candidates: design.candidates,
+        candidates_unseen: design.unseen,
+    };
+    let printed = if json {
+        super::print_json(&report)
+    } else {
+        print!("{}", design_text(&report, &how));
+        Ok(())
+    };
+    if let Err(e) = printed {
+        eprintln!("groundcal plan: {e}");
+        return ExitStatus::RuntimeFailure;
+    }
+    let passes = report.designed.sigma.as_ref().is_some_and(|s| {
+        s.alpha_deg.max(s.beta_deg).max(s.gamma_deg) <= gates.sigma_angle_max_deg
+            && s.px_mm.max(s.py_mm).max(s.pz_mm) <= gates.sigma_position_max_mm
+    });
+    if passes {
+        ExitStatus::Success
+    } else {
+        ExitStatus::Rejected
+    }
+}
+
+fn design_text(report: &DesignJson, how: &str) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let _ = writeln!(out, "{how}\n");
+    let (d, c) = (&report.designed, &report.configured);
+    let _ = writeln!(
+        out,
+        "predicted σ      {:>14} {:>14}",
+        format!("{} ({})", d.schedule, d.poses),
+        format!("{} ({})", c.schedule, c.poses)
+    );
+    let pick = |s: &Option<SigmaJson>, k: usize| {
+        s.as_ref().map_or("-".to_string(), |s| {
+            let v = [
+                s.alpha_deg,
+                s.beta_deg,
+                s.gamma_deg,
+                s.px_mm,
+                s.py_mm,
+                s.pz_mm,
+            ][k];
+            if k < 3 {
+                format!("{v:.4}°")
+            } else {
+                format!("{v:.3} mm")
+            }
+        })
+    };
+    for (k, name) in ["alpha", "beta", "gamma", "px", "py", "pz"]
+        .iter()
+        .enumerate()
+    {
+        let _ = writeln!(
+            out,
+            "  {name:<14} {:>14} {:>14}",
+            pick(&d.sigma, k),
+            pick(&c.sigma, k)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "  {:<14} {:>14} {:>14}",
+        "robot time",
+        format!("{:.0} s", d.wall_time_s),
+        format!("{:.0} s", c.wall_time_s)
+    );
+    let _ = writeln!(out, "\nwritten to {}", report.out.display());
+    out
+}
