@@ -289,9 +289,17 @@ fn run(args: Args) -> ExitStatus {
             ground_fit,
             config,
         } => {
-            let gates = match config.as_deref().map(groundcal::config::Config::load) {
-                None => None,
-                Some(Ok((config, _))) => Some(config.calibration.gates),
+            let (gates, noise) = match config.as_deref().map(groundcal::config::Config::load) {
+                None => (None, None),
+                Some(Ok((config, _))) => (
+                    Some(config.calibration.gates),
+                    Some(
+                        config
+                            .calibration
+                            .noise
+                            .unwrap_or_else(groundcal::calib::plan::NoiseModel::solve_floors),
+                    ),
+                ),
                 Some(Err(e)) => return usage_error(e.to_string()),
             };
             let nominal_mount =
@@ -306,6 +314,7 @@ fn run(args: Args) -> ExitStatus {
                 nominal_mount,
                 threads,
                 gates,
+                noise,
                 ..Default::default()
             };
             options.pose.plane.method = ground_fit;

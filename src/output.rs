@@ -88,6 +88,20 @@ pub struct SigmaJson {
     pub pz_mm: f64,
 }
 
+impl SigmaJson {
+    /// From σ in radians and metres, in the order α, β, γ, px, py, pz.
+    pub fn from_radians_metres(sigma: &[f64; 6]) -> Self {
+        Self {
+            alpha_deg: sigma[0].to_degrees(),
+            beta_deg: sigma[1].to_degrees(),
+            gamma_deg: sigma[2].to_degrees(),
+            px_mm: sigma[3] * 1000.0,
+            py_mm: sigma[4] * 1000.0,
+            pz_mm: sigma[5] * 1000.0,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct PlaneJson {
     #[serde(deserialize_with = "number_or_nan")]
@@ -342,6 +356,10 @@ pub struct ResultJson {
     /// How the input was made and solved, when it says.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub setup: Option<SetupJson>,
+    /// The σ `groundcal plan` predicted for the schedule before the robot
+    /// moved (live calibrations), to compare with `sigma`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predicted_sigma: Option<SigmaJson>,
 }
 
 impl ResultJson {
@@ -383,6 +401,7 @@ impl ResultJson {
             notes: Vec::new(),
             gate_checks: c.checks.iter().map(GateCheckJson::from).collect(),
             setup: None,
+            predicted_sigma: None,
         }
     }
 
@@ -401,6 +420,7 @@ impl ResultJson {
             notes: Vec::new(),
             gate_checks: Vec::new(),
             setup: None,
+            predicted_sigma: None,
         }
     }
 
@@ -499,16 +519,30 @@ impl ResultJson {
             let _ = writeln!(out, "  for the Kinect tilted {tilt}°");
         }
         if let (Some(m), Some(s)) = (&self.robot_from_sensor, &self.sigma) {
-            let _ = writeln!(out, "\nrobot_from_sensor            value        σ");
-            for (name, v, sv, unit) in [
-                ("alpha", m.alpha_deg, s.alpha_deg, "°"),
-                ("beta", m.beta_deg, s.beta_deg, "°"),
-                ("gamma", m.gamma_deg, s.gamma_deg, "°"),
-                ("px", m.px_mm, s.px_mm, " mm"),
-                ("py", m.py_mm, s.py_mm, " mm"),
-                ("pz", m.pz_mm, s.pz_mm, " mm"),
+            let predicted = self.predicted_sigma.as_ref();
+            let _ = writeln!(
+                out,
+                "\nrobot_from_sensor            value        σ{}",
+                if predicted.is_some() {
+                    "   predicted σ"
+                } else {
+                    ""
+                }
+            );
+            let p = |f: fn(&SigmaJson) -> f64| predicted.map(f);
+            for (name, v, sv, pv, unit) in [
+                ("alpha", m.alpha_deg, s.alpha_deg, p(|s| s.alpha_deg), "°"),
+                ("beta", m.beta_deg, s.beta_deg, p(|s| s.beta_deg), "°"),
+                ("gamma", m.gamma_deg, s.gamma_deg, p(|s| s.gamma_deg), "°"),
+                ("px", m.px_mm, s.px_mm, p(|s| s.px_mm), " mm"),
+                ("py", m.py_mm, s.py_mm, p(|s| s.py_mm), " mm"),
+                ("pz", m.pz_mm, s.pz_mm, p(|s| s.pz_mm), " mm"),
             ] {
-                let _ = writeln!(out, "  {name:<8} {v:>22.4}{unit:<3} {sv:>9.4}{unit}");
+                let predicted = pv.map_or(String::new(), |pv| format!(" {pv:>10.4}{unit}"));
+                let _ = writeln!(
+                    out,
+                    "  {name:<8} {v:>22.4}{unit:<3} {sv:>9.4}{unit:<3}{predicted}"
+                );
             }
         }
         out

@@ -30,6 +30,9 @@ pub struct ReplayOptions {
     /// The gates to judge by (`replay --config`); otherwise the recording's
     /// own (those of its live run), so that both give the same verdict.
     pub gates: Option<Gates>,
+    /// The noise the solve assumes at least (`replay --config`'s); otherwise
+    /// the recording's own (its live run's).
+    pub noise: Option<crate::calib::plan::NoiseModel>,
     /// Worker threads; `None` uses every core.
     pub threads: Option<usize>,
 }
@@ -194,10 +197,11 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         (None, Some(gates)) => (gates, "recording"),
         (None, None) => (options.calibration.gates, "built-in"),
     };
-    let settings = CalibrationSettings {
-        gates,
-        ..options.calibration
+    let solve = match options.noise.or(session.noise) {
+        Some(noise) => noise.solve_settings(),
+        None => options.calibration.solve,
     };
+    let settings = CalibrationSettings { gates, solve };
     let mut result = ResultJson::from_poses(
         &observations,
         &failed,

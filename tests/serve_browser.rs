@@ -87,6 +87,8 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     assert_eq!(text("verdict"), "Passed checks", "{seen}");
     assert!(seen["points"].as_u64().unwrap() > 6, "{seen}");
     assert_eq!(seen["values"].as_array().unwrap().len(), 7, "{seen}");
+    // Each σ with the one predicted before the robot moved.
+    assert_eq!(seen["predicted"], 6, "{seen}");
     assert!(text("notActiveYet").starts_with("Not active yet"), "{seen}");
     // Accept asks first, then shows Active and hides itself.
     assert!(

@@ -40,6 +40,16 @@ impl NoiseModel {
         }
     }
 
+    /// The solve's settings with this noise as its floors: what it assumes
+    /// at least, so that the σ it reports are the ones predicted here.
+    pub fn solve_settings(&self) -> SolveSettings {
+        SolveSettings {
+            normal_sigma_floor: self.normal_sigma_deg.to_radians(),
+            offset_sigma_floor: self.offset_sigma_mm / 1000.0,
+            ..SolveSettings::default()
+        }
+    }
+
     /// Whether both σ are positive and finite.
     pub fn validate(&self) -> Result<(), String> {
         for (name, value) in [
@@ -119,12 +129,7 @@ pub fn predict_schedule(
             observation
         })
         .collect();
-    let settings = SolveSettings {
-        normal_sigma_floor: noise.normal_sigma_deg.to_radians(),
-        offset_sigma_floor: noise.offset_sigma_mm / 1000.0,
-        ..SolveSettings::default()
-    };
-    let solution = solve(&observations, &settings)?;
+    let solution = solve(&observations, &noise.solve_settings())?;
     Ok(Prediction {
         covariance: solution.covariance,
         observability: solution.observability,

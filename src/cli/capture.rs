@@ -104,6 +104,7 @@ pub fn capture_session(sensor: &impl DepthSensor, tilt_deg: f64) -> Session {
         schedule: None,
         nominal_mount: None,
         gates: None,
+        noise: None,
     }
 }
 

@@ -261,17 +261,6 @@ pub struct ScheduleSummaryJson {
     pub wall_time_s: f64,
 }
 
-fn sigma_json(sigma: &[f64; 6]) -> SigmaJson {
-    SigmaJson {
-        alpha_deg: sigma[0].to_degrees(),
-        beta_deg: sigma[1].to_degrees(),
-        gamma_deg: sigma[2].to_degrees(),
-        px_mm: sigma[3] * 1000.0,
-        py_mm: sigma[4] * 1000.0,
-        pz_mm: sigma[5] * 1000.0,
-    }
-}
-
 /// `plan --design N --out FILE`: designs a schedule of N poses and writes it.
 pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bool) -> ExitStatus {
     let config_path = config_path
@@ -355,7 +344,7 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
     let summary = |schedule: &Schedule, sigma: Option<[f64; 6]>| ScheduleSummaryJson {
         schedule: schedule.name.clone(),
         poses: schedule.poses.len(),
-        sigma: sigma.as_ref().map(sigma_json),
+        sigma: sigma.as_ref().map(SigmaJson::from_radians_metres),
         wall_time_s: per_pose_s * schedule.poses.len() as f64,
     };
     let report = DesignJson {

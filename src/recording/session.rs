@@ -47,6 +47,10 @@ pub struct Session {
     /// know): `replay` judges by the same ones unless told otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gates: Option<crate::calib::quality::Gates>,
+    /// The noise the live solve assumed at least (`[calibration.noise]`, a
+    /// groundcal extension like `gates`): `replay` assumes the same.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<crate::calib::plan::NoiseModel>,
 }
 
 /// Checks that feet are six finite triples.
@@ -109,6 +113,9 @@ impl Session {
         let bad = |m: String| InputError::new(path, None, m);
         if let Some(gates) = &session.gates {
             gates.validate().map_err(&bad)?;
+        }
+        if let Some(noise) = &session.noise {
+            noise.validate().map_err(|e| bad(format!("noise: {e}")))?;
         }
         check_feet(&session.home.feet_body_mm)
             .map_err(|e| bad(format!("home.feet_body_mm: {e}")))?;

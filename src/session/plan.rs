@@ -25,6 +25,8 @@ pub struct Plan {
     /// The Kinect's motor tilt during calibration.
     pub tilt_deg: f64,
     pub nominal_mount: Option<NominalMount>,
+    /// The noise of one pose's ground, for the σ predicted before moving.
+    pub noise: crate::calib::plan::NoiseModel,
     pub pose: ObserveSettings,
     pub calibration: CalibrationSettings,
     /// Write everything as a recording here, as it goes.
@@ -78,6 +80,9 @@ impl Plan {
             settle: Duration::from_millis(c.settle_ms).div_f64(scale),
             tilt_deg: config.sensor.tilt_deg,
             nominal_mount: c.nominal_mount,
+            noise: c
+                .noise
+                .unwrap_or_else(crate::calib::plan::NoiseModel::solve_floors),
             pose: ObserveSettings {
                 slip_threshold_m: c.slip_threshold_mm / 1000.0,
                 plane: PlaneFitSettings {
@@ -88,7 +93,11 @@ impl Plan {
             },
             calibration: crate::calib::calibrate::CalibrationSettings {
                 gates: c.gates,
-                ..Default::default()
+                // The configured noise is what the solve assumes at least:
+                // the σ it reports are then the ones `plan` predicts.
+                solve: c
+                    .noise
+                    .map_or_else(Default::default, |n| n.solve_settings()),
             },
             record,
             poll: Duration::from_millis(100)

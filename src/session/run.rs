@@ -376,6 +376,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
                 schedule: Some(schedule.name.clone()),
                 nominal_mount: plan.nominal_mount,
                 gates: Some(plan.calibration.gates),
+                noise: Some(plan.noise),
             },
         )?),
         None => None,
@@ -469,6 +470,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
     if let Some(note) = processor.prior_note() {
         result.notes.insert(0, note);
     }
+    result.predicted_sigma = predicted_sigma(plan);
     let recording = match writer {
         Some(w) => Some(w.finish()?),
         None => None,
@@ -663,4 +665,14 @@ pub async fn run<S: DepthSensor, C: BodyController>(
             Err(e)
         }
     }
+}
+
+/// The σ `groundcal plan` predicts for the plan's schedule (None without a
+/// nominal mount, or for a schedule the prediction cannot solve).
+fn predicted_sigma(plan: &Plan) -> Option<crate::output::SigmaJson> {
+    let nominal = plan.nominal_mount?.pose().to_params();
+    let poses: Vec<_> = plan.schedule.poses.iter().map(|p| p.to_params()).collect();
+    let prediction = crate::calib::plan::predict_schedule(&poses, &nominal, &plan.noise).ok()?;
+    let sigma: [f64; 6] = std::array::from_fn(|i| prediction.covariance[(i, i)].max(0.0).sqrt());
+    Some(crate::output::SigmaJson::from_radians_metres(&sigma))
 }

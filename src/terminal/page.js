@@ -113,6 +113,8 @@ function when(rfc3339) {
   return isNaN(t) ? (rfc3339 || '?') : t.toLocaleString([], { dateStyle: 'medium', timeStyle: 'medium' });
 }
 function fixed(value, unit) { return value.toFixed(unit === '°' ? 3 : 1); }
+// A σ with two significant digits: 0.0022°, 0.049 mm.
+function sig(value) { return value.toPrecision(2); }
 
 // How a result differs from the active calibration, in words: the largest
 // change of an angle and of a position.
@@ -129,17 +131,25 @@ function changeInWords(mount, active) {
     + '° (' + angle.name + '), positions by up to ' + Math.abs(shift.delta).toFixed(1) + ' mm (' + shift.name + ').';
 }
 
-function valuesTable(table, mount, sigma, active) {
+// predicted: the σ `plan` predicted before the robot moved (shown under
+// the achieved σ, to compare).
+function valuesTable(table, mount, sigma, active, predicted) {
   table.innerHTML = '';
   const head = table.insertRow();
-  for (const h of ['', 'value', '±σ', active ? 'change' : '']) { const th = document.createElement('th'); th.textContent = h; head.appendChild(th); }
+  for (const h of ['', 'value', predicted ? '±σ (predicted)' : '±σ', active ? 'change' : '']) { const th = document.createElement('th'); th.textContent = h; head.appendChild(th); }
   for (const [key, name, unit, words] of PARAMS) {
     const row = table.insertRow();
     const label = row.insertCell();
     const small = document.createElement('span'); small.className = 'small'; small.textContent = ' ' + words;
     label.append(name, small);
     row.insertCell().textContent = fixed(mount[key], unit) + unit;
-    row.insertCell().textContent = sigma ? fixed(sigma[key], unit) + unit : '';
+    const sigmaCell = row.insertCell();
+    sigmaCell.textContent = sigma ? sig(sigma[key]) + unit : '';
+    if (predicted) {
+      const small = document.createElement('div'); small.className = 'small predicted';
+      small.textContent = '(' + sig(predicted[key]) + unit + ')';
+      sigmaCell.appendChild(small);
+    }
     const change = active && active.robot_from_sensor ? mount[key] - active.robot_from_sensor[key] : null;
     const shown = change === null ? '' : fixed(Math.abs(change), unit);
     const sign = change === null || Number(shown) === 0 ? '' : (change > 0 ? '+' : '−');
@@ -309,7 +319,7 @@ function render() {
     for (const reason of r.reasons || []) say(reason);
     const against = model.active && model.active.id !== s.result_id ? model.active : null;
     redraw('values', JSON.stringify([s.result_id, against && against.id]), () => {
-      if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against);
+      if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against, r.predicted_sigma);
       else $('values').innerHTML = '';
     });
     activeHere = !!model.active && model.active.id === s.result_id;

@@ -107,6 +107,7 @@ try {
   seen.verdict = await text('verdict');
   seen.points = await page.$$eval('#theta circle', (n) => n.length);
   seen.values = await page.$$eval('#values tr', (rows) => rows.map((r) => r.innerText));
+  seen.predicted = await page.$$eval('#values .predicted', (n) => n.length);
   seen.notActiveYet = await text('activeline');
   await shot(page, '3-verdict');
 
