@@ -54,11 +54,14 @@ pub struct ExpectedJson {
 
 /// Runs the command.
 pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool) -> ExitStatus {
-    let config_path = config_path
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| PathBuf::from("/etc/groundcal/groundcal.toml"));
-    let (config, schedule) = match load(&config_path, schedule_path) {
-        Ok(loaded) => loaded,
+    let Inputs {
+        config,
+        schedule,
+        nominal,
+        noise,
+        ..
+    } = match load(config_path, schedule_path) {
+        Ok(inputs) => inputs,
         Err(e) => {
             eprintln!("groundcal plan: {e}");
             return ExitStatus::BadInput;
@@ -74,19 +77,8 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
             return ExitStatus::BadInput;
         }
     }
-    let Some(nominal) = config.calibration.nominal_mount else {
-        eprintln!(
-            "groundcal plan: {}: calibration.nominal_mount is needed to predict (the planes depend on the mount)",
-            config_path.display()
-        );
-        return ExitStatus::BadInput;
-    };
-    let noise = config
-        .calibration
-        .noise
-        .unwrap_or_else(NoiseModel::solve_floors);
     let poses: Vec<_> = schedule.poses.iter().map(|p| p.to_params()).collect();
-    let prediction = match predict_schedule(&poses, &nominal.pose().to_params(), &noise) {
+    let prediction = match predict_schedule(&poses, &nominal, &noise) {
         Ok(p) => p,
         Err(e) => {
             eprintln!("groundcal plan: the schedule cannot be solved: {e}");
@@ -139,21 +131,54 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
     }
 }
 
-/// The configuration (every check but the schedule's) and the schedule to
-/// judge: the one given, else the configuration's.
-fn load(config_path: &Path, schedule_path: Option<&Path>) -> Result<(Config, Schedule), String> {
-    let bytes = read_bounded(config_path, 1 << 20).map_err(|e| e.to_string())?;
+/// What planning starts from: the configuration (every check but the
+/// schedule's), the schedule to judge (the one given, else the
+/// configuration's), the nominal mount and the noise model.
+struct Inputs {
+    config: Config,
+    config_path: PathBuf,
+    schedule: Schedule,
+    nominal: crate::calib::geometry::PoseParams,
+    noise: NoiseModel,
+}
+
+fn load(config_path: Option<&Path>, schedule_path: Option<&Path>) -> Result<Inputs, String> {
+    let config_path = config_path
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("/etc/groundcal/groundcal.toml"));
+    let bytes = read_bounded(&config_path, 1 << 20).map_err(|e| e.to_string())?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|e| format!("{}: not UTF-8: {e}", config_path.display()))?;
-    let config = Config::parse(config_path, text).map_err(|e| e.to_string())?;
+    let config = Config::parse(&config_path, text).map_err(|e| e.to_string())?;
     config
-        .validate_settings(config_path)
+        .validate_settings(&config_path)
         .map_err(|e| e.to_string())?;
     let schedule_path = schedule_path
         .map(Path::to_path_buf)
-        .unwrap_or_else(|| config.schedule_path(config_path));
+        .unwrap_or_else(|| config.schedule_path(&config_path));
     let schedule = Schedule::read(&schedule_path).map_err(|e| e.to_string())?;
-    Ok((config, schedule))
+    let nominal = config
+        .calibration
+        .nominal_mount
+        .ok_or_else(|| {
+            format!(
+                "{}: calibration.nominal_mount is needed to plan (the planes depend on the mount)",
+                config_path.display()
+            )
+        })?
+        .pose()
+        .to_params();
+    let noise = config
+        .calibration
+        .noise
+        .unwrap_or_else(NoiseModel::solve_floors);
+    Ok(Inputs {
+        config,
+        config_path,
+        schedule,
+        nominal,
+        noise,
+    })
 }
 
 fn to_json(
@@ -263,28 +288,19 @@ pub struct ScheduleSummaryJson {
 
 /// `plan --design N --out FILE`: designs a schedule of N poses and writes it.
 pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bool) -> ExitStatus {
-    let config_path = config_path
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| PathBuf::from("/etc/groundcal/groundcal.toml"));
-    let (config, configured) = match load(&config_path, None) {
-        Ok(loaded) => loaded,
+    let Inputs {
+        config,
+        config_path,
+        schedule: configured,
+        nominal,
+        noise,
+    } = match load(config_path, None) {
+        Ok(inputs) => inputs,
         Err(e) => {
             eprintln!("groundcal plan: {e}");
             return ExitStatus::BadInput;
         }
     };
-    let Some(nominal) = config.calibration.nominal_mount else {
-        eprintln!(
-            "groundcal plan: {}: calibration.nominal_mount is needed to design a schedule",
-            config_path.display()
-        );
-        return ExitStatus::BadInput;
-    };
-    let nominal = nominal.pose().to_params();
-    let noise = config
-        .calibration
-        .noise
-        .unwrap_or_else(NoiseModel::solve_floors);
     let gates = &config.calibration.gates;
     let configured_sigma = crate::design::predicted_sigma(&configured, &nominal, &noise);
     // Against the configured schedule when it observes all six, else the gates.
