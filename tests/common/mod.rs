@@ -343,7 +343,10 @@ pub fn browser_ready(test: &str) -> bool {
 /// The simulation configuration pointed at the lower computer at `address`,
 /// with `robot_keys` (TOML lines of `[robot]`, e.g. `retries = 30`) and a
 /// short settle delay (a recorded robot holds still at once), written into
-/// `dir`; its schedule path is absolute.
+/// `dir`; its schedule path is absolute. Without the simulator's
+/// `[calibration.noise]`: a recording played back live is not the
+/// simulator's, and its replay assumes the recording's noise (none stored:
+/// the solve's default floors), so the live run must too.
 pub fn config_towards(address: &str, dir: &Path, robot_keys: &str) -> PathBuf {
     let text = std::fs::read_to_string(root().join("config/sim.toml"))
         .expect("config/sim.toml")
@@ -360,8 +363,29 @@ pub fn config_towards(address: &str, dir: &Path, robot_keys: &str) -> PathBuf {
             ),
         );
     let path = dir.join("groundcal.toml");
-    std::fs::write(&path, text).expect("configuration written");
+    std::fs::write(&path, without_table(&text, "[calibration.noise]"))
+        .expect("configuration written");
     path
+}
+
+/// A TOML text without one table: its header and its keys, up to the next
+/// blank line.
+fn without_table(text: &str, header: &str) -> String {
+    let mut inside = false;
+    let mut kept = String::new();
+    for line in text.lines() {
+        if line.trim() == header {
+            inside = true;
+        } else if inside && line.trim().is_empty() {
+            inside = false;
+        }
+        if !inside {
+            kept.push_str(line);
+            kept.push('\n');
+        }
+    }
+    assert!(kept.len() < text.len(), "{header} is not in the configuration");
+    kept
 }
 
 /// What a live calibration against a recorded robot gave.
