@@ -384,7 +384,10 @@ fn without_table(text: &str, header: &str) -> String {
             kept.push('\n');
         }
     }
-    assert!(kept.len() < text.len(), "{header} is not in the configuration");
+    assert!(
+        kept.len() < text.len(),
+        "{header} is not in the configuration"
+    );
     kept
 }
 
