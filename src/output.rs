@@ -44,6 +44,19 @@ pub struct MountJson {
 }
 
 impl MountJson {
+    /// The six parameters in the order α, β, γ, px, py, pz (degrees,
+    /// millimetres).
+    pub fn values(&self) -> [f64; 6] {
+        [
+            self.alpha_deg,
+            self.beta_deg,
+            self.gamma_deg,
+            self.px_mm,
+            self.py_mm,
+            self.pz_mm,
+        ]
+    }
+
     pub fn from_params(p: &PoseParams) -> Self {
         let d = PoseDegMm::from_params(p);
         let m = p.to_matrix();

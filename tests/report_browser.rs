@@ -288,14 +288,7 @@ fn report_of_a_recording_shows_its_setup_and_commanded_poses() {
         // Change = result − nominal, for each of the six parameters.
         let nominal = [4.5, -30.7, -2.0, 491.3, 331.6, 8.7];
         let m = result.robot_from_sensor.as_ref().unwrap();
-        let values = [
-            m.alpha_deg,
-            m.beta_deg,
-            m.gamma_deg,
-            m.px_mm,
-            m.py_mm,
-            m.pz_mm,
-        ];
+        let values = m.values();
         let rows = sections["setup"]["nominal"].as_array().unwrap();
         assert_eq!(rows.len(), 6, "{view}");
         for ((row, value), nominal) in rows.iter().zip(values).zip(nominal) {

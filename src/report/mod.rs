@@ -33,7 +33,7 @@ use html::{escape, num, opt, signed};
 use crate::calib::outcome::{position_words, rotation_words};
 use crate::calib::sensor::DepthModel;
 use crate::files::{write_atomically, FileError};
-use crate::output::{GateCheckJson, MountJson, PoseJson, ResultJson};
+use crate::output::{GateCheckJson, PoseJson, ResultJson};
 
 /// Where a result came from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -349,17 +349,6 @@ fn six(values: [f64; 6]) -> [(&'static str, f64, &'static str); 6] {
     ]
 }
 
-fn mount_values(m: &MountJson) -> [f64; 6] {
-    [
-        m.alpha_deg,
-        m.beta_deg,
-        m.gamma_deg,
-        m.px_mm,
-        m.py_mm,
-        m.pz_mm,
-    ]
-}
-
 fn setup_section(page: &mut String, result: &ResultJson, input: &str) {
     page.push_str("<section id=\"setup\"><h2>Setup</h2>\n<dl class=\"facts setup\">\n");
     let _ = writeln!(page, "<dt>input</dt><dd>{}</dd>", escape(input));
@@ -460,7 +449,7 @@ fn setup_section(page: &mut String, result: &ResultJson, input: &str) {
         (Some(n), Some(m)) => {
             let nominal = [n.alpha_deg, n.beta_deg, n.gamma_deg, n.px_mm, n.py_mm, n.pz_mm];
             page.push_str("<div class=\"scroll\"><table class=\"nominal\">\n<thead><tr><th class=\"text\">parameter</th><th>nominal</th><th>result</th><th>change</th></tr></thead>\n<tbody>\n");
-            for ((name, result_value, unit), nominal_value) in six(mount_values(m)).into_iter().zip(nominal) {
+            for ((name, result_value, unit), nominal_value) in six(m.values()).into_iter().zip(nominal) {
                 let decimals = if unit == "°" { 2 } else { 1 };
                 let _ = writeln!(
                     page,
