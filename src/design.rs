@@ -177,7 +177,7 @@ pub fn predicted_sigma(
         .observability
         .problems
         .is_empty()
-        .then(|| std::array::from_fn(|i| prediction.covariance[(i, i)].max(0.0).sqrt()))
+        .then(|| prediction.sigma())
 }
 
 /// The schedule as a `config/schedules/*.toml` file, with a comment saying

@@ -551,11 +551,12 @@ impl ResultJson {
                 ("py", m.py_mm, s.py_mm, p(|s| s.py_mm), " mm"),
                 ("pz", m.pz_mm, s.pz_mm, p(|s| s.pz_mm), " mm"),
             ] {
-                let predicted = pv.map_or(String::new(), |pv| format!(" {pv:>10.4}{unit}"));
-                let _ = writeln!(
-                    out,
-                    "  {name:<8} {v:>22.4}{unit:<3} {sv:>9.4}{unit:<3}{predicted}"
-                );
+                let sigma = format!("{sv:>9.4}{unit}");
+                let line = match pv {
+                    Some(pv) => format!("{sigma:<13}{pv:>11.4}{unit}"),
+                    None => sigma,
+                };
+                let _ = writeln!(out, "  {name:<8} {v:>22.4}{unit:<3} {line}");
             }
         }
         out

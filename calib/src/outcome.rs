@@ -233,6 +233,7 @@ impl Solution {
     }
 }
 
-fn sigma_of(covariance: &Matrix6<f64>) -> Vector6<f64> {
+/// One σ of each parameter from a covariance (its diagonal's roots).
+pub(crate) fn sigma_of(covariance: &Matrix6<f64>) -> Vector6<f64> {
     Vector6::from_fn(|i, _| covariance[(i, i)].max(0.0).sqrt())
 }

@@ -80,14 +80,21 @@ impl Prediction {
     /// One σ of each parameter (degrees, millimetres), in the order
     /// α, β, γ, px, py, pz.
     pub fn sigma_deg_mm(&self) -> [f64; 6] {
+        let sigma = self.sigma();
         std::array::from_fn(|i| {
-            let sigma = self.covariance[(i, i)].max(0.0).sqrt();
+            let sigma = sigma[i];
             if i < 3 {
                 sigma.to_degrees()
             } else {
                 sigma * 1000.0
             }
         })
+    }
+
+    /// One σ of each parameter (radians, metres), in the order α, β, γ,
+    /// px, py, pz.
+    pub fn sigma(&self) -> [f64; 6] {
+        super::outcome::sigma_of(&self.covariance).into()
     }
 
     /// The correlation matrix of the six parameters.
@@ -215,9 +222,8 @@ pub fn design(
     }
     let poses: Vec<PoseParams> = chosen.iter().map(|&i| candidates[i]).collect();
     let prediction = predict_schedule(&poses, nominal, noise).ok()?;
-    let worst = (0..6)
-        .map(|i| prediction.covariance[(i, i)].max(0.0).sqrt() / reference[i])
-        .fold(0.0, f64::max);
+    let sigma = prediction.sigma();
+    let worst = (0..6).map(|i| sigma[i] / reference[i]).fold(0.0, f64::max);
     Some((chosen, worst))
 }
 

@@ -671,8 +671,6 @@ pub async fn run<S: DepthSensor, C: BodyController>(
 /// nominal mount, or for a schedule the prediction cannot solve).
 fn predicted_sigma(plan: &Plan) -> Option<crate::output::SigmaJson> {
     let nominal = plan.nominal_mount?.pose().to_params();
-    let poses: Vec<_> = plan.schedule.poses.iter().map(|p| p.to_params()).collect();
-    let prediction = crate::calib::plan::predict_schedule(&poses, &nominal, &plan.noise).ok()?;
-    let sigma: [f64; 6] = std::array::from_fn(|i| prediction.covariance[(i, i)].max(0.0).sqrt());
+    let sigma = crate::design::predicted_sigma(&plan.schedule, &nominal, &plan.noise)?;
     Some(crate::output::SigmaJson::from_radians_metres(&sigma))
 }
