@@ -18,7 +18,8 @@
 //! - [`outcome`]: what a calibration found, shared by the solve and the verdict;
 //! - [`solve`]: `robot_from_sensor` from all observations (paper 4.3);
 //! - [`quality`]: θ and e_d (paper 5.2), gates and the verdict;
-//! - [`calibrate`]: the solve then the verdict, in one call.
+//! - [`calibrate`]: the solve then the verdict, in one call;
+//! - [`verify`]: whether the sensor still sits where a calibration says.
 
 // One exception, in `disparity`: the AVX2 build of the per-pixel loop, called
 // only after the processor was checked for AVX2.
@@ -39,3 +40,4 @@ pub mod plane;
 pub mod quality;
 pub mod sensor;
 pub mod solve;
+pub mod verify;

@@ -594,7 +594,10 @@ fn level_kinect(config: SimKinectConfig) -> (SimKinect, TruePose) {
 
 #[tokio::test(start_paused = true)]
 async fn accelerometer_and_tilt_follow_the_true_pose() {
-    let (mut kinect, pose) = level_kinect(SimKinectConfig::default());
+    let (mut kinect, pose) = level_kinect(SimKinectConfig {
+        accelerometer_noise_g: 0.0,
+        ..SimKinectConfig::default()
+    });
     let state = kinect.tilt_state().await.unwrap();
     assert_eq!(state.accelerometer_g, [0.0, 1.0, 0.0]);
     assert_eq!(kinect.accelerometer_counts(), [0, 819, 0]);
@@ -608,8 +611,10 @@ async fn accelerometer_and_tilt_follow_the_true_pose() {
     assert_eq!(state.tilt_deg, -20.0);
     let (s, c) = 20f64.to_radians().sin_cos();
     let expected = [0.0, c, -s];
+    // Whole counts, as a real Kinect reports them.
     for (got, want) in state.accelerometer_g.iter().zip(expected) {
-        assert!((got - want).abs() < 1e-12, "{:?}", state.accelerometer_g);
+        assert!((got - want).abs() <= 0.5 / 819.0, "{:?}", state.accelerometer_g);
+        assert_eq!((got * 819.0).fract(), 0.0);
     }
     assert_eq!(kinect.accelerometer_counts(), [0, 770, -280]);
 
@@ -633,6 +638,32 @@ async fn accelerometer_and_tilt_follow_the_true_pose() {
         groundcal_hal::Error::kind(&e),
         groundcal_hal::ErrorKind::Refused
     );
+}
+
+#[tokio::test(start_paused = true)]
+async fn accelerometer_readings_are_noisy_whole_counts_around_gravity() {
+    let (mut kinect, _pose) = level_kinect(SimKinectConfig::default());
+    kinect.set_tilt(-20.0).await.unwrap();
+    let (s, c) = 20f64.to_radians().sin_cos();
+    let expected = [0.0, c, -s];
+    let n = 2000;
+    let mut sum = [0.0; 3];
+    let mut squares = [0.0; 3];
+    for _ in 0..n {
+        let g = kinect.tilt_state().await.unwrap().accelerometer_g;
+        for k in 0..3 {
+            assert_eq!((g[k] * 819.0).fract(), 0.0, "{g:?}");
+            sum[k] += g[k] - expected[k];
+            squares[k] += (g[k] - expected[k]).powi(2);
+        }
+    }
+    for k in 0..3 {
+        let mean = sum[k] / n as f64;
+        let rms = (squares[k] / n as f64).sqrt();
+        // Noise 1.5·10⁻³ g with rounding to 1/819 g (σ 3.5·10⁻⁴ g): 1.54·10⁻³ g.
+        assert!(mean.abs() < 1e-4, "axis {k}: mean {mean}");
+        assert!((rms - 1.54e-3).abs() < 1e-4, "axis {k}: rms {rms}");
+    }
 }
 
 #[tokio::test(start_paused = true)]

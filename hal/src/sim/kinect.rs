@@ -50,6 +50,11 @@ pub const DISPARITY_SIGMA: f64 = 1.4e-3;
 /// Accelerometer counts per g (recording.md).
 pub const ACCELEROMETER_COUNTS_PER_G: f64 = 819.0;
 
+/// The accelerometer's noise per axis and reading, in g: 1.5·10⁻³ g, about
+/// 1.2 counts or 0.09° of gravity's direction (the Kinect's KXSD9-class part
+/// reads a count or two of noise at rest).
+pub const ACCELEROMETER_NOISE_G: f64 = 1.5e-3;
+
 /// The tilt motor's range, ± degrees from level (the Kinect's is about ±27°).
 pub const TILT_LIMIT_DEG: f64 = 27.0;
 
@@ -103,6 +108,9 @@ pub struct SimKinectConfig {
     /// Set it to the session's `tilt_deg`, so that the mount the calibration
     /// finds is the one given.
     pub mount_tilt_deg: f64,
+    /// σ of each accelerometer axis per reading, in g (before the reading is
+    /// rounded to whole counts of 1/819 g, as a real Kinect's is).
+    pub accelerometer_noise_g: f64,
 }
 
 impl Default for SimKinectConfig {
@@ -122,6 +130,7 @@ impl Default for SimKinectConfig {
             time_scale: 1.0,
             tilt_speed_deg_s: 20.0,
             mount_tilt_deg: 0.0,
+            accelerometer_noise_g: ACCELEROMETER_NOISE_G,
         }
     }
 }
@@ -137,6 +146,7 @@ impl SimKinectConfig {
         let finite_non_negative = [
             ("noise_scale", self.noise_scale),
             ("emitter_baseline_m", self.emitter_baseline_m),
+            ("accelerometer_noise_g", self.accelerometer_noise_g),
         ];
         for (name, value) in finite_non_negative {
             if !(value.is_finite() && value >= 0.0) {
@@ -583,6 +593,8 @@ pub struct SimKinect {
     /// Frames delivered so far: the next frame's noise is drawn by this
     /// number, so that a run's frames do not depend on the host's timing.
     frames_delivered: u64,
+    /// Accelerometer readings so far (their noise is drawn by this number).
+    readings: u64,
     /// Started at the first frame requested (inside the runtime whose clock
     /// counts, paused or not).
     clock: Option<Clock>,
@@ -607,6 +619,7 @@ impl SimKinect {
             tilt_deg: config.mount_tilt_deg,
             led: Led::Off,
             frames_delivered: 0,
+            readings: 0,
             clock: None,
             last_tick: None,
         })
@@ -691,10 +704,25 @@ impl DepthSensor for SimKinect {
         Ok(())
     }
 
+    /// Gravity from the true pose, with the accelerometer's noise, in whole
+    /// counts as a real Kinect reports it.
     async fn tilt_state(&mut self) -> Result<TiltState, Self::Error> {
+        let c = *self.config();
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            c.seed ^ 0xacce_1e50_0000_0000 ^ self.readings.wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        );
+        self.readings += 1;
+        let (n0, n1) = normal_pair(&mut rng);
+        let (n2, _) = normal_pair(&mut rng);
+        let exact = accelerometer_g(&self.true_ground_from_sensor());
+        let noise = [n0, n1, n2];
+        let accelerometer_g = std::array::from_fn(|k| {
+            let g = exact[k] + c.accelerometer_noise_g * noise[k];
+            (g * ACCELEROMETER_COUNTS_PER_G).round() / ACCELEROMETER_COUNTS_PER_G
+        });
         Ok(TiltState {
             tilt_deg: self.tilt_deg,
-            accelerometer_g: accelerometer_g(&self.true_ground_from_sensor()),
+            accelerometer_g,
             stopped: true,
         })
     }
