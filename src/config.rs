@@ -26,6 +26,58 @@ pub struct Config {
     pub sim: Option<SimConfig>,
     #[serde(default)]
     pub serve: Option<ServeConfig>,
+    /// `groundcal verify` and the daemon's checks (defaults if absent).
+    #[serde(default)]
+    pub verify: VerifyConfig,
+}
+
+/// How a calibration is checked against the ground and the accelerometer
+/// (`groundcal verify`, the daemon at start-up and on "Check").
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VerifyConfig {
+    /// A direction has drifted beyond this many of its σ (the calibration's
+    /// and the poses' noise together). 4 keeps false alarms near 1 in 1000.
+    pub k_sigma: f64,
+    /// σ of one accelerometer reading, degrees of gravity's direction (its
+    /// noise, its counts of 1/819 g, its alignment with the depth camera).
+    pub accelerometer_sigma_deg: f64,
+    /// Tilted poses besides the still stance (0: stand still; 4 also see the
+    /// yaw). `--poses` overrides it.
+    pub poses: usize,
+    /// The body's roll and pitch at the tilted poses, degrees.
+    pub tilt_deg: f64,
+    /// Whether `serve` checks the active calibration when it starts.
+    pub at_start: bool,
+}
+
+impl Default for VerifyConfig {
+    fn default() -> Self {
+        let d = crate::calib::verify::VerifySettings::default();
+        Self {
+            k_sigma: d.k_sigma,
+            accelerometer_sigma_deg: d.accelerometer_sigma_deg,
+            poses: 0,
+            tilt_deg: 8.0,
+            at_start: true,
+        }
+    }
+}
+
+impl VerifyConfig {
+    /// The math's settings, with the ground's noise of `[calibration.noise]`.
+    pub fn settings(
+        &self,
+        calibration: &CalibrationConfig,
+    ) -> crate::calib::verify::VerifySettings {
+        crate::calib::verify::VerifySettings {
+            noise: calibration
+                .noise
+                .unwrap_or_else(crate::calib::plan::NoiseModel::solve_floors),
+            accelerometer_sigma_deg: self.accelerometer_sigma_deg,
+            k_sigma: self.k_sigma,
+        }
+    }
 }
 
 /// The lower computer.
@@ -273,6 +325,22 @@ impl Config {
             m.validate().map_err(|e| bad("calibration", e))?;
         }
         c.gates.validate().map_err(|e| bad("calibration", e))?;
+        self.verify
+            .settings(c)
+            .validate()
+            .map_err(|e| bad("verify", e))?;
+        if !(self.verify.tilt_deg.is_finite()
+            && self.verify.tilt_deg > 0.0
+            && self.verify.tilt_deg <= self.robot.limits.max_tilt_deg)
+        {
+            return Err(bad(
+                "verify.tilt_deg",
+                format!(
+                    "must be a positive number of degrees within the robot's max_tilt_deg {}, not {}",
+                    self.robot.limits.max_tilt_deg, self.verify.tilt_deg
+                ),
+            ));
+        }
         if let Some(noise) = &c.noise {
             noise.validate().map_err(|e| bad("calibration.noise", e))?;
         }

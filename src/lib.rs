@@ -49,3 +49,4 @@ pub mod session;
 pub mod store;
 pub mod systemd;
 pub mod terminal;
+pub mod verify;

@@ -52,11 +52,13 @@ Exit statuses (every command):
   1  failed at run time: hardware, link, disk
   2  bad input or usage; the message names the file, line, key or flag
   3  solved but rejected: unobservable, residuals or σ beyond the gates (the output says why)
+  4  verify only: the sensor no longer agrees with the calibration (drift; the output says which way)
 
 Examples:
   groundcal calibrate --robot sim --sensor sim      a whole simulated calibration
   groundcal replay DIR --report out/                a recording, offline, with its HTML report
   groundcal serve --config /etc/groundcal/groundcal.toml
+  groundcal verify --config /etc/groundcal/groundcal.toml   is the sensor still where it was calibrated?
 
 `groundcal help COMMAND` shows each command's flags and an example."
 )]
@@ -135,6 +137,32 @@ enum Command {
         /// The ground fit, overriding calibration.ground_fit: disparity or paper.
         #[arg(long, value_name = "disparity|paper")]
         ground_fit: Option<GroundFitMethod>,
+    },
+    /// Whether the sensor still sits where the active (or a given) calibration says: the ground and the accelerometer now, or in a recording; exit 4 on drift.
+    #[command(
+        after_help = "The robot holds its home stance (with --poses N, also N small tilted poses, which see a turn about the vertical) while the Kinect captures the ground and gravity; both are compared with what the calibration predicts. Exit 0 consistent, 4 drift (the output says which way and by how much), 1 hardware, 2 bad input.\n\nExamples:\n  groundcal verify --config /etc/groundcal/groundcal.toml\n  groundcal verify --config config/sim.toml --calibration result.json --poses 4\n  groundcal verify --config config/sim.toml --calibration result.json --recording rec/ --json"
+    )]
+    Verify {
+        /// The configuration (default: built-in simulation with --robot sim, else /etc/groundcal/groundcal.toml).
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// The calibration to check: a result of calibrate/replay/solve --json, or an active.json (default: the store's active calibration, [serve] state_dir).
+        #[arg(long, value_name = "FILE")]
+        calibration: Option<PathBuf>,
+        #[command(flatten)]
+        hardware: HardwareArgs,
+        /// Check a recording's poses offline instead of the robot now.
+        #[arg(long, value_name = "DIR", conflicts_with = "poses")]
+        recording: Option<PathBuf>,
+        /// Tilted poses besides the still stance (default [verify] poses, 0 = stand still).
+        #[arg(long, value_name = "N")]
+        poses: Option<usize>,
+        /// Keep what the check saw as a recording in this new directory.
+        #[arg(long, value_name = "DIR", conflicts_with = "recording")]
+        record: Option<PathBuf>,
+        /// One JSON document on stdout (progress stays on stderr).
+        #[arg(long)]
+        json: bool,
     },
     /// The simulated lower computer (hexapod-udp.md) on a UDP socket, until SIGINT or SIGTERM.
     #[command(
@@ -289,19 +317,21 @@ fn run(args: Args) -> ExitStatus {
             ground_fit,
             config,
         } => {
-            let (gates, noise) = match config.as_deref().map(groundcal::config::Config::load) {
-                None => (None, None),
-                Some(Ok((config, _))) => (
-                    Some(config.calibration.gates),
-                    Some(
-                        config
-                            .calibration
-                            .noise
-                            .unwrap_or_else(groundcal::calib::plan::NoiseModel::solve_floors),
+            let (gates, noise, verify) =
+                match config.as_deref().map(groundcal::config::Config::load) {
+                    None => (None, None, Default::default()),
+                    Some(Ok((config, _))) => (
+                        Some(config.calibration.gates),
+                        Some(
+                            config
+                                .calibration
+                                .noise
+                                .unwrap_or_else(groundcal::calib::plan::NoiseModel::solve_floors),
+                        ),
+                        config.verify.settings(&config.calibration),
                     ),
-                ),
-                Some(Err(e)) => return usage_error(e.to_string()),
-            };
+                    Some(Err(e)) => return usage_error(e.to_string()),
+                };
             let nominal_mount =
                 match nominal_mount.map(|m| cli::parse_numbers::<6>("--nominal-mount", &m)) {
                     None => None,
@@ -315,6 +345,7 @@ fn run(args: Args) -> ExitStatus {
                 threads,
                 gates,
                 noise,
+                verify,
                 ..Default::default()
             };
             options.pose.plane.method = ground_fit;
@@ -336,6 +367,23 @@ fn run(args: Args) -> ExitStatus {
             };
             cli::calibrate::run(&options)
         }
+        Command::Verify {
+            config,
+            calibration,
+            hardware,
+            recording,
+            poses,
+            record,
+            json,
+        } => cli::verify::run(&cli::verify::VerifyOptions {
+            config,
+            calibration,
+            selection: hardware.into(),
+            recording,
+            poses,
+            record,
+            json,
+        }),
         Command::SimRobot {
             listen,
             seed,

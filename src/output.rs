@@ -166,6 +166,10 @@ pub struct PoseJson {
     /// the input has it (`replay`; not a planes file).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub commanded: Option<PoseDegMm>,
+    /// The sensor's turn about the tilt motor's axis at this pose against
+    /// the poses' mean, from the accelerometer (degrees; when recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motor_turn_deg: Option<f64>,
 }
 
 impl PoseJson {
@@ -182,6 +186,7 @@ impl PoseJson {
             predicted_plane: None,
             note: None,
             commanded: None,
+            motor_turn_deg: None,
         }
     }
 }
@@ -199,6 +204,7 @@ impl From<&PoseOutcome> for PoseJson {
             predicted_plane: Some((&p.predicted).into()),
             note: p.note.clone(),
             commanded: None,
+            motor_turn_deg: None,
         }
     }
 }
@@ -373,6 +379,11 @@ pub struct ResultJson {
     /// moved (live calibrations), to compare with `sigma`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predicted_sigma: Option<SigmaJson>,
+    /// The tilt motor during the calibration, from the accelerometer (when
+    /// the poses have readings): the angle reached against the body, and
+    /// whether it moved.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motor: Option<crate::verify::MotorJson>,
 }
 
 impl ResultJson {
@@ -415,6 +426,7 @@ impl ResultJson {
             gate_checks: c.checks.iter().map(GateCheckJson::from).collect(),
             setup: None,
             predicted_sigma: None,
+            motor: None,
         }
     }
 
@@ -434,6 +446,7 @@ impl ResultJson {
             gate_checks: Vec::new(),
             setup: None,
             predicted_sigma: None,
+            motor: None,
         }
     }
 

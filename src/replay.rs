@@ -17,6 +17,7 @@ use crate::calib::solve::Observation;
 use crate::output::{ResultJson, SetupJson};
 use crate::recording::session::NominalMount;
 use crate::recording::{InputError, Recording};
+use crate::session::{GravityReading, VisitedPose};
 
 /// How to replay.
 #[derive(Debug, Clone, Default)]
@@ -35,6 +36,8 @@ pub struct ReplayOptions {
     pub noise: Option<crate::calib::plan::NoiseModel>,
     /// Worker threads; `None` uses every core.
     pub threads: Option<usize>,
+    /// How steady the tilt motor must have stayed (the accelerometer's σ).
+    pub verify: crate::calib::verify::VerifySettings,
 }
 
 /// The outcome of a replay.
@@ -119,17 +122,34 @@ fn process_pose(
     })
 }
 
-/// Replays a recording.
-pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, InputError> {
+/// What a recording's poses gave, in pose order.
+pub struct ObservedRecording {
+    pub poses: Vec<VisitedPose>,
+    /// BLAKE3 of the text files' and every frame's BLAKE3, in order (hex).
+    pub input_digest: String,
+    /// Depth frames read.
+    pub frames: usize,
+    /// A note when no mount tells which plane is the ground.
+    pub prior_note: Option<String>,
+}
+
+/// Per pose of a recording, the body pose from the feet, the ground from the
+/// frames (told from other planes by `nominal`) and gravity from the
+/// accelerometer readings; shared by `replay` and `verify --recording`.
+pub fn observe_recording(
+    recording: &Recording,
+    nominal: Option<NominalMount>,
+    settings: ObserveSettings,
+    threads: Option<usize>,
+) -> Result<ObservedRecording, InputError> {
     let session = &recording.session;
     let session_path = recording.dir.join("session.json");
-    let nominal = options.nominal_mount.or(session.nominal_mount);
     let processor = PoseObserver::new(
         session.kinect.depth_model,
         session.kinect.intrinsics,
         &session.home.feet_body_mm,
         nominal,
-        options.pose,
+        settings,
     )
     .map_err(|e| InputError::new(&session_path, None, e))?;
 
@@ -154,7 +174,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             })
             .collect()
     };
-    let gathered = match options.threads {
+    let gathered = match threads {
         Some(threads) => rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .build()
@@ -184,12 +204,39 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     }
     let input_digest = hasher.finalize().to_hex().to_string();
 
+    let mut poses = Vec::with_capacity(outcomes.len());
+    for ((outcome, record), body) in outcomes.into_iter().zip(&recording.poses).zip(&bodies) {
+        let states = record
+            .accelerometer
+            .iter()
+            .map(|name| recording.read_tilt_state(name).map(|raw| raw.state()))
+            .collect::<Result<Vec<_>, InputError>>()?;
+        poses.push(VisitedPose {
+            index: outcome.index,
+            ground_from_robot: body.as_ref().ok().map(|b| b.ground_from_robot),
+            fit: outcome.observation,
+            gravity: GravityReading::from_states(&states),
+        });
+    }
+    Ok(ObservedRecording {
+        poses,
+        input_digest,
+        frames,
+        prior_note: processor.prior_note(),
+    })
+}
+
+/// Replays a recording.
+pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, InputError> {
+    let session = &recording.session;
+    let nominal = options.nominal_mount.or(session.nominal_mount);
+    let observed = observe_recording(recording, nominal, options.pose, options.threads)?;
     let mut observations = Vec::new();
     let mut failed = Vec::new();
-    for outcome in outcomes {
-        match outcome.observation {
-            Ok(o) => observations.push(o),
-            Err(reason) => failed.push((outcome.index, reason)),
+    for pose in &observed.poses {
+        match &pose.fit {
+            Ok(o) => observations.push(o.clone()),
+            Err(reason) => failed.push((pose.index, reason.clone())),
         }
     }
     let (gates, gates_from) = match (options.gates, session.gates) {
@@ -209,9 +256,15 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         &settings,
         session.kinect.tilt_deg,
     );
-    if let Some(note) = processor.prior_note() {
+    if let Some(note) = observed.prior_note {
         result.notes.insert(0, note);
     }
+    crate::verify::judge_motor(
+        &mut result,
+        &observed.poses,
+        session.kinect.tilt_deg,
+        &options.verify,
+    );
     for pose in &mut result.poses {
         pose.commanded = recording
             .poses
@@ -239,7 +292,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     }
     Ok(Replay {
         result,
-        input_digest,
-        frames,
+        input_digest: observed.input_digest,
+        frames: observed.frames,
     })
 }

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{groundcal, groundcal_json, root, temp_dir};
+use common::{groundcal, groundcal_json, root, sim_config, temp_dir};
 use serde_json::Value;
 
 const KEYS: [&str; 6] = [
@@ -18,27 +18,6 @@ const KEYS: [&str; 6] = [
 
 /// The simulated robot's true mount (config/sim.toml's `[sim] mount`).
 const TRUTH: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
-
-/// config/sim.toml with its schedule path made absolute and these
-/// replacements, written into `dir`.
-fn sim_config(dir: &std::path::Path, replacements: &[(&str, &str)]) -> std::path::PathBuf {
-    let mut text = std::fs::read_to_string(root().join("config/sim.toml"))
-        .unwrap()
-        .replace(
-            "schedule = \"schedules/octopus-52.toml\"",
-            &format!(
-                "schedule = \"{}\"",
-                root().join("config/schedules/octopus-52.toml").display()
-            ),
-        );
-    for (from, to) in replacements {
-        assert!(text.contains(from), "{from}");
-        text = text.replace(from, to);
-    }
-    let path = dir.join("groundcal.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
 
 /// The paper's schedule, planned with the simulator's noise model: each
 /// predicted σ lies within 0.7–1.5× of the RMS error that simulated

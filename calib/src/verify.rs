@@ -302,11 +302,7 @@ fn mount_covariance(mount: &ActiveMount) -> Matrix6<f64> {
         std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 }))
     });
     let covariance = Matrix6::from_fn(|i, j| {
-        let r = if i == j {
-            1.0
-        } else {
-            correlations[i][j]
-        };
+        let r = if i == j { 1.0 } else { correlations[i][j] };
         let r = if r.is_finite() { r } else { 0.0 };
         sigma[i] * sigma[j] * r
     });
@@ -345,15 +341,18 @@ impl Rows {
 
     /// The ground's distance: `d_m − d_p = n_p · δt`.
     fn add_distance(&mut self, normal: &Vector3<f64>, residual: f64, sigma: f64) {
-        self.a
-            .push([0.0, 0.0, 0.0, normal.x, normal.y, normal.z]);
+        self.a.push([0.0, 0.0, 0.0, normal.x, normal.y, normal.z]);
         self.r.push(residual);
         self.sigma.push(sigma);
     }
 
     /// The weighted least-squares change with the prior, and each
     /// direction's σ against `calibration` (zero rows: None).
-    fn estimate(&self, calibration: &Matrix6<f64>, rotations_only: bool) -> Option<Vec<DirectionChange>> {
+    fn estimate(
+        &self,
+        calibration: &Matrix6<f64>,
+        rotations_only: bool,
+    ) -> Option<Vec<DirectionChange>> {
         if self.a.is_empty() {
             return None;
         }
@@ -399,10 +398,7 @@ fn tilt_of(changes: &[DirectionChange]) -> Option<(f64, f64)> {
     if !(roll.seen && pitch.seen) {
         return None;
     }
-    Some((
-        roll.change.hypot(pitch.change),
-        roll.sigma.max(pitch.sigma),
-    ))
+    Some((roll.change.hypot(pitch.change), roll.sigma.max(pitch.sigma)))
 }
 
 /// Compares the measured poses with the active calibration.
@@ -461,8 +457,12 @@ pub fn verify(
     if ground_rows.a.is_empty() && gravity_rows.a.is_empty() {
         return Err(VerifyError::NothingMeasured);
     }
-    let ground = ground_rows.estimate(&calibration, false).unwrap_or_default();
-    let gravity = gravity_rows.estimate(&calibration, true).unwrap_or_default();
+    let ground = ground_rows
+        .estimate(&calibration, false)
+        .unwrap_or_default();
+    let gravity = gravity_rows
+        .estimate(&calibration, true)
+        .unwrap_or_default();
     let k = settings.k_sigma;
 
     let mut checks = Vec::new();
@@ -478,7 +478,11 @@ pub fn verify(
             changes
                 .iter()
                 .filter(|c| directions.contains(&c.direction) && c.seen)
-                .max_by(|a, b| (a.change / a.sigma).abs().total_cmp(&(b.change / b.sigma).abs()))
+                .max_by(|a, b| {
+                    (a.change / a.sigma)
+                        .abs()
+                        .total_cmp(&(b.change / b.sigma).abs())
+                })
                 .into_iter()
                 .collect()
         } else {
@@ -537,7 +541,9 @@ pub fn verify(
         });
         if !passed {
             let ground_agrees = ground.is_empty()
-                || checks.iter().any(|c| c.name == "ground tilt θ" && !c.passed);
+                || checks
+                    .iter()
+                    .any(|c| c.name == "ground tilt θ" && !c.passed);
             let said = words(&gravity, &[Direction::Roll, Direction::Pitch]).join(" and ");
             if ground_agrees {
                 reasons.push(format!(
@@ -688,7 +694,10 @@ mod tests {
                 }
             }
             // Six tests at k = 4: about 1 in 1000 runs; 1 in 50 is the limit.
-            assert!(false_alarms <= 3, "{false_alarms} of 500 with {tilted} tilted poses");
+            assert!(
+                false_alarms <= 3,
+                "{false_alarms} of 500 with {tilted} tilted poses"
+            );
         }
     }
 
@@ -696,9 +705,21 @@ mod tests {
     fn a_still_stance_sees_roll_pitch_and_height_and_names_them() {
         let mut rng = ChaCha8Rng::seed_from_u64(2);
         let cases = [
-            (Vector3::new(0.1f64.to_radians(), 0.0, 0.0), Vector3::zeros(), "more to the right"),
-            (Vector3::new(-0.1f64.to_radians(), 0.0, 0.0), Vector3::zeros(), "more to the left"),
-            (Vector3::new(0.0, 0.0, 0.1f64.to_radians()), Vector3::zeros(), "pitched 0.1"),
+            (
+                Vector3::new(0.1f64.to_radians(), 0.0, 0.0),
+                Vector3::zeros(),
+                "more to the right",
+            ),
+            (
+                Vector3::new(-0.1f64.to_radians(), 0.0, 0.0),
+                Vector3::zeros(),
+                "more to the left",
+            ),
+            (
+                Vector3::new(0.0, 0.0, 0.1f64.to_radians()),
+                Vector3::zeros(),
+                "pitched 0.1",
+            ),
             (Vector3::zeros(), Vector3::new(0.0, 0.001, 0.0), "higher"),
             (Vector3::zeros(), Vector3::new(0.0, -0.001, 0.0), "lower"),
         ];
@@ -715,7 +736,11 @@ mod tests {
             }
         }
         // The yaw is not seen by one stance, and said so.
-        let poses = measure(&knocked(Vector3::new(0.0, 0.01, 0.0), Vector3::zeros()), &bodies(0, 0.0), &mut rng);
+        let poses = measure(
+            &knocked(Vector3::new(0.0, 0.01, 0.0), Vector3::zeros()),
+            &bodies(0, 0.0),
+            &mut rng,
+        );
         let report = verify(&active(), &poses, &settings()).unwrap();
         assert!(!report.drifted(), "{report:?}");
         assert!(report.notes[0].contains("yaw"), "{:?}", report.notes);
@@ -729,9 +754,15 @@ mod tests {
                 let omega = Vector3::new(0.0, sign * 0.2f64.to_radians(), 0.0);
                 let poses = measure(&knocked(omega, Vector3::zeros()), &bodies(4, 8.0), &mut rng);
                 let report = verify(&active(), &poses, &settings()).unwrap();
-                assert!(report.reasons.iter().any(|r| r.contains("turned 0.")), "{report:?}");
+                assert!(
+                    report.reasons.iter().any(|r| r.contains("turned 0.")),
+                    "{report:?}"
+                );
                 let side = if sign > 0.0 { "left" } else { "right" };
-                assert!(report.reasons.iter().any(|r| r.contains(side)), "{report:?}");
+                assert!(
+                    report.reasons.iter().any(|r| r.contains(side)),
+                    "{report:?}"
+                );
             }
         }
     }
@@ -747,7 +778,9 @@ mod tests {
             }
             let report = verify(&active(), &poses, &settings()).unwrap();
             assert!(
-                report.reasons.iter().any(|r| r.contains("accelerometer") && r.contains("pitched 0.") && r.contains("down")),
+                report.reasons.iter().any(|r| r.contains("accelerometer")
+                    && r.contains("pitched 0.")
+                    && r.contains("down")),
                 "{report:?}"
             );
             // A pitch about the body's sideways axis is nearly the motor's own.

@@ -613,7 +613,11 @@ async fn accelerometer_and_tilt_follow_the_true_pose() {
     let expected = [0.0, c, -s];
     // Whole counts, as a real Kinect reports them.
     for (got, want) in state.accelerometer_g.iter().zip(expected) {
-        assert!((got - want).abs() <= 0.5 / 819.0, "{:?}", state.accelerometer_g);
+        assert!(
+            (got - want).abs() <= 0.5 / 819.0,
+            "{:?}",
+            state.accelerometer_g
+        );
         assert_eq!((got * 819.0).fract(), 0.0);
     }
     assert_eq!(kinect.accelerometer_counts(), [0, 770, -280]);

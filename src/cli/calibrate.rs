@@ -44,8 +44,9 @@ pub fn load_config(options: &CalibrateOptions) -> Result<(Config, Schedule), Str
 
 /// Prints progress as it happens. Returns how an abort left the robot (the
 /// `Aborted` event's words), which the command says last.
-fn show_progress(
+pub(super) fn show_progress(
     mut events: tokio::sync::mpsc::UnboundedReceiver<Event>,
+    command: &'static str,
 ) -> tokio::task::JoinHandle<Option<String>> {
     tokio::spawn(async move {
         let terminal = std::io::stderr().is_terminal();
@@ -102,6 +103,10 @@ fn show_progress(
                     "finished: {}",
                     if *accepted { "accepted" } else { "rejected" }
                 ),
+                Event::Verified { consistent } => format!(
+                    "back home; {}",
+                    if *consistent { "consistent" } else { "drift" }
+                ),
                 Event::Aborted { reason } => {
                     aborted = Some(reason.clone());
                     continue;
@@ -109,7 +114,7 @@ fn show_progress(
             };
             match &bar {
                 Some(bar) => bar.set_message(line),
-                None => eprintln!("groundcal calibrate: {line}"),
+                None => eprintln!("groundcal {command}: {line}"),
             }
         }
         // The bar gives way to the result; the last step stays on screen.
@@ -122,7 +127,7 @@ fn show_progress(
 }
 
 /// Completes when the operator presses Ctrl-C or systemd sends SIGTERM.
-async fn stop_signal() -> String {
+pub(super) async fn stop_signal() -> String {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
@@ -187,7 +192,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
                 }
             };
         let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
-        let progress = show_progress(receiver);
+        let progress = show_progress(receiver, "calibrate");
         let outcome =
             session::run(&mut sensor, &mut controller, &plan, &events, stop_signal()).await;
         drop(events);

@@ -108,15 +108,9 @@ pub fn capture_session(sensor: &impl DepthSensor, tilt_deg: f64) -> Session {
     }
 }
 
-/// The raw 12-byte state `fakenect-record` would have written for `state`
-/// (819 counts per g, half degrees, 0 stopped / 4 moving).
+/// The raw 12-byte state `fakenect-record` would have written for `state`.
 pub fn raw_tilt_state(state: &TiltState) -> RawTiltState {
-    let counts = |g: f64| (g * 819.0).round().clamp(-32768.0, 32767.0) as i16;
-    RawTiltState {
-        accelerometer: state.accelerometer_g.map(counts),
-        tilt_angle: (state.tilt_deg * 2.0).round().clamp(-128.0, 127.0) as i8,
-        tilt_status: if state.stopped { 0 } else { 4 },
-    }
+    RawTiltState::from_state(state)
 }
 
 /// Captures `frames` depth frames from `sensor` into a new recording `out`

@@ -13,6 +13,7 @@ pub mod replay;
 pub mod serve;
 pub mod sim_robot;
 pub mod solve;
+pub mod verify;
 
 /// Exit statuses of `shared/spec/cli.md`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -25,6 +26,8 @@ pub enum ExitStatus {
     BadInput = 2,
     /// Solved but rejected; the output says why.
     Rejected = 3,
+    /// `verify` only: the sensor no longer agrees with the calibration.
+    Drift = 4,
 }
 
 impl ExitStatus {

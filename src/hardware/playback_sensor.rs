@@ -20,6 +20,8 @@ pub enum PlaybackSensorError {
     OutOfFrames { pose: u16, recorded: usize },
     #[error("no pose is being captured (begin_pose was not called)")]
     NoPose,
+    #[error("the recording has {recorded} accelerometer readings for pose {pose}")]
+    OutOfReadings { pose: u16, recorded: usize },
 }
 
 impl Error for PlaybackSensorError {
@@ -39,6 +41,8 @@ pub struct PlaybackSensor {
     /// Dump file name → (Kinect timestamp, seconds), from the INDEX.
     times: HashMap<String, (u32, f64)>,
     current: Option<(u16, usize)>,
+    /// Accelerometer readings of the current pose served so far.
+    readings_served: usize,
     tilt_deg: f64,
 }
 
@@ -62,6 +66,7 @@ impl PlaybackSensor {
             poses,
             times,
             current: None,
+            readings_served: 0,
             tilt_deg,
         }
     }
@@ -95,12 +100,30 @@ impl DepthSensor for PlaybackSensor {
         Ok(())
     }
 
+    /// The current pose's recorded accelerometer readings, in order (the
+    /// motor at the recording's tilt before any pose).
     async fn tilt_state(&mut self) -> Result<TiltState, Self::Error> {
-        Ok(TiltState {
-            tilt_deg: self.tilt_deg,
-            accelerometer_g: [0.0, 1.0, 0.0],
-            stopped: true,
-        })
+        let Some((pose_id, _)) = self.current else {
+            return Ok(TiltState {
+                tilt_deg: self.tilt_deg,
+                accelerometer_g: [0.0, 1.0, 0.0],
+                stopped: true,
+            });
+        };
+        let line = *self
+            .poses
+            .get(&pose_id)
+            .ok_or(PlaybackSensorError::NoSuchPose(pose_id))?;
+        let record = &self.recording.poses[line];
+        let name = record.accelerometer.get(self.readings_served).ok_or(
+            PlaybackSensorError::OutOfReadings {
+                pose: pose_id,
+                recorded: record.accelerometer.len(),
+            },
+        )?;
+        let raw = self.recording.read_tilt_state(name)?;
+        self.readings_served += 1;
+        Ok(raw.state())
     }
 
     async fn set_led(&mut self, _led: Led) -> Result<(), Self::Error> {
@@ -109,6 +132,7 @@ impl DepthSensor for PlaybackSensor {
 
     fn begin_pose(&mut self, pose_id: u16) {
         self.current = Some((pose_id, 0));
+        self.readings_served = 0;
     }
 
     async fn next_frame(&mut self) -> Result<DepthFrame, Self::Error> {

@@ -117,6 +117,26 @@ impl RawTiltState {
         })
     }
 
+    /// The raw state `fakenect-record` would have written for `state` (819
+    /// counts per g, half degrees, 0 stopped / 4 moving).
+    pub fn from_state(state: &groundcal_hal::TiltState) -> Self {
+        let counts = |g: f64| (g * 819.0).round().clamp(-32768.0, 32767.0) as i16;
+        RawTiltState {
+            accelerometer: state.accelerometer_g.map(counts),
+            tilt_angle: (state.tilt_deg * 2.0).round().clamp(-128.0, 127.0) as i8,
+            tilt_status: if state.stopped { 0 } else { 4 },
+        }
+    }
+
+    /// The state as the sensor reports it (g, degrees).
+    pub fn state(&self) -> groundcal_hal::TiltState {
+        groundcal_hal::TiltState {
+            tilt_deg: f64::from(self.tilt_angle) / 2.0,
+            accelerometer_g: self.accelerometer.map(|c| f64::from(c) / 819.0),
+            stopped: self.tilt_status != 4,
+        }
+    }
+
     /// The 12 bytes of the state (padding byte 0).
     pub fn encode(&self) -> [u8; RAW_TILT_STATE_BYTES] {
         let mut b = [0u8; RAW_TILT_STATE_BYTES];

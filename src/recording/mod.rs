@@ -185,6 +185,28 @@ impl Recording {
                 }
             }
         }
+        for pose in &poses_file.poses {
+            for name in &pose.accelerometer {
+                let at = |m: String| {
+                    InputError::new(
+                        &poses_path,
+                        Some(pose.line),
+                        format!("pose {}: {m}", pose.index),
+                    )
+                };
+                match names.get(name.as_str()) {
+                    None => {
+                        return Err(at(format!(
+                            "accelerometer reading \"{name}\" is not in kinect/INDEX.txt"
+                        )))
+                    }
+                    Some(entry) if entry.kind != EntryKind::Accelerometer => {
+                        return Err(at(format!("\"{name}\" is not an accelerometer reading")))
+                    }
+                    Some(_) => {}
+                }
+            }
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             session,
@@ -242,6 +264,13 @@ impl Recording {
             ));
         }
         Ok(())
+    }
+
+    /// Reads one accelerometer reading (`a-…` file: a raw tilt state).
+    pub fn read_tilt_state(&self, name: &str) -> Result<dump::RawTiltState, InputError> {
+        let path = self.kinect_path(name);
+        let bytes = read_bounded(&path, dump::RAW_TILT_STATE_BYTES as u64 + 1)?;
+        dump::RawTiltState::parse(&path, &bytes)
     }
 
     /// The text files' bytes (session.json, poses.jsonl, INDEX.txt).

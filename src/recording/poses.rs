@@ -19,6 +19,10 @@ pub struct PoseRecord {
     pub feet_body_mm: Vec<[f64; 3]>,
     /// Files in `kinect/` captured at this pose.
     pub depth_frames: Vec<String>,
+    /// Accelerometer readings (`a-…` files in `kinect/`) taken at this pose
+    /// after its frames: groundcal's key beyond recording.md (docs/recording.md).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub accelerometer: Vec<String>,
     /// The line of `poses.jsonl` it was read from (for messages).
     #[serde(skip)]
     pub line: usize,
@@ -80,11 +84,16 @@ pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
             ));
         }
         check_feet(&record.feet_body_mm).map_err(|e| at(format!("feet_body_mm: {e}")))?;
-        for name in &record.depth_frames {
-            if name.contains('/') || name.contains('\\') || name == ".." || name.is_empty() {
-                return Err(at(format!(
-                    "depth frame name \"{name}\" must be a plain file name in kinect/"
-                )));
+        for (what, names) in [
+            ("depth frame", &record.depth_frames),
+            ("accelerometer reading", &record.accelerometer),
+        ] {
+            for name in names {
+                if name.contains('/') || name.contains('\\') || name == ".." || name.is_empty() {
+                    return Err(at(format!(
+                        "{what} name \"{name}\" must be a plain file name in kinect/"
+                    )));
+                }
             }
         }
         poses.push(record);

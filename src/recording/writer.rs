@@ -312,6 +312,21 @@ impl RecordingWriter {
                 )));
             }
         }
+        for name in &pose.accelerometer {
+            match self.names.get(name) {
+                None => {
+                    return Err(refuse(format!(
+                        "accelerometer reading \"{name}\" was not written by this recording"
+                    )))
+                }
+                Some(EntryKind::Accelerometer) => {}
+                Some(_) => {
+                    return Err(refuse(format!(
+                        "\"{name}\" is not an accelerometer reading"
+                    )))
+                }
+            }
+        }
         let mut line = serde_json::to_string(pose)
             .map_err(|e| refuse(format!("cannot encode the pose: {e}")))?;
         line.push('\n');

@@ -43,6 +43,14 @@ pub struct Plan {
     /// The longest the depth sensor may take to answer (a frame, the tilt,
     /// the LED) before the session fails: a stalled stream must not hang it.
     pub sensor_timeout: Duration,
+    /// A calibration (true: the schedule must observe all six parameters,
+    /// provisional solves feed the live charts) or a check (`verify`).
+    pub calibrating: bool,
+    /// Accelerometer readings taken at each pose after its frames (their
+    /// mean is the pose's gravity).
+    pub accelerometer_readings: usize,
+    /// How `verify` judges, and how steady the motor must stay.
+    pub verify: crate::calib::verify::VerifySettings,
     /// For each pose of the schedule, the pose id sent and the frames
     /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
     /// recording's own, so that the session asks for what was recorded.
@@ -106,6 +114,9 @@ impl Plan {
             motion_slack: Duration::from_secs(5),
             link_recovery: Duration::from_secs(30),
             sensor_timeout: Duration::from_secs(10),
+            calibrating: true,
+            accelerometer_readings: 10,
+            verify: config.verify.settings(c),
             recorded_poses: None,
         };
         if let Some(recording) = replay {
@@ -114,6 +125,12 @@ impl Plan {
                 home: recording.session.home.commanded,
                 poses: recording.poses.iter().map(|p| p.commanded).collect(),
             };
+            plan.accelerometer_readings = recording
+                .poses
+                .iter()
+                .map(|p| p.accelerometer.len())
+                .max()
+                .unwrap_or(0);
             plan.frames_per_pose = recording
                 .poses
                 .iter()

@@ -7,17 +7,21 @@ use std::time::Duration;
 
 use groundcal_hal::{
     BodyController, BodyState, DepthFrame, DepthSensor, ErrorKind, Led, MotionState, SensorInfo,
+    TiltState,
 };
 use tokio::sync::mpsc::UnboundedSender;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::{Event, Plan, PoseFit, ProvisionalPose};
+use super::{Event, GravityReading, Plan, PoseFit, ProvisionalPose, VisitedPose};
+use crate::calib::geometry::Transform;
 use crate::calib::observe::{BodyEstimate, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::solve::Observation;
+use crate::calib::verify::{ActiveMount, VerifyReport};
 use crate::depth_image::DepthImage;
 use crate::output::ResultJson;
+use crate::recording::dump::RawTiltState;
 use crate::recording::poses::PoseRecord;
 use crate::recording::session::{Home, KinectInfo, Session};
 use crate::recording::writer::{RecordingWriter, WriteError};
@@ -28,6 +32,15 @@ use crate::schedule::Limits;
 pub struct SessionOutcome {
     pub result: ResultJson,
     /// The recording written, if one was asked for.
+    pub recording: Option<PathBuf>,
+}
+
+/// How a check of a calibration (`verify`) ended.
+#[derive(Debug, Clone)]
+pub struct VerifyOutcome {
+    pub report: VerifyReport,
+    /// The poses visited, as measured.
+    pub poses: Vec<VisitedPose>,
     pub recording: Option<PathBuf>,
 }
 
@@ -142,8 +155,22 @@ async fn wait_for<C: BodyController>(
 async fn record_pose(
     mut writer: RecordingWriter,
     frames: &[DepthFrame],
+    tilt_states: &[TiltState],
     mut record: PoseRecord,
 ) -> Result<RecordingWriter, SessionError> {
+    // Stamped as fakenect-record stamps them, with the last frame's
+    // timestamp; a tenth of a millisecond apart, after that frame.
+    let (last_time, last_timestamp) = frames.last().map_or((0.0, 0), |f| (f.time_s, f.timestamp));
+    let readings: Vec<(f64, RawTiltState)> = tilt_states
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            (
+                last_time + (k + 1) as f64 * 1e-4,
+                RawTiltState::from_state(s),
+            )
+        })
+        .collect();
     let images: Vec<(f64, u32, DepthImage)> = frames
         .iter()
         .map(|f| {
@@ -162,6 +189,10 @@ async fn record_pose(
             .collect::<Result<Vec<String>, WriteError>>()
             .and_then(|names| {
                 record.depth_frames = names;
+                record.accelerometer = readings
+                    .iter()
+                    .map(|(time_s, state)| writer.write_tilt_state(*time_s, last_timestamp, state))
+                    .collect::<Result<Vec<String>, WriteError>>()?;
                 writer.write_pose(&record)
             });
         (writer, result)
@@ -177,6 +208,9 @@ async fn record_pose(
 /// A pose whose ground is being fitted on a worker thread.
 struct PendingFit {
     index: u16,
+    /// The body pose from the feet, when they fixed it.
+    ground_from_robot: Option<Transform>,
+    gravity: Option<GravityReading>,
     handle: JoinHandle<Result<Observation, String>>,
     /// The fit's outcome once it has been awaited (a handle is awaited once).
     done: Option<Result<Observation, String>>,
@@ -277,7 +311,7 @@ async fn report_finished(
         );
         *reported += 1;
     }
-    if !all && *reported > before {
+    if !all && *reported > before && plan.calibrating {
         report_provisional(pending, plan, events);
     }
 }
@@ -292,13 +326,18 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
     plan: &Plan,
     events: &UnboundedSender<Event>,
     pending: &mut Vec<PendingFit>,
-) -> Result<SessionOutcome, SessionError> {
+) -> Result<Visited, SessionError> {
     let schedule = &plan.schedule;
     let of = schedule.poses.len();
     // 1. The schedule, against our limits, then the lower computer's.
-    schedule
-        .validate(&plan.limits)
-        .map_err(|e| SessionError::Refused(e.to_string()))?;
+    let validate = |limits: &Limits| {
+        if plan.calibrating {
+            schedule.validate(limits)
+        } else {
+            schedule.validate_limits(limits)
+        }
+    };
+    validate(&plan.limits).map_err(|e| SessionError::Refused(e.to_string()))?;
     let welcome = controller.hello().await.map_err(SessionError::robot)?;
     let theirs = Limits {
         max_tilt_deg: welcome.limits.max_tilt_deg,
@@ -306,14 +345,12 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         max_height_mm: welcome.limits.max_height_mm,
         max_shift_mm: welcome.limits.max_shift_mm,
     };
-    schedule
-        .validate(&plan.limits.intersect(&theirs))
-        .map_err(|e| {
-            SessionError::Refused(format!(
-                "{e} (limits of the lower computer, firmware {})",
-                welcome.firmware
-            ))
-        })?;
+    validate(&plan.limits.intersect(&theirs)).map_err(|e| {
+        SessionError::Refused(format!(
+            "{e} (limits of the lower computer, firmware {})",
+            welcome.firmware
+        ))
+    })?;
     send(
         events,
         Event::Started {
@@ -423,6 +460,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         send(events, Event::Capturing { index, of });
         sensor.begin_pose(index);
         let frames = capture(sensor, plan, index, frame_count, &info).await?;
+        let tilt_states = read_accelerometer(sensor, plan, index).await?;
         let feet_mm: Vec<[f64; 3]> = settled.feet_mm.to_vec();
         if let Some(w) = writer.take() {
             let record = PoseRecord {
@@ -430,12 +468,15 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
                 commanded: *commanded,
                 feet_body_mm: feet_mm.clone(),
                 depth_frames: Vec::new(),
+                accelerometer: Vec::new(),
                 line: 0,
             };
-            writer = Some(record_pose(w, &frames, record).await?);
+            writer = Some(record_pose(w, &frames, &tilt_states, record).await?);
         }
+        let mut ground_from_robot = None;
         let fit = match feet.body_pose(commanded, &feet_mm) {
             Ok(body) => {
+                ground_from_robot = Some(body.ground_from_robot);
                 let processor = Arc::clone(&processor);
                 tokio::task::spawn_blocking(move || fit_pose(processor, index, body, frames))
             }
@@ -446,42 +487,110 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         };
         pending.push(PendingFit {
             index,
+            ground_from_robot,
+            gravity: GravityReading::from_states(&tilt_states),
             handle: fit,
             done: None,
         });
         report_finished(pending, &mut reported, of, events, false, plan).await;
     }
 
-    // 4. Home, then the solve.
+    // 4. Home; the fits finish.
     go_home(controller, plan).await?;
     let _ = bounded(plan, "the LED", sensor.set_led(Led::Green)).await;
-    send(events, Event::Solving);
+    if plan.calibrating {
+        send(events, Event::Solving);
+    }
     report_finished(pending, &mut reported, of, events, true, plan).await;
-    let mut observations = Vec::new();
-    let mut failed = Vec::new();
+    let mut poses = Vec::with_capacity(pending.len());
     for mut fit in pending.drain(..) {
-        match fit.outcome().await.clone() {
-            Ok(o) => observations.push(o),
-            Err(reason) => failed.push((u32::from(fit.index), reason)),
-        }
+        let outcome = fit.outcome().await.clone();
+        poses.push(VisitedPose {
+            index: u32::from(fit.index),
+            ground_from_robot: fit.ground_from_robot,
+            fit: outcome,
+            gravity: fit.gravity,
+        });
     }
-    let mut result =
-        ResultJson::from_poses(&observations, &failed, of, &plan.calibration, plan.tilt_deg);
-    if let Some(note) = processor.prior_note() {
-        result.notes.insert(0, note);
-    }
-    result.predicted_sigma = predicted_sigma(plan);
     let recording = match writer {
         Some(w) => Some(w.finish()?),
         None => None,
     };
+    Ok(Visited {
+        poses,
+        of,
+        prior_note: processor.prior_note(),
+        recording,
+    })
+}
+
+/// What visiting the poses gave.
+struct Visited {
+    poses: Vec<VisitedPose>,
+    /// Poses in the schedule.
+    of: usize,
+    prior_note: Option<String>,
+    recording: Option<PathBuf>,
+}
+
+/// The calibration's end: the solve, the verdict, the motor's steadiness.
+fn solve_visited(visited: Visited, plan: &Plan, events: &UnboundedSender<Event>) -> SessionOutcome {
+    let mut observations = Vec::new();
+    let mut failed = Vec::new();
+    for pose in &visited.poses {
+        match &pose.fit {
+            Ok(o) => observations.push(o.clone()),
+            Err(reason) => failed.push((pose.index, reason.clone())),
+        }
+    }
+    let mut result = ResultJson::from_poses(
+        &observations,
+        &failed,
+        visited.of,
+        &plan.calibration,
+        plan.tilt_deg,
+    );
+    if let Some(note) = visited.prior_note {
+        result.notes.insert(0, note);
+    }
+    result.predicted_sigma = predicted_sigma(plan);
+    crate::verify::judge_motor(&mut result, &visited.poses, plan.tilt_deg, &plan.verify);
     send(
         events,
         Event::Finished {
             accepted: result.accepted(),
         },
     );
-    Ok(SessionOutcome { result, recording })
+    SessionOutcome {
+        result,
+        recording: visited.recording,
+    }
+}
+
+/// A check's end: the poses against the calibration.
+fn verify_visited(
+    visited: Visited,
+    mount: &ActiveMount,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+) -> Result<VerifyOutcome, SessionError> {
+    let report = crate::verify::compare(mount, &visited.poses, &plan.verify).map_err(|e| {
+        SessionError::Sensor {
+            kind: ErrorKind::Other,
+            message: e.to_string(),
+        }
+    })?;
+    send(
+        events,
+        Event::Verified {
+            consistent: !report.drifted(),
+        },
+    );
+    Ok(VerifyOutcome {
+        report,
+        poses: visited.poses,
+        recording: visited.recording,
+    })
 }
 
 /// Sends the body home and waits until it stands there; its state then
@@ -574,6 +683,36 @@ async fn capture<S: DepthSensor>(
     Ok(frames)
 }
 
+/// A pose's accelerometer readings, after its frames. A sensor that has
+/// none (a recording made without) gives none; one that stops answering
+/// fails the session, as a stalled stream does.
+async fn read_accelerometer<S: DepthSensor>(
+    sensor: &mut S,
+    plan: &Plan,
+    index: u16,
+) -> Result<Vec<TiltState>, SessionError> {
+    let mut states = Vec::with_capacity(plan.accelerometer_readings);
+    for _ in 0..plan.accelerometer_readings {
+        match tokio::time::timeout(plan.sensor_timeout, sensor.tilt_state()).await {
+            Ok(Ok(state)) => states.push(state),
+            Ok(Err(e)) => {
+                tracing::debug!("pose {index}: no accelerometer reading: {e}");
+                break;
+            }
+            Err(_) => {
+                return Err(SessionError::Sensor {
+                    kind: ErrorKind::Timeout,
+                    message: format!(
+                        "pose {index}: the accelerometer: no answer from the depth sensor in {} s",
+                        plan.sensor_timeout.as_secs_f64()
+                    ),
+                })
+            }
+        }
+    }
+    Ok(states)
+}
+
 /// Corrupt frames skipped at one pose before the session fails.
 const MAX_CORRUPT_FRAMES: usize = 3;
 
@@ -629,6 +768,34 @@ pub async fn run<S: DepthSensor, C: BodyController>(
     events: &UnboundedSender<Event>,
     abort: impl Future<Output = String>,
 ) -> Result<SessionOutcome, SessionError> {
+    let visited = guarded(sensor, controller, plan, events, abort).await?;
+    Ok(solve_visited(visited, plan, events))
+}
+
+/// Runs a check of `mount` (`groundcal verify`): the plan's schedule is the
+/// still stance and any tilted poses; the poses are then compared with the
+/// calibration instead of solved. Aborts and failures as [`run`].
+pub async fn verify<S: DepthSensor, C: BodyController>(
+    sensor: &mut S,
+    controller: &mut C,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+    abort: impl Future<Output = String>,
+    mount: &ActiveMount,
+) -> Result<VerifyOutcome, SessionError> {
+    let visited = guarded(sensor, controller, plan, events, abort).await?;
+    verify_visited(visited, mount, plan, events)
+}
+
+/// Visits the poses; on an abort or a failure halts the robot and sends it
+/// home before returning the error.
+async fn guarded<S: DepthSensor, C: BodyController>(
+    sensor: &mut S,
+    controller: &mut C,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+    abort: impl Future<Output = String>,
+) -> Result<Visited, SessionError> {
     let mut pending = Vec::new();
     let outcome = {
         let work = visit_poses(sensor, controller, plan, events, &mut pending);

@@ -52,6 +52,10 @@ pub enum EventJson {
     Finished {
         accepted: bool,
     },
+    /// A check of the active calibration ended.
+    Verified {
+        consistent: bool,
+    },
     Aborted {
         reason: String,
     },
@@ -134,6 +138,9 @@ impl From<&Event> for EventJson {
             Event::Solving => EventJson::Solving,
             Event::Finished { accepted } => EventJson::Finished {
                 accepted: *accepted,
+            },
+            Event::Verified { consistent } => EventJson::Verified {
+                consistent: *consistent,
             },
             Event::Aborted { reason } => EventJson::Aborted {
                 reason: reason.clone(),
@@ -294,6 +301,12 @@ impl Status {
                     if *accepted { "accepted" } else { "rejected" }
                 )
             }
+            EventJson::Verified { consistent } => {
+                self.robot = format!(
+                    "checked ({})",
+                    if *consistent { "consistent" } else { "drift" }
+                )
+            }
             EventJson::Aborted { reason } => self.robot = format!("aborted: {reason}"),
             EventJson::Stored { .. } | EventJson::Failed { .. } => {}
             EventJson::Provisional { poses } => self.provisional = Some(poses.clone()),
@@ -337,6 +350,14 @@ fn step_in_words(event: &EventJson) -> Option<String> {
                 "passed its checks"
             } else {
                 "failed its checks"
+            }
+        ),
+        EventJson::Verified { consistent } => format!(
+            "checked: {}",
+            if *consistent {
+                "the sensor agrees with the active calibration"
+            } else {
+                "the sensor has moved since it was calibrated"
             }
         ),
         EventJson::Aborted { reason } => format!("aborted: {reason}"),

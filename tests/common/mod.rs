@@ -208,6 +208,27 @@ pub fn stop_sim_robot(child: Child) -> String {
     stderr
 }
 
+/// config/sim.toml with its schedule path made absolute and these
+/// replacements (each must occur), written into `dir` as `groundcal.toml`.
+pub fn sim_config(dir: &Path, replacements: &[(&str, &str)]) -> PathBuf {
+    let mut text = std::fs::read_to_string(root().join("config/sim.toml"))
+        .expect("config/sim.toml")
+        .replace(
+            "schedule = \"schedules/octopus-52.toml\"",
+            &format!(
+                "schedule = \"{}\"",
+                root().join("config/schedules/octopus-52.toml").display()
+            ),
+        );
+    for (from, to) in replacements {
+        assert!(text.contains(from), "config/sim.toml has no {from}");
+        text = text.replace(from, to);
+    }
+    let path = dir.join("groundcal.toml");
+    std::fs::write(&path, text).expect("config written");
+    path
+}
+
 /// `groundcal serve` as systemd would run it: the binary, on the simulation
 /// configuration copied into `dir` (token `token`, state in `dir/state`),
 /// listening on 127.0.0.1:0, with these further arguments and environment
@@ -218,17 +239,18 @@ pub fn spawn_serve(
     args: &[&str],
     env: &[(&str, &OsStr)],
 ) -> (Child, String) {
-    let text = std::fs::read_to_string(root().join("config/sim.toml"))
-        .expect("config/sim.toml")
-        .replace(
-            "schedule = \"schedules/octopus-52.toml\"",
-            &format!(
-                "schedule = \"{}\"",
-                root().join("config/schedules/octopus-52.toml").display()
-            ),
-        );
-    let config = dir.join("groundcal.toml");
-    std::fs::write(&config, text).expect("config written");
+    spawn_serve_with(dir, token, &[], args, env)
+}
+
+/// [`spawn_serve`] on the simulation configuration with these replacements.
+pub fn spawn_serve_with(
+    dir: &Path,
+    token: &str,
+    replacements: &[(&str, &str)],
+    args: &[&str],
+    env: &[(&str, &OsStr)],
+) -> (Child, String) {
+    let config = sim_config(dir, replacements);
     std::fs::write(dir.join("token.sim"), format!("{token}\n")).expect("token written");
     let config = config.to_str().expect("a UTF-8 temporary path");
     let mut full = vec!["serve", "--config", config, "--listen", "127.0.0.1:0"];

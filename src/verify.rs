@@ -1,0 +1,467 @@
+//! Checking a calibration against the sensor now (`groundcal verify`, the
+//! daemon's start-up check and its "Check" button), and the tilt motor's
+//! steadiness during a calibration. The math is `calib::verify`; this module
+//! turns visited poses into its input and its report into the document the
+//! operator reads (docs/verify.md).
+
+use serde::Serialize;
+
+use crate::calib::geometry::{PoseDegMm, PoseParams, Transform};
+use crate::calib::verify::{
+    verify, ActiveMount, Check, DirectionChange, Unit, VerifyError, VerifyPose, VerifyReport,
+    VerifySettings,
+};
+use crate::output::{MountJson, ResultJson, ResultStatus};
+use crate::schedule::Schedule;
+use crate::session::VisitedPose;
+
+/// The mount and σ of a result or an active calibration document.
+pub fn mount_of(result: &ResultJson) -> Result<ActiveMount, String> {
+    let mount = result.robot_from_sensor.as_ref().ok_or_else(|| {
+        "it has no \"robot_from_sensor\": it was not solved, so there is nothing to verify"
+            .to_string()
+    })?;
+    let values = mount.values();
+    let sigma = result.sigma.as_ref().and_then(|s| {
+        let v = [
+            s.alpha_deg.to_radians(),
+            s.beta_deg.to_radians(),
+            s.gamma_deg.to_radians(),
+            s.px_mm / 1000.0,
+            s.py_mm / 1000.0,
+            s.pz_mm / 1000.0,
+        ];
+        v.iter().all(|x| x.is_finite()).then_some(v)
+    });
+    Ok(ActiveMount {
+        robot_from_sensor: PoseDegMm::from_values(values).to_params(),
+        sigma,
+        correlations: result.correlations,
+    })
+}
+
+/// The visited poses against `mount`.
+pub fn compare(
+    mount: &ActiveMount,
+    poses: &[VisitedPose],
+    settings: &VerifySettings,
+) -> Result<VerifyReport, VerifyError> {
+    verify(mount, &verify_poses(poses, true), settings)
+}
+
+/// The poses as the math takes them; without their planes when `planes` is
+/// false (gravity alone).
+fn verify_poses(poses: &[VisitedPose], planes: bool) -> Vec<VerifyPose> {
+    poses
+        .iter()
+        .filter_map(|p| {
+            let ground_from_robot: Transform = match &p.fit {
+                Ok(o) => o.ground_from_robot,
+                Err(_) => p.ground_from_robot?,
+            };
+            Some(VerifyPose {
+                index: p.index,
+                ground_from_robot,
+                plane: p
+                    .fit
+                    .as_ref()
+                    .ok()
+                    .filter(|o| planes && o.set_aside.is_none())
+                    .map(|o| o.plane),
+                gravity_up: p.gravity.map(|g| g.up_sensor),
+                gravity_readings: p.gravity.map_or(0, |g| g.readings),
+            })
+        })
+        .collect()
+}
+
+/// The smallest change of the motor's angle during a calibration that is
+/// called a move: the Kinect reports its angle in half degrees.
+const MOTOR_MOVED_MIN_DEG: f64 = 0.5;
+
+/// What the accelerometer says of the tilt motor during a calibration.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct MotorJson {
+    /// The tilt the session asked the motor for (relative to gravity).
+    pub commanded_deg: f64,
+    /// The motor's own reading, averaged over the poses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reported_deg: Option<f64>,
+    /// The optical axis's pitch against the body's forward axis (negative
+    /// down), from gravity in the sensor frame and the body's attitude from
+    /// the feet: the angle the motor actually reached relative to the body.
+    pub pitch_to_body_deg: f64,
+    /// How far the sensor's turn about the motor's axis (from gravity,
+    /// against the solved mount) ranged over the poses.
+    pub turn_spread_deg: f64,
+    /// The spread beyond which the motor moved.
+    pub turn_limit_deg: f64,
+    pub moved: bool,
+    /// Poses with accelerometer readings.
+    pub poses: usize,
+}
+
+/// Adds the tilt motor's report to a solved result (when the poses carry
+/// accelerometer readings) and rejects it when the motor moved during the
+/// calibration: the mount then differs from pose to pose.
+pub fn judge_motor(
+    result: &mut ResultJson,
+    poses: &[VisitedPose],
+    commanded_deg: f64,
+    settings: &VerifySettings,
+) {
+    let Ok(mount) = mount_of(result) else {
+        return;
+    };
+    let Ok(report) = verify(&mount, &verify_poses(poses, false), settings) else {
+        return;
+    };
+    let turns: Vec<(u32, f64)> = report
+        .poses
+        .iter()
+        .filter_map(|p| Some((p.index, p.motor_turn?.to_degrees())))
+        .collect();
+    if turns.is_empty() {
+        return;
+    }
+    let readings = poses
+        .iter()
+        .filter_map(|p| p.gravity.map(|g| g.readings))
+        .min()
+        .unwrap_or(1)
+        .max(1);
+    let per_pose = settings.accelerometer_sigma_deg / (readings as f64).sqrt();
+    let limit = (2.0 * settings.k_sigma * per_pose).max(MOTOR_MOVED_MIN_DEG);
+    let (low, high) = turns
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), t| {
+            (l.min(t.1), h.max(t.1))
+        });
+    let mean_turn = turns.iter().map(|t| t.1).sum::<f64>() / turns.len() as f64;
+    let reported: Vec<f64> = poses
+        .iter()
+        .filter_map(|p| p.gravity.map(|g| g.motor_reported_deg))
+        .collect();
+    let motor = MotorJson {
+        commanded_deg,
+        reported_deg: (!reported.is_empty())
+            .then(|| reported.iter().sum::<f64>() / reported.len() as f64),
+        pitch_to_body_deg: optical_axis_pitch(&mount.robot_from_sensor, mean_turn.to_radians()),
+        turn_spread_deg: high - low,
+        turn_limit_deg: limit,
+        moved: high - low > limit,
+        poses: turns.len(),
+    };
+    for pose in &mut result.poses {
+        pose.motor_turn_deg = turns
+            .iter()
+            .find(|t| t.0 == pose.index)
+            .map(|t| t.1 - mean_turn);
+    }
+    if motor.moved {
+        let at = |value: f64| turns.iter().find(|t| t.1 == value).map_or(0, |t| t.0);
+        result.status = ResultStatus::Rejected;
+        result.reasons.push(format!(
+            "the Kinect's tilt motor moved during the calibration: the sensor's angle against the body differs by {:.2}° between pose {} and pose {} (from the accelerometer; limit {limit:.2}°). Check that nothing touches the Kinect and calibrate again",
+            high - low,
+            at(low),
+            at(high)
+        ));
+    }
+    result.motor = Some(motor);
+}
+
+/// The optical axis's pitch against the body's forward axis, degrees, for
+/// the mount turned by `turn` about the sensor's right axis (the motor's).
+fn optical_axis_pitch(mount: &PoseParams, turn: f64) -> f64 {
+    let turned = mount.rotation_matrix() * crate::calib::geometry::rot_z(turn);
+    let optical_axis = turned.column(0);
+    optical_axis.y.clamp(-1.0, 1.0).asin().to_degrees()
+}
+
+/// The schedule of a check: the home stance held, then `tilted` poses that
+/// roll and pitch the body by ±`tilt_deg` in turn (a rotation about the
+/// vertical shows only when the body tilts).
+pub fn check_schedule(home: PoseDegMm, tilted: usize, tilt_deg: f64) -> Schedule {
+    let mut poses = vec![home];
+    for k in 0..tilted {
+        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        // Roll right, left, pitch up, down; then the four diagonals, at 70 %.
+        let (roll, pitch) = match k % 8 {
+            0 | 1 => (sign, 0.0),
+            2 | 3 => (0.0, sign),
+            4 | 5 => (sign * 0.7, sign * 0.7),
+            _ => (sign * 0.7, -sign * 0.7),
+        };
+        poses.push(PoseDegMm {
+            gamma_deg: home.gamma_deg + roll * tilt_deg,
+            beta_deg: home.beta_deg + pitch * tilt_deg,
+            ..home
+        });
+    }
+    Schedule {
+        name: if tilted == 0 {
+            "check: the home stance".into()
+        } else {
+            format!("check: the home stance and {tilted} tilted poses (±{tilt_deg}°)")
+        },
+        home,
+        poses,
+    }
+}
+
+/// One check as the document says it.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct CheckJson {
+    pub name: String,
+    /// Degrees or millimetres, as `unit` says.
+    pub measured: f64,
+    pub threshold: f64,
+    pub unit: String,
+    pub passed: bool,
+}
+
+/// One direction's change, degrees or millimetres.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct DirectionJson {
+    pub direction: String,
+    /// `ground` or `gravity`.
+    pub from: String,
+    pub change: f64,
+    pub sigma: f64,
+    pub unit: String,
+    pub checked: bool,
+}
+
+/// One pose against the calibration.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct VerifyPoseJson {
+    pub index: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub theta_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub e_d_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gravity_angle_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_turn_deg: Option<f64>,
+    /// Why the pose gave no ground.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+/// The tilt motor against the calibration.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct VerifyMotorJson {
+    /// The tilt the calibration holds for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibrated_deg: Option<f64>,
+    /// The motor's own reading now.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reported_deg: Option<f64>,
+    /// The sensor's turn about the motor's axis against the calibration,
+    /// from gravity (positive up).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub turn_deg: Option<f64>,
+}
+
+/// What `groundcal verify --json` prints, and the daemon's status keeps.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct VerifyJson {
+    /// `consistent` or `drift`.
+    pub status: String,
+    #[serde(default)]
+    pub reasons: Vec<String>,
+    pub checks: Vec<CheckJson>,
+    pub directions: Vec<DirectionJson>,
+    /// Directions these poses cannot see.
+    pub not_checked: Vec<String>,
+    pub poses: Vec<VerifyPoseJson>,
+    pub motor: VerifyMotorJson,
+    /// The calibration checked.
+    pub robot_from_sensor: MountJson,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+fn check_json(c: &Check) -> CheckJson {
+    let (scale, unit) = match c.unit {
+        Unit::Angle => (180.0 / std::f64::consts::PI, "deg"),
+        Unit::Length => (1000.0, "mm"),
+    };
+    CheckJson {
+        name: c.name.into(),
+        measured: c.measured * scale,
+        threshold: c.threshold * scale,
+        unit: unit.into(),
+        passed: c.passed,
+    }
+}
+
+fn direction_json(c: &DirectionChange, from: &str) -> DirectionJson {
+    let (scale, unit) = if c.direction.is_rotation() {
+        (180.0 / std::f64::consts::PI, "deg")
+    } else {
+        (1000.0, "mm")
+    };
+    DirectionJson {
+        direction: c.direction.name().into(),
+        from: from.into(),
+        change: c.change * scale,
+        sigma: c.sigma * scale,
+        unit: unit.into(),
+        checked: c.seen,
+    }
+}
+
+impl VerifyJson {
+    /// The document of a report on `poses` against `mount`, whose
+    /// calibration holds for the motor at `calibrated_tilt_deg`.
+    pub fn new(
+        report: &VerifyReport,
+        poses: &[VisitedPose],
+        mount: &ActiveMount,
+        calibrated_tilt_deg: Option<f64>,
+    ) -> Self {
+        let mut notes = report.notes.clone();
+        let reported: Vec<f64> = poses
+            .iter()
+            .filter_map(|p| p.gravity.map(|g| g.motor_reported_deg))
+            .collect();
+        let reported_deg =
+            (!reported.is_empty()).then(|| reported.iter().sum::<f64>() / reported.len() as f64);
+        if reported.is_empty() {
+            notes.push("no accelerometer readings: gravity was not checked".into());
+        }
+        if let (Some(calibrated), Some(now)) = (calibrated_tilt_deg, reported_deg) {
+            // The motor reports half degrees, and reaches its angle roughly.
+            if (now - calibrated).abs() > 1.0 {
+                notes.push(format!(
+                    "the tilt motor reports {now:.1}° where the calibration holds for {calibrated:.1}°"
+                ));
+            }
+        }
+        let ground_seen: Vec<_> = report.ground.iter().filter(|c| c.seen).collect();
+        let not_checked = crate::calib::verify::Direction::ALL
+            .iter()
+            .filter(|d| !ground_seen.iter().any(|c| c.direction == **d))
+            .map(|d| d.name().to_string())
+            .collect();
+        let poses_json = report
+            .poses
+            .iter()
+            .map(|p| VerifyPoseJson {
+                index: p.index,
+                theta_deg: p.theta.map(f64::to_degrees),
+                e_d_mm: p.e_d.map(|e| e * 1000.0),
+                gravity_angle_deg: p.gravity_angle.map(f64::to_degrees),
+                motor_turn_deg: p.motor_turn.map(f64::to_degrees),
+                error: poses
+                    .iter()
+                    .find(|v| v.index == p.index)
+                    .and_then(|v| v.fit.as_ref().err().cloned()),
+            })
+            .collect();
+        VerifyJson {
+            status: if report.drifted() {
+                "drift"
+            } else {
+                "consistent"
+            }
+            .into(),
+            reasons: report.reasons.clone(),
+            checks: report.checks.iter().map(check_json).collect(),
+            directions: report
+                .ground
+                .iter()
+                .map(|c| direction_json(c, "ground"))
+                .chain(report.gravity.iter().map(|c| direction_json(c, "gravity")))
+                .collect(),
+            not_checked,
+            poses: poses_json,
+            motor: VerifyMotorJson {
+                calibrated_deg: calibrated_tilt_deg,
+                reported_deg,
+                turn_deg: report.motor_turn().map(f64::to_degrees),
+            },
+            robot_from_sensor: MountJson::from_params(&mount.robot_from_sensor),
+            notes,
+        }
+    }
+
+    pub fn drifted(&self) -> bool {
+        self.status == "drift"
+    }
+
+    /// The report for a terminal: the verdict and its reasons, each check
+    /// against its threshold, what was not checked, the motor.
+    pub fn to_table(&self) -> String {
+        use std::fmt::Write;
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "{:<20} {:>11} {:>11}",
+            "check", "measured", "threshold"
+        );
+        for c in &self.checks {
+            let (m, t) = if c.unit == "deg" {
+                (
+                    format!("{:.3}°", c.measured),
+                    format!("{:.3}°", c.threshold),
+                )
+            } else {
+                (
+                    format!("{:.2} mm", c.measured),
+                    format!("{:.2} mm", c.threshold),
+                )
+            };
+            let verdict = if c.passed { "passed" } else { "FAILED" };
+            let _ = writeln!(out, "{:<20} {m:>11} {t:>11}  {verdict}", c.name);
+        }
+        if !self.not_checked.is_empty() {
+            let _ = writeln!(
+                out,
+                "not checked (these poses cannot see it): {}",
+                self.not_checked.join(", ")
+            );
+        }
+        let m = &self.motor;
+        let mut motor = Vec::new();
+        if let Some(r) = m.reported_deg {
+            motor.push(format!("reports {r:.1}°"));
+        }
+        if let Some(c) = m.calibrated_deg {
+            motor.push(format!("calibrated at {c:.1}°"));
+        }
+        if let Some(t) = m.turn_deg {
+            motor.push(format!(
+                "turned {t:+.2}° against the calibration (from gravity)"
+            ));
+        }
+        if !motor.is_empty() {
+            let _ = writeln!(out, "tilt motor: {}", motor.join("; "));
+        }
+        for note in &self.notes {
+            if !note.starts_with("not checked") {
+                let _ = writeln!(out, "note: {note}");
+            }
+        }
+        let _ = writeln!(out);
+        if self.drifted() {
+            let _ = writeln!(
+                out,
+                "DRIFT: the sensor no longer agrees with the calibration"
+            );
+            for r in &self.reasons {
+                let _ = writeln!(out, "  - {r}");
+            }
+            let _ = writeln!(
+                out,
+                "  Calibrate again before the robot relies on its terrain map."
+            );
+        } else {
+            let _ = writeln!(out, "consistent: the sensor agrees with the calibration");
+        }
+        out
+    }
+}
