@@ -339,6 +339,28 @@ impl<'de> Deserialize<'de> for ResultStatus {
     }
 }
 
+/// What the accelerometer says of the tilt motor during a calibration.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct MotorJson {
+    /// The tilt the session asked the motor for (relative to gravity).
+    pub commanded_deg: f64,
+    /// The motor's own reading, averaged over the poses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reported_deg: Option<f64>,
+    /// The optical axis's pitch against the body's forward axis (negative
+    /// down), from gravity in the sensor frame and the body's attitude from
+    /// the feet: the angle the motor actually reached relative to the body.
+    pub pitch_to_body_deg: f64,
+    /// How far the sensor's turn about the motor's axis (from gravity,
+    /// against the solved mount) ranged over the poses.
+    pub turn_spread_deg: f64,
+    /// The spread beyond which the motor moved.
+    pub turn_limit_deg: f64,
+    pub moved: bool,
+    /// Poses with accelerometer readings.
+    pub poses: usize,
+}
+
 /// The whole result document.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ResultJson {
@@ -383,7 +405,7 @@ pub struct ResultJson {
     /// the poses have readings): the angle reached against the body, and
     /// whether it moved.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub motor: Option<crate::verify::MotorJson>,
+    pub motor: Option<MotorJson>,
 }
 
 impl ResultJson {

@@ -17,7 +17,7 @@ use crate::calib::solve::Observation;
 use crate::output::{ResultJson, SetupJson};
 use crate::recording::session::NominalMount;
 use crate::recording::{InputError, Recording};
-use crate::session::{GravityReading, VisitedPose};
+use crate::verify::{GravityReading, VisitedPose};
 
 /// How to replay.
 #[derive(Debug, Clone, Default)]

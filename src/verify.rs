@@ -4,16 +4,141 @@
 //! turns visited poses into its input and its report into the document the
 //! operator reads (docs/verify.md).
 
+use std::path::Path;
+
+use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::calib::geometry::{PoseDegMm, PoseParams, Transform};
+use crate::calib::observe::NominalMount;
+use crate::calib::solve::Observation;
 use crate::calib::verify::{
     verify, ActiveMount, Check, DirectionChange, Unit, VerifyError, VerifyPose, VerifyReport,
     VerifySettings,
 };
-use crate::output::{MountJson, ResultJson, ResultStatus};
+use crate::config::Config;
+use crate::output::{MotorJson, MountJson, ResultJson, ResultStatus};
 use crate::schedule::Schedule;
-use crate::session::VisitedPose;
+use crate::store::Store;
+
+/// The accelerometer at one pose, its readings averaged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GravityReading {
+    /// Gravity's reaction (up) in the sensor frame (X forward, Y up, Z
+    /// right), in g: the accelerometer's (right, up, forward) reordered.
+    pub up_sensor: Vector3<f64>,
+    pub readings: usize,
+    /// The angle the tilt motor reported, degrees (its own reading, half
+    /// degrees, relative to gravity).
+    pub motor_reported_deg: f64,
+}
+
+impl GravityReading {
+    /// The mean of a pose's readings; none when there are none, or when
+    /// they are not about 1 g (a sensor that reports no accelerometer, or
+    /// one that moved).
+    pub fn from_states(states: &[groundcal_hal::TiltState]) -> Option<Self> {
+        if states.is_empty() {
+            return None;
+        }
+        let n = states.len() as f64;
+        let mean = |k: usize| states.iter().map(|s| s.accelerometer_g[k]).sum::<f64>() / n;
+        let up_sensor = Vector3::new(mean(2), mean(1), mean(0));
+        let magnitude = up_sensor.norm();
+        if !(0.7..=1.3).contains(&magnitude) {
+            return None;
+        }
+        Some(GravityReading {
+            up_sensor,
+            readings: states.len(),
+            motor_reported_deg: states.iter().map(|s| s.tilt_deg).sum::<f64>() / n,
+        })
+    }
+}
+
+/// One pose a session visited.
+#[derive(Debug, Clone)]
+pub struct VisitedPose {
+    pub index: u32,
+    /// The real body pose from the feet, when they fixed it.
+    pub ground_from_robot: Option<Transform>,
+    /// The pose's observation, or why there is none.
+    pub fit: Result<Observation, String>,
+    pub gravity: Option<GravityReading>,
+}
+
+/// The calibration to check: its mount and σ, and the tilt it holds for.
+pub struct Calibration {
+    pub mount: ActiveMount,
+    pub tilt_deg: Option<f64>,
+    /// Where it came from, for messages.
+    pub source: String,
+}
+
+/// Reads the calibration from a file, or the store's active one.
+pub fn load_calibration(
+    file: Option<&Path>,
+    config: &Config,
+    config_path: Option<&Path>,
+) -> Result<Calibration, String> {
+    let (document, source) = match file {
+        Some(path) => {
+            let bytes =
+                crate::recording::read_bounded(path, 16 << 20).map_err(|e| e.to_string())?;
+            let value: serde_json::Value = serde_json::from_slice(&bytes)
+                .map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
+            (value, path.display().to_string())
+        }
+        None => {
+            let serve = config.serve.as_ref().ok_or(
+                "no --calibration FILE, and the configuration has no [serve] state_dir to find the active calibration in",
+            )?;
+            let dir = match config_path {
+                Some(p) => crate::config::resolve_from_config(p, &serve.state_dir),
+                None => serve.state_dir.clone(),
+            };
+            return calibration_in_store(&Store::new(&dir))?.ok_or_else(|| {
+                format!(
+                    "no calibration is active in {} yet: calibrate and accept one, or give --calibration FILE",
+                    dir.display()
+                )
+            });
+        }
+    };
+    calibration_of(document, source)
+}
+
+/// The store's active calibration, if one is.
+pub fn calibration_in_store(store: &Store) -> Result<Option<Calibration>, String> {
+    match store.active().map_err(|e| e.to_string())? {
+        Some(document) => {
+            calibration_of(document, store.active_path().display().to_string()).map(Some)
+        }
+        None => Ok(None),
+    }
+}
+
+/// A calibration from its document.
+fn calibration_of(document: serde_json::Value, source: String) -> Result<Calibration, String> {
+    let result = ResultJson::parse(document).map_err(|e| format!("{source}: {e}"))?;
+    let mount = mount_of(&result).map_err(|e| format!("{source}: {e}"))?;
+    Ok(Calibration {
+        mount,
+        tilt_deg: result.kinect_tilt_deg,
+        source,
+    })
+}
+
+/// The calibrated mount as the prior that tells the ground from other
+/// planes: a knock is far less than 10°.
+pub fn ground_prior(mount: &ActiveMount) -> NominalMount {
+    let values = crate::calib::geometry::PoseDegMm::from_params(&mount.robot_from_sensor).values();
+    NominalMount {
+        tolerance_deg: 10.0,
+        tolerance_mm: 150.0,
+        ..NominalMount::from_values(values)
+    }
+}
 
 /// The mount and σ of a result or an active calibration document.
 pub fn mount_of(result: &ResultJson) -> Result<ActiveMount, String> {
@@ -78,28 +203,6 @@ fn verify_poses(poses: &[VisitedPose], planes: bool) -> Vec<VerifyPose> {
 /// The smallest change of the motor's angle during a calibration that is
 /// called a move: the Kinect reports its angle in half degrees.
 const MOTOR_MOVED_MIN_DEG: f64 = 0.5;
-
-/// What the accelerometer says of the tilt motor during a calibration.
-#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
-pub struct MotorJson {
-    /// The tilt the session asked the motor for (relative to gravity).
-    pub commanded_deg: f64,
-    /// The motor's own reading, averaged over the poses.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub reported_deg: Option<f64>,
-    /// The optical axis's pitch against the body's forward axis (negative
-    /// down), from gravity in the sensor frame and the body's attitude from
-    /// the feet: the angle the motor actually reached relative to the body.
-    pub pitch_to_body_deg: f64,
-    /// How far the sensor's turn about the motor's axis (from gravity,
-    /// against the solved mount) ranged over the poses.
-    pub turn_spread_deg: f64,
-    /// The spread beyond which the motor moved.
-    pub turn_limit_deg: f64,
-    pub moved: bool,
-    /// Poses with accelerometer readings.
-    pub poses: usize,
-}
 
 /// Adds the tilt motor's report to a solved result (when the poses carry
 /// accelerometer readings) and rejects it when the motor moved during the

@@ -214,3 +214,104 @@ fn a_dead_daemon_does_not_look_alive_and_its_cut_off_run_is_named() {
     std::thread::sleep(std::time::Duration::from_millis(500));
     let _ = fs::remove_dir_all(&dir);
 }
+
+/// config/sim.toml's `[sim] mount`, the simulated robot's true mount.
+const TRUE_MOUNT: &str = "mount = { alpha_deg = 0.8, beta_deg = -33.0, gamma_deg = 1.5, px_mm = 510.0, py_mm = 370.0, pz_mm = 15.0 }";
+
+/// The sensor knocked since its calibration: `serve` checks the active
+/// calibration at start, finds the drift, says it in the status and the
+/// journal, and the page shows a banner that advises a new calibration;
+/// Check (with the token) checks again.
+#[test]
+fn a_knocked_sensor_is_caught_at_start_and_on_check() {
+    let dir = common::temp_dir("serve-knocked");
+    // The active calibration: a calibration of the simulated robot, accepted.
+    let sim = common::root().join("config/sim.toml");
+    let (code, out, err) =
+        common::groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let result: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let store = groundcal::store::Store::new(&dir.join("state.sim"));
+    let id = store.add(&result, "2026-12-01T00:00:00Z").unwrap();
+    store.activate(&id, "2026-12-01T00:00:01Z").unwrap();
+
+    // Then the sensor is knocked: pitched 0.3° down about the body's
+    // sideways axis (β of the fixed angles is the turn about it, α ≈ 0.8°).
+    let knocked = TRUE_MOUNT.replace("beta_deg = -33.0", "beta_deg = -33.3");
+    let (server, addr) = common::spawn_serve_with(&dir, TOKEN, &[(TRUE_MOUNT, &knocked)], &[], &[]);
+
+    // The status: the check at start, then its outcome.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let check = loop {
+        let (code, status) = common::http(&addr, "GET", "/api/status", None);
+        assert_eq!(code, 200);
+        let check = status["check"].clone();
+        if check["outcome"].is_string() && check["outcome"] != "running" {
+            break check;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no check at start: {status:#}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    assert_eq!(check["outcome"], "drift", "{check:#}");
+    assert_eq!(check["by"], "the service's start", "{check:#}");
+    let reasons = check["reasons"].to_string();
+    assert!(
+        reasons.contains("pitched 0.") && reasons.contains("down"),
+        "{reasons}"
+    );
+    assert!(
+        check["report"]["checks"].as_array().unwrap().len() >= 3,
+        "{check:#}"
+    );
+
+    // Check needs the token.
+    let (code, _) = common::http(&addr, "POST", "/api/check", None);
+    assert_eq!(code, 401);
+
+    if common::browser_ready("serve_browser") {
+        let shots = common::root().join("target/test-screenshots");
+        fs::create_dir_all(&shots).expect("screenshot directory");
+        let url = format!("http://{addr}/");
+        let seen = common::run_browser_script(
+            "serve-check.mjs",
+            &[OsStr::new(&url), OsStr::new(TOKEN), shots.as_os_str()],
+        );
+        let seen = &seen["seen"];
+        let text = |key: &str| seen[key].as_str().unwrap_or_default().to_string();
+        assert!(
+            text("banner").starts_with("The sensor has moved since it was calibrated: the ground says the sensor is pitched 0.")
+                && text("banner").contains("Calibrate again"),
+            "{seen}"
+        );
+        assert!(text("checkline").contains("the sensor has moved"), "{seen}");
+        assert!(
+            seen["checks"].to_string().contains("ground tilt θ")
+                && seen["checks"].to_string().contains("too far"),
+            "{seen}"
+        );
+        assert_eq!(seen["checkEnabled"], true, "{seen}");
+        assert!(text("secondCheckline").contains("terminal page"), "{seen}");
+        assert!(!text("secondBanner").is_empty(), "{seen}");
+        for step in ["10-drift", "11-checked"] {
+            let bytes =
+                fs::read(shots.join(format!("serve-{step}.png"))).expect("screenshot saved");
+            assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "serve-{step}.png");
+        }
+    }
+
+    // The journal (stderr under systemd) names the drift and its direction.
+    let (code, stderr) = common::terminate(server);
+    assert_eq!(code, 0, "{stderr}");
+    let line = stderr
+        .lines()
+        .find(|l| l.contains("check of the active calibration") && l.contains("drift"))
+        .unwrap_or_else(|| panic!("no journal line of the drift: {stderr}"));
+    assert!(
+        line.contains("pitched 0.") && line.contains("down"),
+        "{line}"
+    );
+    let _ = fs::remove_dir_all(&dir);
+}

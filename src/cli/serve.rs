@@ -100,9 +100,12 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
         // once, not only when the operator presses Calibrate. It is closed
         // again (each calibration opens it), and a failure does not stop the
         // service: the page must stay up to say what is wrong.
+        let check_at_start = config.verify.at_start;
+        let mut opened_at_start = false;
         let hardware = match hardware::open(&config, &options.selection).await {
             Ok(opened) => {
                 drop(opened);
+                opened_at_start = true;
                 // The link only binds its socket: the lower computer is first
                 // spoken to (HELLO) when a calibration starts.
                 format!(
@@ -125,6 +128,9 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
             &state_dir,
         );
         state.set_hardware(hardware);
+        if check_at_start && opened_at_start {
+            terminal::check_at_start(&state);
+        }
         match terminal::serve(listener, state, stop).await {
             Ok(()) => ExitStatus::Success,
             Err(e) => {

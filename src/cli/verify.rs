@@ -2,19 +2,14 @@
 //! given) calibration says, from the ground and the accelerometer, live or
 //! from a recording. Exit 0 consistent, 4 drift, 1 hardware, 2 bad input.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::calibrate::{show_progress, stop_signal};
 use super::{print_json, ExitStatus};
-use crate::calib::observe::NominalMount;
-use crate::calib::verify::ActiveMount;
-use crate::config::Config;
 use crate::hardware::{self, Selection};
-use crate::output::ResultJson;
 use crate::recording::Recording;
 use crate::session::{self, Plan, SessionError};
-use crate::store::Store;
-use crate::verify::{check_schedule, compare, mount_of, VerifyJson};
+use crate::verify::{check_schedule, compare, ground_prior, load_calibration, VerifyJson};
 
 /// The command's options.
 #[derive(Debug, Clone, Default)]
@@ -30,68 +25,6 @@ pub struct VerifyOptions {
     /// Keep what the check saw as a recording.
     pub record: Option<PathBuf>,
     pub json: bool,
-}
-
-/// The calibration to check: its mount and σ, and the tilt it holds for.
-pub struct Calibration {
-    pub mount: ActiveMount,
-    pub tilt_deg: Option<f64>,
-    /// Where it came from, for messages.
-    pub source: String,
-}
-
-/// Reads the calibration from a file, or the store's active one.
-pub fn load_calibration(
-    file: Option<&Path>,
-    config: &Config,
-    config_path: Option<&Path>,
-) -> Result<Calibration, String> {
-    let (document, source) = match file {
-        Some(path) => {
-            let bytes =
-                crate::recording::read_bounded(path, 16 << 20).map_err(|e| e.to_string())?;
-            let value: serde_json::Value = serde_json::from_slice(&bytes)
-                .map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
-            (value, path.display().to_string())
-        }
-        None => {
-            let serve = config.serve.as_ref().ok_or(
-                "no --calibration FILE, and the configuration has no [serve] state_dir to find the active calibration in",
-            )?;
-            let dir = match config_path {
-                Some(p) => crate::config::resolve_from_config(p, &serve.state_dir),
-                None => serve.state_dir.clone(),
-            };
-            let store = Store::new(&dir);
-            match store.active().map_err(|e| e.to_string())? {
-                Some(v) => (v, store.active_path().display().to_string()),
-                None => {
-                    return Err(format!(
-                        "no calibration is active in {} yet: calibrate and accept one, or give --calibration FILE",
-                        dir.display()
-                    ))
-                }
-            }
-        }
-    };
-    let result = ResultJson::parse(document).map_err(|e| format!("{source}: {e}"))?;
-    let mount = mount_of(&result).map_err(|e| format!("{source}: {e}"))?;
-    Ok(Calibration {
-        mount,
-        tilt_deg: result.kinect_tilt_deg,
-        source,
-    })
-}
-
-/// The calibrated mount as the prior that tells the ground from other
-/// planes: a knock is far less than 10°.
-pub fn ground_prior(mount: &ActiveMount) -> NominalMount {
-    let values = crate::calib::geometry::PoseDegMm::from_params(&mount.robot_from_sensor).values();
-    NominalMount {
-        tolerance_deg: 10.0,
-        tolerance_mm: 150.0,
-        ..NominalMount::from_values(values)
-    }
 }
 
 /// Prints the document; the exit status its verdict calls for.
@@ -199,7 +132,7 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
                 return ExitStatus::RuntimeFailure;
             }
         };
-        let plan = match check_plan(&config, check, &calibration, options.record.clone()) {
+        let plan = match Plan::for_check(&config, check, &calibration, options.record.clone()) {
             Ok(p) => p,
             Err(e) => {
                 eprintln!("groundcal verify: {e}");
@@ -247,21 +180,4 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
             }
         }
     })
-}
-
-/// The session plan of a check: the check's schedule, the calibration's
-/// tilt, the calibrated mount as the ground's prior, no provisional solves.
-pub fn check_plan(
-    config: &Config,
-    schedule: crate::schedule::Schedule,
-    calibration: &Calibration,
-    record: Option<PathBuf>,
-) -> Result<Plan, String> {
-    let mut plan = Plan::from_config(config, schedule, None, record)?;
-    plan.calibrating = false;
-    plan.nominal_mount = Some(ground_prior(&calibration.mount));
-    if let Some(tilt) = calibration.tilt_deg {
-        plan.tilt_deg = tilt;
-    }
-    Ok(plan)
 }

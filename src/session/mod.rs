@@ -23,10 +23,9 @@ mod run;
 pub use plan::{Plan, RecordedPose};
 pub use run::{run, verify, SessionError, SessionOutcome, VerifyOutcome};
 
-use nalgebra::Vector3;
+pub use crate::verify::{GravityReading, VisitedPose};
 
-use crate::calib::geometry::{PoseDegMm, Transform};
-use crate::calib::solve::Observation;
+use crate::calib::geometry::PoseDegMm;
 
 /// What happens, for the operator's progress display.
 #[derive(Debug, Clone, PartialEq)]
@@ -84,50 +83,4 @@ pub struct ProvisionalPose {
 pub struct PoseFit {
     pub inliers: usize,
     pub plane: [f64; 4],
-}
-
-/// The accelerometer at one pose, its readings averaged.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GravityReading {
-    /// Gravity's reaction (up) in the sensor frame (X forward, Y up, Z
-    /// right), in g: the accelerometer's (right, up, forward) reordered.
-    pub up_sensor: Vector3<f64>,
-    pub readings: usize,
-    /// The angle the tilt motor reported, degrees (its own reading, half
-    /// degrees, relative to gravity).
-    pub motor_reported_deg: f64,
-}
-
-impl GravityReading {
-    /// The mean of a pose's readings; none when there are none, or when
-    /// they are not about 1 g (a sensor that reports no accelerometer, or
-    /// one that moved).
-    pub fn from_states(states: &[groundcal_hal::TiltState]) -> Option<Self> {
-        if states.is_empty() {
-            return None;
-        }
-        let n = states.len() as f64;
-        let mean = |k: usize| states.iter().map(|s| s.accelerometer_g[k]).sum::<f64>() / n;
-        let up_sensor = Vector3::new(mean(2), mean(1), mean(0));
-        let magnitude = up_sensor.norm();
-        if !(0.7..=1.3).contains(&magnitude) {
-            return None;
-        }
-        Some(GravityReading {
-            up_sensor,
-            readings: states.len(),
-            motor_reported_deg: states.iter().map(|s| s.tilt_deg).sum::<f64>() / n,
-        })
-    }
-}
-
-/// One pose a session visited.
-#[derive(Debug, Clone)]
-pub struct VisitedPose {
-    pub index: u32,
-    /// The real body pose from the feet, when they fixed it.
-    pub ground_from_robot: Option<Transform>,
-    /// The pose's observation, or why there is none.
-    pub fit: Result<Observation, String>,
-    pub gravity: Option<GravityReading>,
 }

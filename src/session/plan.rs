@@ -163,6 +163,24 @@ impl Plan {
         Ok(plan)
     }
 
+    /// The plan of a check (`verify`): the check's schedule, the motor at
+    /// the calibration's tilt, the calibrated mount as the ground's prior,
+    /// no provisional solves.
+    pub fn for_check(
+        config: &Config,
+        schedule: Schedule,
+        calibration: &crate::verify::Calibration,
+        record: Option<PathBuf>,
+    ) -> Result<Plan, String> {
+        let mut plan = Plan::from_config(config, schedule, None, record)?;
+        plan.calibrating = false;
+        plan.nominal_mount = Some(crate::verify::ground_prior(&calibration.mount));
+        if let Some(tilt) = calibration.tilt_deg {
+            plan.tilt_deg = tilt;
+        }
+        Ok(plan)
+    }
+
     /// The pose id sent for the `k`-th pose of the schedule (from 0).
     pub fn pose_id(&self, k: usize) -> u16 {
         self.recorded_poses

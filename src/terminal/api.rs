@@ -68,6 +68,12 @@ pub enum EventJson {
     Failed {
         error: String,
     },
+    /// Not a session event: a check of the active calibration ended,
+    /// `consistent`, `drift` or `failed` (with the reasons or the error).
+    Checked {
+        outcome: String,
+        reasons: Vec<String>,
+    },
 }
 
 /// One pose of a provisional solve.
@@ -158,10 +164,40 @@ pub enum RunState {
     Running,
 }
 
+/// What a running session does: calibrate, or check the active calibration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Task {
+    #[default]
+    Calibration,
+    Check,
+}
+
+/// The last check of the active calibration (`verify`), at the service's
+/// start or on "Check".
+#[derive(Debug, Clone, Serialize)]
+pub struct CheckStatus {
+    /// `running`, `consistent`, `drift` or `failed`.
+    pub outcome: String,
+    pub by: String,
+    pub started: String,
+    pub finished: Option<String>,
+    /// Why it drifted, in an operator's words.
+    pub reasons: Vec<String>,
+    /// Why it could not check.
+    pub error: Option<String>,
+    /// The whole report (`groundcal verify --json`).
+    pub report: Option<crate::verify::VerifyJson>,
+}
+
 /// What `GET /api/status` shows.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Status {
     pub state: RunState,
+    /// What the running (or last) session does.
+    pub task: Task,
+    /// The last check of the active calibration.
+    pub check: Option<CheckStatus>,
     /// Who started the current (or last) calibration.
     pub by: Option<String>,
     pub started: Option<String>,
@@ -308,7 +344,7 @@ impl Status {
                 )
             }
             EventJson::Aborted { reason } => self.robot = format!("aborted: {reason}"),
-            EventJson::Stored { .. } | EventJson::Failed { .. } => {}
+            EventJson::Stored { .. } | EventJson::Failed { .. } | EventJson::Checked { .. } => {}
             EventJson::Provisional { poses } => self.provisional = Some(poses.clone()),
         }
     }
@@ -362,6 +398,10 @@ fn step_in_words(event: &EventJson) -> Option<String> {
         ),
         EventJson::Aborted { reason } => format!("aborted: {reason}"),
         EventJson::Failed { error } => format!("stopped without a result: {error}"),
+        EventJson::Checked { outcome, .. } if outcome == "failed" => {
+            "the check could not be made (see below)".into()
+        }
+        EventJson::Checked { .. } => return None,
         EventJson::Stored { .. } | EventJson::Provisional { .. } => return None,
     })
 }

@@ -13,7 +13,7 @@ use serde_json::{json, Value};
 use tokio::sync::oneshot;
 use tokio_stream::StreamExt;
 
-use super::api::{RunClock, RunState, Status};
+use super::api::{CheckStatus, RunClock, RunState, Status, Task};
 use super::state::{now, AppState};
 use super::worker;
 use crate::store::StoreError;
@@ -134,7 +134,7 @@ pub async fn post_abort(
         }
         None => Err(ApiError(
             StatusCode::CONFLICT,
-            "no calibration is running".into(),
+            "no calibration or check is running".into(),
         )),
     }
 }
@@ -144,60 +144,113 @@ pub async fn post_start(
     headers: HeaderMap,
     ConnectInfo(addr): ConnectInfo<SocketAddr>,
 ) -> Result<Response, ApiError> {
+    let by = client_name(&headers, addr);
+    let started = start(&state, by.clone(), Task::Calibration)?;
+    Ok((
+        StatusCode::ACCEPTED,
+        Json(json!({ "state": "running", "by": by, "started": started })),
+    )
+        .into_response())
+}
+
+/// Checks the active calibration against the sensor now (`verify`).
+pub async fn post_check(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ConnectInfo(addr): ConnectInfo<SocketAddr>,
+) -> Result<Response, ApiError> {
+    if state.store().active().map_err(store_error)?.is_none() {
+        return Err(ApiError(
+            StatusCode::CONFLICT,
+            "no calibration is active yet: there is nothing to check".into(),
+        ));
+    }
+    let by = client_name(&headers, addr);
+    let started = start(&state, by.clone(), Task::Check)?;
+    Ok((
+        StatusCode::ACCEPTED,
+        Json(json!({ "state": "running", "task": "check", "by": by, "started": started })),
+    )
+        .into_response())
+}
+
+/// Starts a session on its own thread, unless one runs or the service
+/// stops; returns when it started. A calibration replaces the last result
+/// on the page; a check keeps it.
+pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiError> {
     if state.is_stopping() {
         return Err(ApiError(
             StatusCode::SERVICE_UNAVAILABLE,
             "the service is stopping".into(),
         ));
     }
-    let by = client_name(&headers, addr);
     let started = now();
     let (abort_tx, abort_rx) = oneshot::channel::<String>();
     {
         let mut status = state.status_mut();
         if status.state == RunState::Running {
+            let what = match status.task {
+                Task::Calibration => "a calibration",
+                Task::Check => "a check of the active calibration",
+            };
             return Err(ApiError(
                 StatusCode::CONFLICT,
                 format!(
-                    "a calibration is already running, started by {} at {}",
+                    "{what} is already running, started by {} at {}",
                     status.by.as_deref().unwrap_or("someone"),
                     status.started.as_deref().unwrap_or("?")
                 ),
             ));
         }
-        *status = Status {
+        let previous = std::mem::take(&mut *status);
+        let mut next = Status {
             state: RunState::Running,
+            task,
             by: Some(by.clone()),
             started: Some(started.clone()),
             robot: "opening the hardware".into(),
             step: "opening the Kinect and connecting to the robot".into(),
             clock: Some(RunClock::start(std::time::Instant::now())),
-            gates: status.gates,
-            hardware: std::mem::take(&mut status.hardware),
+            gates: previous.gates,
+            hardware: previous.hardware,
+            check: previous.check,
             ..Status::default()
         };
+        if task == Task::Check {
+            next.step = "checking the sensor against the active calibration: opening the Kinect and connecting to the robot".into();
+            next.result = previous.result;
+            next.result_id = previous.result_id;
+            next.check = Some(CheckStatus {
+                outcome: "running".into(),
+                by: by.clone(),
+                started: started.clone(),
+                finished: None,
+                reasons: Vec::new(),
+                error: None,
+                report: None,
+            });
+        }
+        *status = next;
         state.set_abort(abort_tx);
     }
     // Written once the status is released: a write waits for the disk.
-    if let Err(e) = state.store().mark_running(&by, &started) {
-        tracing::warn!("cannot mark the calibration as running: {e}");
+    if task == Task::Calibration {
+        if let Err(e) = state.store().mark_running(&by, &started) {
+            tracing::warn!("cannot mark the calibration as running: {e}");
+        }
     }
     // A finished worker of an earlier session is joined here.
     let worker_state = state.clone();
     let spawned = state.replace_worker(|| {
         std::thread::Builder::new()
             .name("groundcal-session".into())
-            .spawn(move || worker::run_session(worker_state, abort_rx))
+            .spawn(move || match task {
+                Task::Calibration => worker::run_session(worker_state, abort_rx),
+                Task::Check => worker::run_check(worker_state, abort_rx),
+            })
     });
     match spawned {
-        Ok(()) => {
-            let started = state.status_mut().started.clone();
-            Ok((
-                StatusCode::ACCEPTED,
-                Json(json!({ "state": "running", "by": by, "started": started })),
-            )
-                .into_response())
-        }
+        Ok(()) => Ok(started),
         Err(e) => {
             state.store().clear_running();
             let mut status = state.status_mut();

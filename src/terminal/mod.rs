@@ -84,6 +84,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/calibrations/{id}/reject", post(post_reject))
         .route("/api/rollback/{id}", post(post_activate))
         .route("/api/active", get(get_active))
+        .route("/api/check", post(post_check))
         // Only the routes above: an unknown endpoint is a 404 to anyone.
         .route_layer(axum::middleware::from_fn_with_state(
             state.clone(),
@@ -119,6 +120,24 @@ async fn protective_headers(mut response: Response) -> Response {
     headers.insert(X_CONTENT_TYPE_OPTIONS, HeaderValue::from_static("nosniff"));
     headers.insert(REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
     response
+}
+
+/// Checks the active calibration against the sensor once, as the service
+/// starts (when one is active): on the session's thread, so that systemd's
+/// READY is not delayed by it. The outcome goes to the journal and the status.
+pub fn check_at_start(state: &AppState) {
+    match state.store().active() {
+        Ok(Some(_)) => {
+            match handlers::start(state, "the service's start".into(), api::Task::Check) {
+                Ok(_) => tracing::info!("checking the active calibration against the sensor"),
+                Err(handlers::ApiError(_, e)) => {
+                    tracing::warn!("cannot check the active calibration at start: {e}")
+                }
+            }
+        }
+        Ok(None) => tracing::info!("no calibration is active yet: nothing to check at start"),
+        Err(e) => tracing::warn!("cannot read the active calibration to check it: {e}"),
+    }
 }
 
 /// Serves until `shutdown` completes; then aborts a running session, waits

@@ -74,6 +74,12 @@ $('calibrate').onclick = async () => {
   model.confirm = null;
   if (await call('POST', '/api/calibrations')) refresh();
 };
+// A check of the active calibration against the sensor now (the robot holds
+// its home stance, or tilts a little with [verify] poses).
+$('check').onclick = async () => {
+  model.confirm = null;
+  if (await call('POST', '/api/check')) refresh();
+};
 // Between Abort and the session's end the robot halts and walks home, which
 // takes seconds on a real robot: the page says so.
 $('abort').onclick = async () => {
@@ -155,6 +161,16 @@ function valuesTable(table, mount, sigma, active, predicted) {
     const sign = change === null || Number(shown) === 0 ? '' : (change > 0 ? '+' : '−');
     row.insertCell().textContent = change === null ? '' : sign + shown + unit;
   }
+}
+
+// A check's figures in words: "ground tilt θ 0.003° (allowed 0.017°), …".
+function checkFigures(report) {
+  if (!report) return [];
+  return report.checks.map((c) => {
+    const unit = c.unit === 'deg' ? '°' : ' mm';
+    const digits = c.unit === 'deg' ? 3 : 2;
+    return c.name + ' ' + c.measured.toFixed(digits) + unit + ' (allowed ' + c.threshold.toFixed(digits) + unit + ')' + (c.passed ? '' : ' — too far');
+  });
 }
 
 // ---- charts ----------------------------------------------------------------
@@ -273,11 +289,20 @@ function render() {
   $('safety').hidden = !unsafe;
   $('safety').textContent = unsafe ? 'The robot may not have stopped: ' + unsafe + '. Check it before anything else.' : '';
 
+  // A sensor that moved since its calibration: the terrain map is wrong.
+  const ck = s && s.check;
+  const drift = ck && ck.outcome === 'drift';
+  $('drift').hidden = !drift;
+  $('drift').textContent = drift ? 'The sensor has moved since it was calibrated: '
+    + ck.reasons.map((r) => r.replace(' than the active calibration says', '')).join('; ')
+    + '. Calibrate again before the robot relies on its terrain map.' : '';
+
   // Progress.
+  const checking = running && s.task === 'check';
   const stoppedAtHome = s && !running && /^aborted/.test(s.robot || '') && /stands at the home stance/.test(s.robot || '');
   let title = 'connecting…';
   if (s) {
-    if (running) title = model.aborting ? 'aborting…' : (s.pose ? 'pose ' + s.pose + ' of ' + s.of : 'starting');
+    if (running) title = model.aborting ? 'aborting…' : checking ? 'checking the sensor' : (s.pose ? 'pose ' + s.pose + ' of ' + s.of : 'starting');
     else title = stoppedAtHome ? 'at home' : (s.result ? 'finished' : 'idle');
   }
   $('progress').textContent = title;
@@ -298,6 +323,7 @@ function render() {
   }
   $('hardware').textContent = s && !running && s.hardware ? 'Hardware at the service\'s start: ' + s.hardware : '';
   $('calibrate').disabled = lost || !s || running;
+  $('check').disabled = lost || !s || running || !model.active;
   $('abort').disabled = lost || !running || model.aborting;
   const m = $('message');
   m.textContent = model.message ? model.message.text : '';
@@ -311,7 +337,7 @@ function render() {
   reasons.innerHTML = '';
   const say = (text) => { const li = document.createElement('li'); li.textContent = text; reasons.appendChild(li); };
   let activeHere = false;
-  if (s && !running && r) {
+  if (s && r && (!running || checking)) {
     card.hidden = false;
     const passed = r.status === 'accepted';
     verdict.textContent = passed ? 'Passed checks' : 'Failed checks';
@@ -343,7 +369,7 @@ function render() {
     redraw('charts', 'none', () => charts([], 1, false));
   } else {
     card.hidden = true;
-    if (running) redraw('charts', JSON.stringify(['running', s.provisional, s.of, s.pose]), () => charts(s.provisional || [], s.of || 1, true));
+    if (running && !checking) redraw('charts', JSON.stringify(['running', s.provisional, s.of, s.pose]), () => charts(s.provisional || [], s.of || 1, true));
     else redraw('charts', 'none', () => charts([], 1, false));
   }
   $('accept').hidden = activeHere || !(r && r.status === 'accepted');
@@ -361,6 +387,20 @@ function render() {
   // The active calibration and the history.
   const a = model.active;
   $('active').textContent = a ? a.id + ', active since ' + when(a.activated) : 'None yet: the robot uses no calibration from groundcal.';
+  const line = $('checkline');
+  line.className = ck ? ck.outcome : '';
+  if (!ck) line.textContent = a ? 'Not checked since the service started: Check compares it with the sensor now.' : '';
+  else if (ck.outcome === 'running') line.textContent = 'Checking it against the sensor now…';
+  else if (ck.outcome === 'failed') line.textContent = 'The last check (' + when(ck.started) + ') could not be made: ' + (ck.error || 'no reason given');
+  else line.textContent = 'Checked ' + when(ck.finished) + (ck.by ? ' (' + ck.by + ')' : '') + ': '
+    + (drift ? 'the sensor has moved since it was calibrated.' : 'the sensor agrees with it.');
+  redraw('checks', JSON.stringify(ck && ck.report ? [ck.finished, ck.report.checks] : null), () => {
+    const list = $('checks');
+    list.innerHTML = '';
+    const report = ck && ck.report;
+    for (const text of checkFigures(report)) { const li = document.createElement('li'); li.textContent = text; list.appendChild(li); }
+    if (report && report.not_checked.length) { const li = document.createElement('li'); li.textContent = 'not seen from where it stood: ' + report.not_checked.join(', '); list.appendChild(li); }
+  });
   redraw('history', JSON.stringify([model.history.slice(0, 20), !!a, lost || running]), () => {
     const history = $('history');
     history.innerHTML = '';
@@ -444,7 +484,7 @@ function listen() {
       model.status.provisional = e.poses;
       render();
     } else {
-      if (e.type === 'stored' || e.type === 'failed') loadStore();
+      if (e.type === 'stored' || e.type === 'failed' || e.type === 'checked') loadStore();
       refresh();
     }
   };

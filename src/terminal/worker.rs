@@ -1,28 +1,54 @@
 //! The session thread: opens the hardware, runs the same session as
-//! `groundcal calibrate` on a runtime of its own (so the hardware never
-//! crosses threads), forwards its events, and keeps the result in the store.
+//! `groundcal calibrate` (or `groundcal verify`) on a runtime of its own (so
+//! the hardware never crosses threads), forwards its events, and keeps the
+//! result in the store (or the check's outcome in the status and the journal).
 
 use serde_json::Value;
 use tokio::sync::oneshot;
 
-use super::api::{EventJson, RunState};
+use super::api::{CheckStatus, EventJson, RunState};
 use super::state::{now, AppState};
 use crate::hardware;
 use crate::session::{self, Event};
+use crate::verify::{calibration_in_store, check_schedule, VerifyJson};
+
+/// The session's own runtime, on this thread.
+fn session_runtime() -> Result<tokio::runtime::Runtime, String> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| format!("cannot start the session's runtime: {e}"))
+}
+
+/// Runs `work` while the session's loop beats: if that runtime is blocked
+/// (a stuck device call, a deadlock), the beat stops and so does the systemd
+/// watchdog.
+async fn beating<T>(state: &AppState, work: impl std::future::Future<Output = T>) -> T {
+    let beat = async {
+        let mut tick = tokio::time::interval(crate::systemd::heartbeat_period());
+        loop {
+            tick.tick().await;
+            state.beat();
+        }
+    };
+    tokio::select! {
+        result = work => result,
+        never = beat => never,
+    }
+}
+
+/// The abort as a future of its reason.
+async fn abort_reason(abort: oneshot::Receiver<String>) -> String {
+    abort
+        .await
+        .unwrap_or_else(|_| "the service went away".to_string())
+}
 
 /// The session thread: opens the hardware, runs the session, keeps the result.
 pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
+    let runtime = match session_runtime() {
         Ok(r) => r,
-        Err(e) => {
-            return finish(
-                &state,
-                Err(format!("cannot start the session's runtime: {e}")),
-            )
-        }
+        Err(e) => return finish(&state, Err(e)),
     };
     let outcome = runtime.block_on(async {
         let work = async {
@@ -39,44 +65,151 @@ pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
                 replay.as_ref(),
                 None,
             )?;
-            let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
-            let abort = async move {
-                abort
-                    .await
-                    .unwrap_or_else(|_| "the service went away".to_string())
-            };
+            let (tx, rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
             let session = async {
-                let r = session::run(&mut sensor, &mut controller, &plan, &tx, abort).await;
+                let r = session::run(
+                    &mut sensor,
+                    &mut controller,
+                    &plan,
+                    &tx,
+                    abort_reason(abort),
+                )
+                .await;
                 drop(tx);
                 r
             };
-            let forward = async {
-                while let Some(e) = rx.recv().await {
-                    state.publish(EventJson::from(&e));
-                }
-            };
-            tokio::join!(session, forward).0.map_err(|e| e.to_string())
+            tokio::join!(session, forward(&state, rx))
+                .0
+                .map_err(|e| e.to_string())
         };
-        // The session's own runtime beats from the moment it opens the
-        // hardware: if that runtime is blocked (a stuck device call, a
-        // deadlock), the beat stops and so does the systemd watchdog.
-        let beat = async {
-            let mut tick = tokio::time::interval(crate::systemd::heartbeat_period());
-            loop {
-                tick.tick().await;
-                state.beat();
-            }
-        };
-        tokio::select! {
-            result = work => result,
-            never = beat => never,
-        }
+        // The session's own runtime beats from the moment it opens the hardware.
+        beating(&state, work).await
     });
     state.clear_heartbeat();
     let result = outcome.and_then(|o| {
         serde_json::to_value(&o.result).map_err(|e| format!("cannot encode the result: {e}"))
     });
     finish(&state, result);
+}
+
+/// Publishes the session's events until it ends.
+async fn forward(state: &AppState, mut events: tokio::sync::mpsc::UnboundedReceiver<Event>) {
+    while let Some(e) = events.recv().await {
+        state.publish(EventJson::from(&e));
+    }
+}
+
+/// The check thread: the active calibration against the sensor now, as
+/// `groundcal verify` with the configuration's `[verify] poses`.
+pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
+    let runtime = match session_runtime() {
+        Ok(r) => r,
+        Err(e) => return finish_check(&state, Err(e)),
+    };
+    let outcome = runtime.block_on(async {
+        let work = async {
+            let calibration = calibration_in_store(state.store())?
+                .ok_or_else(|| "no calibration is active: there is nothing to check".to_string())?;
+            let (mut sensor, mut controller) = hardware::open(state.config(), state.selection())
+                .await
+                .map_err(|e| e.to_string())?;
+            let config = state.config();
+            let schedule = check_schedule(
+                state.schedule().home,
+                config.verify.poses,
+                config.verify.tilt_deg,
+            );
+            let plan = session::Plan::for_check(config, schedule, &calibration, None)?;
+            let (tx, rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
+            let session = async {
+                let r = session::verify(
+                    &mut sensor,
+                    &mut controller,
+                    &plan,
+                    &tx,
+                    abort_reason(abort),
+                    &calibration.mount,
+                )
+                .await;
+                drop(tx);
+                r
+            };
+            let outcome = tokio::join!(session, forward(&state, rx))
+                .0
+                .map_err(|e| e.to_string())?;
+            Ok::<_, String>((
+                VerifyJson::new(
+                    &outcome.report,
+                    &outcome.poses,
+                    &calibration.mount,
+                    calibration.tilt_deg,
+                ),
+                calibration.source,
+            ))
+        };
+        beating(&state, work).await
+    });
+    state.clear_heartbeat();
+    finish_check(&state, outcome);
+}
+
+/// A check's outcome, to the status, the journal and the live stream.
+fn finish_check(state: &AppState, outcome: Result<(VerifyJson, String), String>) {
+    state.take_abort();
+    let (outcome_words, reasons, error, report) = match outcome {
+        Ok((report, source)) => {
+            if report.drifted() {
+                tracing::warn!(
+                    "check of the active calibration ({source}): drift: {}; calibrate again",
+                    report.reasons.join("; ")
+                );
+            } else {
+                let checks: Vec<String> = report
+                    .checks
+                    .iter()
+                    .map(|c| {
+                        format!(
+                            "{} {:.3} of {:.3} {}",
+                            c.name, c.measured, c.threshold, c.unit
+                        )
+                    })
+                    .collect();
+                tracing::info!(
+                    "check of the active calibration ({source}): consistent ({})",
+                    checks.join(", ")
+                );
+            }
+            let words = if report.drifted() {
+                "drift"
+            } else {
+                "consistent"
+            };
+            (words, report.reasons.clone(), None, Some(report))
+        }
+        Err(e) => {
+            tracing::warn!("check of the active calibration failed: {e}");
+            ("failed", Vec::new(), Some(e), None)
+        }
+    };
+    {
+        let mut status = state.status_mut();
+        let previous = status.check.take();
+        status.check = Some(CheckStatus {
+            outcome: outcome_words.into(),
+            by: previous.as_ref().map_or_else(String::new, |c| c.by.clone()),
+            started: previous.map_or_else(String::new, |c| c.started),
+            finished: Some(now()),
+            reasons: reasons.clone(),
+            error,
+            report,
+        });
+        status.state = RunState::Idle;
+        status.provisional = None;
+    }
+    state.publish(EventJson::Checked {
+        outcome: outcome_words.into(),
+        reasons,
+    });
 }
 
 fn finish(state: &AppState, result: Result<Value, String>) {
