@@ -263,12 +263,11 @@ pub fn judge_motor(
     }
     if motor.moved {
         let at = |value: f64| turns.iter().find(|t| t.1 == value).map_or(0, |t| t.0);
+        let (first, second) = (at(low).min(at(high)), at(low).max(at(high)));
         result.status = ResultStatus::Rejected;
         result.reasons.push(format!(
-            "the Kinect's tilt motor moved during the calibration: the sensor's angle against the body differs by {:.2}° between pose {} and pose {} (from the accelerometer; limit {limit:.2}°). Check that nothing touches the Kinect and calibrate again",
+            "the Kinect's tilt motor moved during the calibration: the sensor's angle against the body differs by {:.2}° between pose {first} and pose {second} (from the accelerometer; limit {limit:.2}°). Check that nothing touches the Kinect and calibrate again",
             high - low,
-            at(low),
-            at(high)
         ));
     }
     result.motor = Some(motor);
@@ -566,5 +565,129 @@ impl VerifyJson {
             let _ = writeln!(out, "consistent: the sensor agrees with the calibration");
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::geometry::ground_in_sensor;
+    use crate::calib::solve::Observation;
+
+    const MOUNT: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+
+    /// Poses of the paper's kind (rolled and pitched), each with the
+    /// gravity the sensor feels when its motor turned by `turn(k)` degrees
+    /// about its right axis since the calibration.
+    fn poses(turn: impl Fn(usize) -> f64) -> Vec<VisitedPose> {
+        let mount = PoseDegMm::from_values(MOUNT).to_params().to_transform();
+        (0..12)
+            .map(|k| {
+                let body = PoseDegMm::from_values([
+                    0.0,
+                    [0.0, 8.0, -8.0][k % 3],
+                    [15.0, -15.0, 0.0, 5.0][k % 4],
+                    0.0,
+                    600.0,
+                    0.0,
+                ])
+                .to_params()
+                .to_transform();
+                let motor = Transform::from_parts(
+                    nalgebra::Translation3::identity(),
+                    nalgebra::Rotation3::from_matrix_unchecked(crate::calib::geometry::rot_z(
+                        turn(k).to_radians(),
+                    )),
+                );
+                let up = ground_in_sensor(&(body * mount * motor)).normal;
+                let plane = ground_in_sensor(&(body * mount));
+                VisitedPose {
+                    index: k as u32 + 1,
+                    ground_from_robot: Some(body),
+                    fit: Ok(Observation::new(k as u32 + 1, body, plane)),
+                    gravity: Some(GravityReading {
+                        up_sensor: up,
+                        readings: 10,
+                        motor_reported_deg: -20.0,
+                    }),
+                }
+            })
+            .collect()
+    }
+
+    fn result() -> ResultJson {
+        let mut result = ResultJson::unsolved("x".into(), &[]);
+        result.status = ResultStatus::Accepted;
+        result.reasons.clear();
+        result.robot_from_sensor = Some(MountJson::from_params(
+            &PoseDegMm::from_values(MOUNT).to_params(),
+        ));
+        result.poses = (1..=12)
+            .map(|i| crate::output::PoseJson::failed(i, String::new()))
+            .collect();
+        result
+    }
+
+    #[test]
+    fn a_steady_motor_passes_and_its_angle_against_the_body_is_the_mounts_pitch() {
+        let mut r = result();
+        judge_motor(&mut r, &poses(|_| 0.0), -20.0, &VerifySettings::default());
+        let motor = r.motor.clone().unwrap();
+        assert!(!motor.moved, "{motor:?}");
+        assert!(motor.turn_spread_deg < 1e-6, "{motor:?}");
+        // β is the optical axis's pitch against the body (α, γ small).
+        assert!((motor.pitch_to_body_deg + 33.0).abs() < 0.05, "{motor:?}");
+        assert_eq!(motor.poses, 12);
+        assert_eq!(motor.reported_deg, Some(-20.0));
+        assert_eq!(r.status, ResultStatus::Accepted);
+    }
+
+    #[test]
+    fn a_motor_that_moved_midway_rejects_the_calibration_naming_the_poses() {
+        let mut r = result();
+        judge_motor(
+            &mut r,
+            &poses(|k| if k >= 6 { -1.0 } else { 0.0 }),
+            -20.0,
+            &VerifySettings::default(),
+        );
+        let motor = r.motor.clone().unwrap();
+        assert!(motor.moved, "{motor:?}");
+        assert!((motor.turn_spread_deg - 1.0).abs() < 0.02, "{motor:?}");
+        assert_eq!(r.status, ResultStatus::Rejected);
+        let reason = r.reasons.join(" ");
+        assert!(
+            reason.contains("tilt motor moved") && reason.contains("1.00°"),
+            "{reason}"
+        );
+        // One pose before the move (1-6), one after (7-12), in that order.
+        let poses: Vec<u32> = reason
+            .split("pose ")
+            .skip(1)
+            .filter_map(|w| w.split_whitespace().next()?.parse().ok())
+            .collect();
+        assert!(
+            poses.len() == 2 && poses[0] <= 6 && poses[1] >= 7,
+            "{reason}"
+        );
+        // Each pose's turn against the mean: half a degree either way.
+        let turns: Vec<f64> = r.poses.iter().filter_map(|p| p.motor_turn_deg).collect();
+        assert_eq!(turns.len(), 12);
+        assert!(
+            turns.iter().all(|t| (t.abs() - 0.5).abs() < 0.02),
+            "{turns:?}"
+        );
+    }
+
+    #[test]
+    fn the_checks_schedule_holds_home_then_tilts_each_way() {
+        let home = PoseDegMm::from_values([0.0, 0.0, 0.0, 0.0, 600.0, 0.0]);
+        let still = check_schedule(home, 0, 8.0);
+        assert_eq!(still.poses, vec![home]);
+        let tilted = check_schedule(home, 4, 8.0);
+        let rolls: Vec<f64> = tilted.poses.iter().map(|p| p.gamma_deg).collect();
+        let pitches: Vec<f64> = tilted.poses.iter().map(|p| p.beta_deg).collect();
+        assert_eq!(rolls, [0.0, 8.0, -8.0, 0.0, 0.0]);
+        assert_eq!(pitches, [0.0, 0.0, 0.0, 8.0, -8.0]);
     }
 }
