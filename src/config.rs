@@ -155,6 +155,46 @@ pub struct CalibrationConfig {
     /// the solve's floors, a conservative real robot).
     #[serde(default)]
     pub noise: Option<crate::calib::plan::NoiseModel>,
+    /// The Kinect's depth scale: `"estimate"` (the default: with the mount,
+    /// when the poses' heights observe it, else 1) or a known value such as
+    /// `1.0032` (from an earlier calibration).
+    #[serde(default, deserialize_with = "depth_scale_setting")]
+    pub depth_scale: DepthScaleSetting,
+}
+
+pub use crate::calib::solve::DepthScaleSetting;
+
+/// `"estimate"` or a scale near 1 (`--depth-scale`, `calibration.depth_scale`).
+pub fn parse_depth_scale(text: &str) -> Result<DepthScaleSetting, String> {
+    let text = text.trim();
+    if text == "estimate" {
+        return Ok(DepthScaleSetting::Estimate { fallback: 1.0 });
+    }
+    match text.parse::<f64>() {
+        Ok(s) if (0.5..=2.0).contains(&s) => Ok(DepthScaleSetting::Fixed(s)),
+        Ok(s) => Err(format!(
+            "a depth scale of {s} is not a Kinect's (it lies near 1, e.g. 1.0032)"
+        )),
+        Err(_) => Err(format!(
+            "\"{text}\" is neither \"estimate\" nor a depth scale such as 1.0032"
+        )),
+    }
+}
+
+fn depth_scale_setting<'de, D: Deserializer<'de>>(
+    deserializer: D,
+) -> Result<DepthScaleSetting, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Raw {
+        Word(String),
+        Number(f64),
+    }
+    match Raw::deserialize(deserializer)? {
+        Raw::Word(w) => parse_depth_scale(&w),
+        Raw::Number(n) => parse_depth_scale(&n.to_string()),
+    }
+    .map_err(serde::de::Error::custom)
 }
 
 fn default_slip_mm() -> f64 {
@@ -178,6 +218,10 @@ pub struct SimConfig {
     /// feet): `{ foot = 3, from_pose = 30, depth_mm = 15.0 }`.
     #[serde(default)]
     pub sinking_foot: Option<SinkingFootConfig>,
+    /// The simulated Kinect's depth as a multiple of the truth (1.01: reads
+    /// 1 % long); default 1.
+    #[serde(default)]
+    pub depth_scale: Option<f64>,
 }
 
 /// `[sim] sinking_foot`.

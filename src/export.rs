@@ -205,6 +205,10 @@ pub struct RosMount {
     pub quaternion_xyzw: [f64; 4],
     /// URDF `rpy`, radians.
     pub rpy_rad: [f64; 3],
+    /// The Kinect's depth scale the calibration found (its depth reads this
+    /// × the truth), when it is not 1: the JSON carries it; URDF and the
+    /// transform publisher cannot, and say so.
+    pub depth_scale: Option<f64>,
 }
 
 /// The `json` format.
@@ -219,6 +223,9 @@ pub struct RosMountJson {
     pub matrix: [[f64; 4]; 4],
     /// groundcal's `robot_from_sensor` (degrees, millimetres).
     pub groundcal: PoseDegMm,
+    /// The Kinect's depth reads this × the truth: divide depths by it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_scale: Option<f64>,
 }
 
 impl RosMount {
@@ -233,7 +240,17 @@ impl RosMount {
             translation_m: [t.x, t.y, t.z].map(clean),
             quaternion_xyzw: quaternion_xyzw(rotation).map(clean),
             rpy_rad: rpy_from_rotation(rotation).map(clean),
+            depth_scale: None,
         }
+    }
+
+    /// A note for formats that cannot carry the depth scale, if there is one.
+    pub fn depth_scale_note(&self) -> Option<String> {
+        self.depth_scale.map(|s| {
+            format!(
+                "groundcal depth_scale={s:.5}: the Kinect's depth reads {s:.5} × the truth; this format cannot carry it: divide the depths by it before using this transform"
+            )
+        })
     }
 
     /// The output in one format, ending with a newline.
@@ -260,6 +277,9 @@ impl RosMount {
         let [x, y, z] = self.translation_m;
         let [roll, pitch, yaw] = self.rpy_rad;
         let mut out = String::new();
+        if let Some(note) = self.depth_scale_note() {
+            let _ = writeln!(out, "<!-- {note} -->");
+        }
         // XML comments must not contain "--"; numbers and "=" never make one.
         let _ = writeln!(
             out,
@@ -314,6 +334,7 @@ impl RosMount {
             rpy_rad: self.rpy_rad,
             matrix: std::array::from_fn(|i| std::array::from_fn(|j| clean(m[(i, j)]))),
             groundcal: self.groundcal,
+            depth_scale: self.depth_scale,
         }
     }
 }
@@ -339,12 +360,32 @@ pub fn read_result(path: &Path, allow_rejected: bool) -> Result<PoseDegMm, Expor
     parse_result(path, text, allow_rejected)
 }
 
+/// [`read_result`] with the depth scale the result found, when it is not 1.
+pub fn read_result_with_scale(
+    path: &Path,
+    allow_rejected: bool,
+) -> Result<(PoseDegMm, Option<f64>), ExportError> {
+    let bytes = read_bounded(path, 64 << 20)?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| InputError::new(path, None, format!("not UTF-8 text: {e}")))?;
+    parse_result_with_scale(path, text, allow_rejected)
+}
+
 /// [`read_result`] on a document's text; `path` is only for messages.
 pub fn parse_result(
     path: &Path,
     text: &str,
     allow_rejected: bool,
 ) -> Result<PoseDegMm, ExportError> {
+    parse_result_with_scale(path, text, allow_rejected).map(|(pose, _)| pose)
+}
+
+/// [`parse_result`] with the depth scale, when it is not 1.
+pub fn parse_result_with_scale(
+    path: &Path,
+    text: &str,
+    allow_rejected: bool,
+) -> Result<(PoseDegMm, Option<f64>), ExportError> {
     let fail = |message: String| ExportError::Input(InputError::new(path, None, message));
     let doc: Value = serde_json::from_str(text).map_err(|e| {
         let line = (e.line() > 0).then_some(e.line());
@@ -383,7 +424,16 @@ pub fn parse_result(
     if let Some(q) = mount.quaternion_xyzw {
         check_quaternion(q, &pose).map_err(fail)?;
     }
-    Ok(pose)
+    let scale = match result.depth_scale {
+        Some(s) if !(0.5..=2.0).contains(&s) => {
+            return Err(fail(format!(
+                "\"depth_scale\" is {s}, not a Kinect's depth scale (near 1)"
+            )))
+        }
+        Some(s) if s != 1.0 => Some(s),
+        _ => None,
+    };
+    Ok((pose, scale))
 }
 
 /// The 4×4 `matrix` (translation in mm) must be the six parameters' matrix.

@@ -106,6 +106,10 @@ enum Command {
         /// recording stores from its live run, else the built-in ones).
         #[arg(long, value_name = "FILE")]
         config: Option<PathBuf>,
+        /// The Kinect's depth scale: estimate (the default, or --config's
+        /// calibration.depth_scale) or a known value such as 1.0032.
+        #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::config::parse_depth_scale)]
+        depth_scale: Option<groundcal::config::DepthScaleSetting>,
     },
     /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
     #[command(
@@ -137,6 +141,10 @@ enum Command {
         /// The ground fit, overriding calibration.ground_fit: disparity or paper.
         #[arg(long, value_name = "disparity|paper")]
         ground_fit: Option<GroundFitMethod>,
+        /// The Kinect's depth scale, overriding calibration.depth_scale: estimate
+        /// (with the mount, when the body's heights observe it) or a known value such as 1.0032.
+        #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::config::parse_depth_scale)]
+        depth_scale: Option<groundcal::config::DepthScaleSetting>,
     },
     /// Whether the sensor still sits where the active (or a given) calibration says: the ground and the accelerometer now, or in a recording; exit 4 on drift.
     #[command(
@@ -316,10 +324,11 @@ fn run(args: Args) -> ExitStatus {
             threads,
             ground_fit,
             config,
+            depth_scale,
         } => {
-            let (gates, noise, verify) =
+            let (gates, noise, verify, configured_scale) =
                 match config.as_deref().map(groundcal::config::Config::load) {
-                    None => (None, None, Default::default()),
+                    None => (None, None, Default::default(), Default::default()),
                     Some(Ok((config, _))) => (
                         Some(config.calibration.gates),
                         Some(
@@ -329,6 +338,7 @@ fn run(args: Args) -> ExitStatus {
                                 .unwrap_or_else(groundcal::calib::plan::NoiseModel::solve_floors),
                         ),
                         config.verify.settings(&config.calibration),
+                        config.calibration.depth_scale,
                     ),
                     Some(Err(e)) => return usage_error(e.to_string()),
                 };
@@ -346,6 +356,7 @@ fn run(args: Args) -> ExitStatus {
                 gates,
                 noise,
                 verify,
+                depth_scale: depth_scale.unwrap_or(configured_scale),
                 ..Default::default()
             };
             options.pose.plane.method = ground_fit;
@@ -357,6 +368,7 @@ fn run(args: Args) -> ExitStatus {
             record,
             json,
             ground_fit,
+            depth_scale,
         } => {
             let options = cli::calibrate::CalibrateOptions {
                 config,
@@ -364,6 +376,7 @@ fn run(args: Args) -> ExitStatus {
                 record,
                 json,
                 ground_fit,
+                depth_scale,
             };
             cli::calibrate::run(&options)
         }

@@ -99,6 +99,9 @@ pub struct SigmaJson {
     pub py_mm: f64,
     #[serde(deserialize_with = "number_or_nan")]
     pub pz_mm: f64,
+    /// σ of the depth scale, when it was estimated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale: Option<f64>,
 }
 
 impl SigmaJson {
@@ -111,6 +114,7 @@ impl SigmaJson {
             px_mm: sigma[3] * 1000.0,
             py_mm: sigma[4] * 1000.0,
             pz_mm: sigma[5] * 1000.0,
+            depth_scale: None,
         }
     }
 }
@@ -406,6 +410,16 @@ pub struct ResultJson {
     /// whether it moved.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motor: Option<MotorJson>,
+    /// The Kinect's depth scale: its depth reads this × the truth (its σ is
+    /// `sigma.depth_scale`). Robots' other programs divide depths by it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale: Option<f64>,
+    /// Whether the scale was estimated (else given, or 1: the note says why).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale_estimated: Option<bool>,
+    /// Correlation of the depth scale with α, β, γ, px, py, pz.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale_correlations: Option<[f64; 6]>,
 }
 
 impl ResultJson {
@@ -426,6 +440,7 @@ impl ResultJson {
                 px_mm: s[3] * 1e3,
                 py_mm: s[4] * 1e3,
                 pz_mm: s[5] * 1e3,
+                depth_scale: c.depth_scale.sigma,
             }),
             correlations: Some(std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)]))),
             poses: c.poses.iter().map(PoseJson::from).collect(),
@@ -444,11 +459,23 @@ impl ResultJson {
                 translation_weakest_axis: Some(c.observability.translation_weakest_axis),
             }),
             kinect_tilt_deg: None,
-            notes: Vec::new(),
+            notes: match (&c.depth_scale.note, c.depth_scale.estimated) {
+                (Some(note), false) => vec![format!(
+                    "the depth scale {:.4} was {note}",
+                    c.depth_scale.value
+                )],
+                _ => Vec::new(),
+            },
             gate_checks: c.checks.iter().map(GateCheckJson::from).collect(),
             setup: None,
             predicted_sigma: None,
             motor: None,
+            depth_scale: Some(c.depth_scale.value),
+            depth_scale_estimated: Some(c.depth_scale.estimated),
+            depth_scale_correlations: c
+                .depth_scale
+                .estimated
+                .then_some(c.depth_scale.correlations),
         }
     }
 
@@ -469,6 +496,9 @@ impl ResultJson {
             setup: None,
             predicted_sigma: None,
             motor: None,
+            depth_scale: None,
+            depth_scale_estimated: None,
+            depth_scale_correlations: None,
         }
     }
 

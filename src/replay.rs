@@ -38,6 +38,8 @@ pub struct ReplayOptions {
     pub threads: Option<usize>,
     /// How steady the tilt motor must have stayed (the accelerometer's σ).
     pub verify: crate::calib::verify::VerifySettings,
+    /// The depth scale, estimated (the default) or given.
+    pub depth_scale: crate::calib::solve::DepthScaleSetting,
 }
 
 /// The outcome of a replay.
@@ -247,6 +249,10 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     let solve = match options.noise.or(session.noise) {
         Some(noise) => noise.solve_settings(),
         None => options.calibration.solve,
+    };
+    let solve = crate::calib::solve::SolveSettings {
+        depth_scale: options.depth_scale,
+        ..solve
     };
     let settings = CalibrationSettings { gates, solve };
     let mut result = ResultJson::from_poses(

@@ -147,6 +147,12 @@ pub fn mount_of(result: &ResultJson) -> Result<ActiveMount, String> {
             .to_string()
     })?;
     let values = mount.values();
+    let depth_scale = result.depth_scale.unwrap_or(1.0);
+    if !(0.5..=2.0).contains(&depth_scale) {
+        return Err(format!(
+            "\"depth_scale\" is {depth_scale}, not a Kinect's depth scale (near 1)"
+        ));
+    }
     let sigma = result.sigma.as_ref().and_then(|s| {
         let v = [
             s.alpha_deg.to_radians(),
@@ -162,6 +168,7 @@ pub fn mount_of(result: &ResultJson) -> Result<ActiveMount, String> {
         robot_from_sensor: PoseDegMm::from_values(values).to_params(),
         sigma,
         correlations: result.correlations,
+        depth_scale,
     })
 }
 

@@ -86,9 +86,14 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     // with the six values and their σ.
     assert_eq!(text("verdict"), "Passed checks", "{seen}");
     assert!(seen["points"].as_u64().unwrap() > 6, "{seen}");
-    assert_eq!(seen["values"].as_array().unwrap().len(), 7, "{seen}");
+    // Header, the six parameters and the depth scale.
+    assert_eq!(seen["values"].as_array().unwrap().len(), 8, "{seen}");
+    assert!(
+        seen["values"][7].as_str().unwrap().starts_with("s"),
+        "{seen}"
+    );
     // Each σ with the one predicted before the robot moved.
-    assert_eq!(seen["predicted"], 6, "{seen}");
+    assert_eq!(seen["predicted"], 7, "{seen}");
     assert!(text("notActiveYet").starts_with("Not active yet"), "{seen}");
     // Accept asks first, then shows Active and hides itself.
     assert!(

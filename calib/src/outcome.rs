@@ -156,6 +156,8 @@ pub struct Calibration {
     /// Each quality gate with its limit and what was measured, in the
     /// order of [`crate::quality::check_gates`].
     pub checks: Vec<GateCheck>,
+    /// The depth scale, estimated or given.
+    pub depth_scale: DepthScale,
 }
 
 /// One quality gate as it was checked: its limit, the value measured and
@@ -224,6 +226,34 @@ pub struct Solution {
     pub variance_factors: (f64, f64),
     /// Levenberg-Marquardt's evaluations.
     pub iterations: usize,
+    /// The depth scale the distances were divided by, estimated or given.
+    pub depth_scale: DepthScale,
+}
+
+/// The Kinect's depth scale: its depth reads `value` × the truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthScale {
+    pub value: f64,
+    /// Its σ, when estimated.
+    pub sigma: Option<f64>,
+    pub estimated: bool,
+    /// Its correlation with α, β, γ, px, py, pz (zero for the angles).
+    pub correlations: [f64; 6],
+    /// Why it was not estimated, in words.
+    pub note: Option<String>,
+}
+
+impl DepthScale {
+    /// A scale taken as known.
+    pub fn fixed(value: f64, note: String) -> Self {
+        DepthScale {
+            value,
+            sigma: None,
+            estimated: false,
+            correlations: [0.0; 6],
+            note: Some(note),
+        }
+    }
 }
 
 impl Solution {

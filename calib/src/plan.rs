@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::geometry::PoseParams;
 use super::outcome::Observability;
-use super::solve::{predict, solve, Observation, SolveError, SolveSettings};
+use super::solve::{predict, solve, DepthScaleSetting, Observation, SolveError, SolveSettings};
 
 /// The noise of one observation's ground, as the solve sees it: the
 /// measured plane against the one the mount and the body pose from the feet
@@ -69,6 +69,8 @@ impl NoiseModel {
 pub struct Prediction {
     /// Covariance of `[α, β, γ, px, py, pz]` (radians, metres).
     pub covariance: Matrix6<f64>,
+    /// Whether the depth scale will be estimated, and its σ.
+    pub depth_scale: super::outcome::DepthScale,
     pub observability: Observability,
     /// The mean θ and e_d a pose will show, from the noise alone (degrees,
     /// millimetres): a Rayleigh mean for the angle, a half-normal for e_d.
@@ -123,6 +125,18 @@ pub fn predict_schedule(
     nominal: &PoseParams,
     noise: &NoiseModel,
 ) -> Result<Prediction, SolveError> {
+    predict_schedule_with(body_poses, nominal, noise, DepthScaleSetting::Fixed(1.0))
+}
+
+/// [`predict_schedule`] with the depth scale estimated or given, as the
+/// calibration will treat it: estimating it widens the translation's σ, and
+/// the prediction says whether the schedule observes it at all.
+pub fn predict_schedule_with(
+    body_poses: &[PoseParams],
+    nominal: &PoseParams,
+    noise: &NoiseModel,
+    depth_scale: DepthScaleSetting,
+) -> Result<Prediction, SolveError> {
     let observations: Vec<Observation> = body_poses
         .iter()
         .enumerate()
@@ -136,9 +150,14 @@ pub fn predict_schedule(
             observation
         })
         .collect();
-    let solution = solve(&observations, &noise.solve_settings())?;
+    let settings = SolveSettings {
+        depth_scale,
+        ..noise.solve_settings()
+    };
+    let solution = solve(&observations, &settings)?;
     Ok(Prediction {
         covariance: solution.covariance,
+        depth_scale: solution.depth_scale,
         observability: solution.observability,
         expected_theta_deg: noise.normal_sigma_deg * (std::f64::consts::PI / 2.0).sqrt(),
         expected_e_d_mm: noise.offset_sigma_mm * (2.0 / std::f64::consts::PI).sqrt(),

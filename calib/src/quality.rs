@@ -26,6 +26,9 @@ pub struct Gates {
     pub min_poses_used: usize,
     /// Smallest fraction of the poses that must be used.
     pub min_used_fraction: f64,
+    /// Largest |s − 1| of an estimated depth scale: a Kinect's depth is off
+    /// by about 1 % at most; more is a wrong depth model or intrinsics.
+    pub depth_scale_max_deviation: f64,
 }
 
 impl Default for Gates {
@@ -37,6 +40,7 @@ impl Default for Gates {
             sigma_position_max_mm: 2.0,
             min_poses_used: 6,
             min_used_fraction: 0.7,
+            depth_scale_max_deviation: 0.03,
         }
     }
 }
@@ -49,6 +53,7 @@ impl Gates {
             ("e_d_max_mm", self.e_d_max_mm),
             ("sigma_angle_max_deg", self.sigma_angle_max_deg),
             ("sigma_position_max_mm", self.sigma_position_max_mm),
+            ("depth_scale_max_deviation", self.depth_scale_max_deviation),
         ];
         for (name, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -83,13 +88,26 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         &solution.sigma(),
         &solution.observability,
     );
-    let reasons = judge_checked(
+    let mut checks = checks;
+    let mut reasons = judge_checked(
         gates,
         &summary,
         &solution.sigma(),
         &solution.observability,
         &checks,
     );
+    if let Some(check) = depth_scale_check(gates, &solution.depth_scale) {
+        if !check.passed {
+            let s = solution.depth_scale.value;
+            reasons.push(format!(
+                "the depth reads {:.1}% {} than the ground says it should (depth scale {s:.4}), more than the {:.0}% a Kinect's depth is off by: check the depth model and the intrinsics",
+                (s - 1.0).abs() * 100.0,
+                if s > 1.0 { "longer" } else { "shorter" },
+                gates.depth_scale_max_deviation * 100.0
+            ));
+        }
+        checks.push(check);
+    }
     Calibration {
         verdict: if reasons.is_empty() {
             Verdict::Accepted
@@ -105,7 +123,23 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         variance_factors: solution.variance_factors,
         iterations: solution.iterations,
         checks,
+        depth_scale: solution.depth_scale,
     }
+}
+
+/// The depth scale's gate, when it was estimated.
+fn depth_scale_check(gates: &Gates, scale: &crate::outcome::DepthScale) -> Option<GateCheck> {
+    scale.estimated.then(|| {
+        let deviation = (scale.value - 1.0).abs();
+        GateCheck {
+            gate: "depth_scale_max_deviation",
+            limit: gates.depth_scale_max_deviation,
+            measured: deviation,
+            at_least: false,
+            passed: at_most(deviation, gates.depth_scale_max_deviation),
+            at: Some("depth scale".into()),
+        }
+    })
 }
 
 /// The summary of the used poses.

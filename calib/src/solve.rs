@@ -28,7 +28,7 @@ use super::geometry::{
     angle_between, d_rot_x, d_rot_y, d_rot_z, ground_in_sensor, rot_x, rot_y, rot_z, Plane,
     PoseParams, Transform,
 };
-use crate::outcome::{position_axis_words, Observability, PoseOutcome, Solution};
+use crate::outcome::{position_axis_words, DepthScale, Observability, PoseOutcome, Solution};
 
 /// One pose's evidence.
 #[derive(Debug, Clone, PartialEq)]
@@ -96,7 +96,34 @@ pub struct SolveSettings {
     /// A direction whose normalised singular value is below this is unobservable
     /// (about the sine of the RMS spread of the tilts in that direction).
     pub min_spread: f64,
+    /// Whether the depth scale is estimated with the mount, or taken as known.
+    pub depth_scale: DepthScaleSetting,
 }
+
+/// The Kinect's depth scale `s` (its depth reads `s` × the truth, so every
+/// measured plane's `d` is `s` × the true one and its normal is unchanged):
+/// estimated, when the body's heights observe it, or taken as known.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepthScaleSetting {
+    /// Estimated when the poses observe it; else `fallback` (1 if unknown).
+    Estimate { fallback: f64 },
+    /// Known (from an earlier calibration or the sensor's own data).
+    Fixed(f64),
+}
+
+impl Default for DepthScaleSetting {
+    fn default() -> Self {
+        DepthScaleSetting::Estimate { fallback: 1.0 }
+    }
+}
+
+/// The distances of the poses must vary by at least this much (metres, RMS)
+/// beyond what their tilts explain for the depth scale to be estimated: the
+/// body's height must change. Tilts alone observe it only through the
+/// cosine of their angles, which model errors (feet, an uneven ground) would
+/// bias. The paper's schedule gives 34 mm, the same tilts at one height
+/// 9 mm, the 16-pose designed schedule 90 mm.
+pub const MIN_SCALE_LEVERAGE: f64 = 0.025;
 
 impl Default for SolveSettings {
     fn default() -> Self {
@@ -108,6 +135,7 @@ impl Default for SolveSettings {
             outlier_offset_floor: 0.015,
             max_outlier_fraction: 0.3,
             min_spread: 1.0f64.to_radians().sin(),
+            depth_scale: DepthScaleSetting::default(),
         }
     }
 }
@@ -413,9 +441,184 @@ fn worst_outlier(used: &[&Observation], settings: &SolveSettings) -> Option<(u32
 }
 
 /// Identifies `robot_from_sensor` from the observations: what it found, with
-/// its covariance and observability. Whether that is good enough is for
-/// [`crate::quality`] to say.
+/// its covariance and observability, and the depth scale. Whether that is
+/// good enough is for [`crate::quality`] to say.
+///
+/// The depth scale enters the offsets only: a measured `d` is `s` times
+/// `up · p + h`, so with `q = 1/s` the offset block `up · p − q·d + h = 0` is
+/// linear in `(p, q)`. The six parameters are solved on the distances
+/// divided by the current `s`; then `(p, q)` by weighted least squares with
+/// the solve's final weights gives the next `s`, until it settles (a few
+/// rounds). The translation's covariance is then the joint one's marginal:
+/// estimating `s` costs translation accuracy, as it correlates with it.
 pub fn solve(
+    observations: &[Observation],
+    settings: &SolveSettings,
+) -> Result<Solution, SolveError> {
+    let (mut scale, estimate) = match settings.depth_scale {
+        DepthScaleSetting::Fixed(s) => (s, false),
+        DepthScaleSetting::Estimate { fallback } => (fallback, true),
+    };
+    let mut solution = solve_at_scale(observations, settings, scale)?;
+    if !estimate {
+        solution.depth_scale = DepthScale::fixed(scale, "given".into());
+        return Ok(solution);
+    }
+    for _ in 0..6 {
+        let used: Vec<&Observation> = observations
+            .iter()
+            .filter(|o| solution.poses.iter().any(|p| p.index == o.index && p.used))
+            .collect();
+        let Some(joint) = scale_fit(&used, settings, scale) else {
+            break;
+        };
+        if joint.leverage < MIN_SCALE_LEVERAGE {
+            // Not observable: solve at the fallback.
+            if (scale - solve_fallback(settings)).abs() > 0.0 {
+                scale = solve_fallback(settings);
+                solution = solve_at_scale(observations, settings, scale)?;
+            }
+            solution.depth_scale = DepthScale::fixed(
+                scale,
+                format!(
+                    "not estimated: the poses' distances vary by {:.0} mm beyond what their tilts explain, less than the {:.0} mm that observe it (change the body's height more)",
+                    joint.leverage * 1e3,
+                    MIN_SCALE_LEVERAGE * 1e3
+                ),
+            );
+            return Ok(solution);
+        }
+        if !(joint.scale_ratio.is_finite() && joint.scale_ratio > 0.0) {
+            break;
+        }
+        let next = scale * joint.scale_ratio;
+        let settled = (next / scale - 1.0).abs() < 1e-9;
+        scale = next;
+        if !settled {
+            solution = solve_at_scale(observations, settings, scale)?;
+        }
+        if settled {
+            // The translation's marginal covariance, and the scale's σ,
+            // from the joint fit (with the offsets' variance factor).
+            let factor = solution.variance_factors.1;
+            for i in 0..3 {
+                for j in 0..3 {
+                    solution.covariance[(3 + i, 3 + j)] = joint.covariance[(i, j)] * factor;
+                }
+            }
+            // s = scale/q with q ≈ 1 here: σ_s = scale·σ_q.
+            let sigma = scale * (joint.covariance[(3, 3)] * factor).max(0.0).sqrt();
+            let translation_sigma: Vec<f64> = (0..3)
+                .map(|i| (joint.covariance[(i, i)] * factor).max(0.0).sqrt())
+                .collect();
+            let q_sigma = (joint.covariance[(3, 3)] * factor).max(0.0).sqrt();
+            // Correlation of s with each parameter (q and s anticorrelate).
+            let mut correlations = [0.0; 6];
+            for i in 0..3 {
+                let c = joint.covariance[(i, 3)] * factor;
+                correlations[3 + i] = if translation_sigma[i] > 0.0 && q_sigma > 0.0 {
+                    -c / (translation_sigma[i] * q_sigma)
+                } else {
+                    0.0
+                };
+            }
+            solution.depth_scale = DepthScale {
+                value: scale,
+                sigma: Some(sigma),
+                estimated: true,
+                correlations,
+                note: None,
+            };
+            return Ok(solution);
+        }
+    }
+    solution.depth_scale = DepthScale::fixed(scale, "the estimate did not settle".into());
+    Ok(solution)
+}
+
+fn solve_fallback(settings: &SolveSettings) -> f64 {
+    match settings.depth_scale {
+        DepthScaleSetting::Estimate { fallback } => fallback,
+        DepthScaleSetting::Fixed(s) => s,
+    }
+}
+
+/// The joint fit of the translation and the depth scale's correction.
+struct ScaleFit {
+    /// q: the factor by which the current scale's inverse is off (the next
+    /// scale is the current one divided by q).
+    scale_ratio: f64,
+    /// Covariance of (p_x, p_y, p_z, q) for unit noise.
+    covariance: Matrix4<f64>,
+    /// RMS (weighted) of the distances beyond what the tilts explain.
+    leverage: f64,
+}
+
+/// Weighted least squares of `up · p − q·d' + h = 0` over the used poses
+/// (d' the distance at the current scale), with the solve's offset weights.
+fn scale_fit(used: &[&Observation], settings: &SolveSettings, scale: f64) -> Option<ScaleFit> {
+    if used.len() < 5 {
+        return None;
+    }
+    let mut normal = Matrix4::zeros();
+    let mut rhs = nalgebra::Vector4::zeros();
+    let mut up_block = Matrix3::zeros();
+    let mut up_d = Vector3::zeros();
+    let (mut dd, mut weight_sum) = (0.0, 0.0);
+    for o in used {
+        let w = Weights::of(o, settings).offset_whitener.powi(2) * scale * scale;
+        let up = o.up_in_robot();
+        let d = o.plane.d / scale;
+        let row = nalgebra::Vector4::new(up.x, up.y, up.z, -d);
+        normal += row * row.transpose() * w;
+        rhs += row * (-o.body_height() * w);
+        up_block += up * up.transpose() * w;
+        up_d += up * (d * w);
+        dd += d * d * w;
+        weight_sum += w;
+    }
+    let covariance = normal.try_inverse()?;
+    let x = covariance * rhs;
+    // The part of the distances the tilts' up vectors cannot explain.
+    let explained = up_block
+        .try_inverse()
+        .map_or(0.0, |h| (up_d.transpose() * h * up_d)[(0, 0)]);
+    let leverage = ((dd - explained).max(0.0) / weight_sum).sqrt();
+    Some(ScaleFit {
+        scale_ratio: 1.0 / x[3],
+        covariance,
+        leverage,
+    })
+}
+
+/// The six parameters with the measured distances divided by `scale`.
+fn solve_at_scale(
+    observations: &[Observation],
+    settings: &SolveSettings,
+    scale: f64,
+) -> Result<Solution, SolveError> {
+    if scale != 1.0 {
+        let scaled: Vec<Observation> = observations
+            .iter()
+            .map(|o| {
+                let mut o = o.clone();
+                o.plane.d /= scale;
+                if let Some(c) = &mut o.plane_covariance {
+                    for i in 0..4 {
+                        c[(3, i)] /= scale;
+                        c[(i, 3)] /= scale;
+                    }
+                }
+                o
+            })
+            .collect();
+        return solve_six(&scaled, settings);
+    }
+    solve_six(observations, settings)
+}
+
+/// The six parameters from the observations as they are.
+fn solve_six(
     observations: &[Observation],
     settings: &SolveSettings,
 ) -> Result<Solution, SolveError> {
@@ -508,6 +711,7 @@ pub fn solve(
         observability,
         variance_factors,
         iterations: evaluations,
+        depth_scale: DepthScale::fixed(1.0, "given".into()),
     })
 }
 

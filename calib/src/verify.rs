@@ -47,6 +47,8 @@ pub struct ActiveMount {
     pub sigma: Option<[f64; 6]>,
     /// Their correlations, when known.
     pub correlations: Option<[[f64; 6]; 6]>,
+    /// The depth scale it found (measured distances are divided by it).
+    pub depth_scale: f64,
 }
 
 /// What was measured at one pose.
@@ -434,9 +436,10 @@ pub fn verify(
         if let Some(plane) = &pose.plane {
             let measured = rotation * plane.normal.normalize();
             ground_rows.add_direction(&up, &measured, normal_sigma);
-            ground_rows.add_distance(&up, plane.d - predicted.d, offset_sigma);
+            let d = plane.d / mount.depth_scale;
+            ground_rows.add_distance(&up, d - predicted.d, offset_sigma);
             comparison.theta = Some(super::geometry::angle_between(&measured, &up));
-            comparison.e_d = Some(plane.d - predicted.d);
+            comparison.e_d = Some(d - predicted.d);
         }
         if let Some(g) = pose.gravity_up.filter(|g| g.norm() > 0.0) {
             let measured = rotation * g.normalize();
@@ -671,6 +674,7 @@ mod tests {
                 0.05e-3,
             ]),
             correlations: None,
+            depth_scale: 1.0,
         }
     }
 

@@ -21,6 +21,8 @@ pub struct CalibrateOptions {
     pub json: bool,
     /// Overrides `calibration.ground_fit`.
     pub ground_fit: Option<GroundFitMethod>,
+    /// Overrides `calibration.depth_scale`.
+    pub depth_scale: Option<crate::config::DepthScaleSetting>,
 }
 
 /// Where the configuration comes from: the file given; the built-in
@@ -160,6 +162,9 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
     };
     if let Some(method) = options.ground_fit {
         config.calibration.ground_fit = method;
+    }
+    if let Some(scale) = options.depth_scale {
+        config.calibration.depth_scale = scale;
     }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()

@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use super::ExitStatus;
 use crate::calib::outcome::Observability;
-use crate::calib::plan::{predict_schedule, NoiseModel, Prediction};
+use crate::calib::plan::{predict_schedule_with, NoiseModel, Prediction};
 use crate::config::Config;
 use crate::output::SigmaJson;
 use crate::recording::read_bounded;
@@ -34,6 +34,18 @@ pub struct PlanJson {
     pub expected: ExpectedJson,
     /// The noise the prediction assumes per pose.
     pub noise: NoiseModel,
+    /// Whether the calibration will estimate the depth scale (its σ is
+    /// `sigma.depth_scale`), or take it as given, and why.
+    pub depth_scale: DepthScaleJson,
+}
+
+#[derive(Debug, Serialize)]
+pub struct DepthScaleJson {
+    pub estimated: bool,
+    /// The value it is taken as when not estimated.
+    pub value: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
 }
 
 #[derive(Debug, Serialize)]
@@ -78,13 +90,14 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
         }
     }
     let poses: Vec<_> = schedule.poses.iter().map(|p| p.to_params()).collect();
-    let prediction = match predict_schedule(&poses, &nominal, &noise) {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("groundcal plan: the schedule cannot be solved: {e}");
-            return ExitStatus::Rejected;
-        }
-    };
+    let prediction =
+        match predict_schedule_with(&poses, &nominal, &noise, config.calibration.depth_scale) {
+            Ok(p) => p,
+            Err(e) => {
+                eprintln!("groundcal plan: the schedule cannot be solved: {e}");
+                return ExitStatus::Rejected;
+            }
+        };
     for problem in &prediction.observability.problems {
         if !reasons.contains(problem) {
             reasons.push(problem.clone());
@@ -205,6 +218,12 @@ fn to_json(
             px_mm: s[3],
             py_mm: s[4],
             pz_mm: s[5],
+            depth_scale: prediction.depth_scale.sigma,
+        },
+        depth_scale: DepthScaleJson {
+            estimated: prediction.depth_scale.estimated,
+            value: prediction.depth_scale.value,
+            note: prediction.depth_scale.note.clone(),
         },
         correlations: prediction.correlations(),
         observability: ObservabilityJson {
@@ -241,6 +260,23 @@ fn to_text(plan: &PlanJson) -> String {
         ("pz", s.pz_mm, " mm"),
     ] {
         let _ = writeln!(out, "  {name:<8} {value:>10.4}{unit}");
+    }
+    match (plan.depth_scale.estimated, s.depth_scale) {
+        (true, Some(sigma)) => {
+            let _ = writeln!(
+                out,
+                "  {:<8} {sigma:>10.5}  (estimated with the mount)",
+                "depth scale"
+            );
+        }
+        _ => {
+            let _ = writeln!(
+                out,
+                "  depth scale {:.4}, {}",
+                plan.depth_scale.value,
+                plan.depth_scale.note.as_deref().unwrap_or("not estimated")
+            );
+        }
     }
     let _ = writeln!(
         out,

@@ -239,6 +239,7 @@ pub async fn open(
                 seed: parts.sim.seed,
                 time_scale: parts.sim.time_scale,
                 mount_tilt_deg: config.sensor.tilt_deg,
+                depth_scale: parts.sim.depth_scale.unwrap_or(1.0),
                 ..SimKinectConfig::default()
             };
             if let Some(model) = config.sensor.depth_model {

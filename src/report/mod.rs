@@ -180,6 +180,12 @@ fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static s
             format!("{} mm", num(m, 2)),
             "of ",
         ),
+        "depth_scale_max_deviation" => (
+            "depth scale's distance from 1",
+            format!("≤ {} %", num(100.0 * l, 1)),
+            format!("{} %", num(100.0 * m, 3)),
+            "",
+        ),
         "min_poses_used" => (
             "poses used",
             format!("≥ {}", num(l, 0)),
@@ -284,8 +290,23 @@ fn parameters_section(page: &mut String, result: &ResultJson) {
             num(value, 4)
         );
     }
+    if let Some(scale) = result.depth_scale {
+        let estimated = result.depth_scale_estimated.unwrap_or(false);
+        let s = result
+            .sigma
+            .as_ref()
+            .and_then(|s| s.depth_scale)
+            .filter(|_| estimated)
+            .map_or_else(|| "—".to_string(), |s| num(s, 5));
+        let _ = writeln!(
+            page,
+            "<tr><th class=\"text\">depth scale s</th><td>{}</td><td>{s}</td><td class=\"text\">{}</td></tr>",
+            num(scale, 5),
+            if estimated { "× truth" } else { "given" }
+        );
+    }
     page.push_str("</tbody></table></div>\n");
-    page.push_str("<p class=\"note\">X-Y-Z fixed angles (γ about X, then β about Z, then α about Y) and the sensor's position in the body frame; σ is one standard deviation.</p>\n");
+    page.push_str("<p class=\"note\">X-Y-Z fixed angles (γ about X, then β about Z, then α about Y) and the sensor's position in the body frame; σ is one standard deviation. The depth scale s: the Kinect's depth reads s × the truth (estimated with the mount when the body's heights observe it).</p>\n");
     if let Some(tilt) = result.kinect_tilt_deg {
         let _ = writeln!(
             page,

@@ -103,9 +103,11 @@ impl Plan {
                 gates: c.gates,
                 // The configured noise is what the solve assumes at least:
                 // the σ it reports are then the ones `plan` predicts.
-                solve: c
-                    .noise
-                    .map_or_else(Default::default, |n| n.solve_settings()),
+                solve: crate::calib::solve::SolveSettings {
+                    depth_scale: c.depth_scale,
+                    ..c.noise
+                        .map_or_else(Default::default, |n| n.solve_settings())
+                },
             },
             record,
             poll: Duration::from_millis(100)

@@ -834,10 +834,23 @@ async fn guarded<S: DepthSensor, C: BodyController>(
     }
 }
 
-/// The σ `groundcal plan` predicts for the plan's schedule (None without a
-/// nominal mount, or for a schedule the prediction cannot solve).
+/// The σ `groundcal plan` predicts for the plan's schedule, with the depth
+/// scale's when it will be estimated (None without a nominal mount, or for a
+/// schedule the prediction cannot solve).
 fn predicted_sigma(plan: &Plan) -> Option<crate::output::SigmaJson> {
     let nominal = plan.nominal_mount?.pose().to_params();
-    let sigma = crate::design::predicted_sigma(&plan.schedule, &nominal, &plan.noise)?;
-    Some(crate::output::SigmaJson::from_radians_metres(&sigma))
+    let poses: Vec<_> = plan.schedule.poses.iter().map(|p| p.to_params()).collect();
+    let prediction = crate::calib::plan::predict_schedule_with(
+        &poses,
+        &nominal,
+        &plan.noise,
+        plan.calibration.solve.depth_scale,
+    )
+    .ok()?;
+    if !prediction.observability.problems.is_empty() {
+        return None;
+    }
+    let mut sigma = crate::output::SigmaJson::from_radians_metres(&prediction.sigma());
+    sigma.depth_scale = prediction.depth_scale.sigma;
+    Some(sigma)
 }

@@ -139,7 +139,8 @@ function changeInWords(mount, active) {
 
 // predicted: the σ `plan` predicted before the robot moved (shown under
 // the achieved σ, to compare).
-function valuesTable(table, mount, sigma, active, predicted) {
+// scale: the result's depth scale ({value, sigma, estimated}), a row of its own.
+function valuesTable(table, mount, sigma, active, predicted, scale) {
   table.innerHTML = '';
   const head = table.insertRow();
   for (const h of ['', 'value', predicted ? '±σ (predicted)' : '±σ', active ? 'change' : '']) { const th = document.createElement('th'); th.textContent = h; head.appendChild(th); }
@@ -160,6 +161,24 @@ function valuesTable(table, mount, sigma, active, predicted) {
     const shown = change === null ? '' : fixed(Math.abs(change), unit);
     const sign = change === null || Number(shown) === 0 ? '' : (change > 0 ? '+' : '−');
     row.insertCell().textContent = change === null ? '' : sign + shown + unit;
+  }
+  if (scale && typeof scale.value === 'number') {
+    const row = table.insertRow();
+    const label = row.insertCell();
+    const small = document.createElement('span'); small.className = 'small';
+    small.textContent = scale.estimated ? ' depth reads × this' : ' given, not estimated';
+    label.append('s', small);
+    row.insertCell().textContent = scale.value.toFixed(4);
+    const sigmaCell = row.insertCell();
+    sigmaCell.textContent = scale.estimated && typeof scale.sigma === 'number' ? sig(scale.sigma) : '';
+    if (predicted && typeof predicted.depth_scale === 'number') {
+      const p = document.createElement('div'); p.className = 'small predicted';
+      p.textContent = '(' + sig(predicted.depth_scale) + ')';
+      sigmaCell.appendChild(p);
+    }
+    const activeScale = active && typeof active.depth_scale === 'number' ? active.depth_scale : null;
+    const delta = activeScale === null ? null : scale.value - activeScale;
+    row.insertCell().textContent = delta === null || Math.abs(delta) < 0.00005 ? '' : (delta > 0 ? '+' : '−') + Math.abs(delta).toFixed(4);
   }
 }
 
@@ -345,7 +364,9 @@ function render() {
     for (const reason of r.reasons || []) say(reason);
     const against = model.active && model.active.id !== s.result_id ? model.active : null;
     redraw('values', JSON.stringify([s.result_id, against && against.id]), () => {
-      if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against, r.predicted_sigma);
+      const scale = typeof r.depth_scale === 'number'
+        ? { value: r.depth_scale, sigma: r.sigma && r.sigma.depth_scale, estimated: !!r.depth_scale_estimated } : null;
+      if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against, r.predicted_sigma, scale);
       else $('values').innerHTML = '';
     });
     activeHere = !!model.active && model.active.id === s.result_id;

@@ -111,6 +111,11 @@ pub struct SimKinectConfig {
     /// σ of each accelerometer axis per reading, in g (before the reading is
     /// rounded to whole counts of 1/819 g, as a real Kinect's is).
     pub accelerometer_noise_g: f64,
+    /// The depth the sensor reads, as a multiple of the true depth (a real
+    /// Kinect's is often off by a fraction of a percent to about 1 %): 1.01
+    /// reads 1 % long. Every point moves along its ray, so a plane keeps its
+    /// normal and its distance is multiplied by it.
+    pub depth_scale: f64,
 }
 
 impl Default for SimKinectConfig {
@@ -131,6 +136,7 @@ impl Default for SimKinectConfig {
             tilt_speed_deg_s: 20.0,
             mount_tilt_deg: 0.0,
             accelerometer_noise_g: ACCELEROMETER_NOISE_G,
+            depth_scale: 1.0,
         }
     }
 }
@@ -178,6 +184,12 @@ impl SimKinectConfig {
             if !(value.is_finite() && value > 0.0) {
                 return bad(format!("{name} must be a positive number, not {value}"));
             }
+        }
+        if !(0.5..=2.0).contains(&self.depth_scale) {
+            return bad(format!(
+                "depth_scale must lie in [0.5, 2], not {}",
+                self.depth_scale
+            ));
         }
         if !(-TILT_LIMIT_DEG..=TILT_LIMIT_DEG).contains(&self.mount_tilt_deg) {
             return bad(format!(
@@ -435,7 +447,8 @@ impl DepthRenderer {
                 let z = hit.t;
                 // The noise is in disparity, as the Kinect's correlation
                 // measures it: constant in 1/z, σ(z) ≈ 1.4·10⁻³·z² in depth.
-                let disparity = 1.0 / z + c.noise_scale * DISPARITY_SIGMA * gaussian;
+                let disparity =
+                    1.0 / (z * c.depth_scale) + c.noise_scale * DISPARITY_SIGMA * gaussian;
                 if disparity <= 0.0 {
                     continue;
                 }
