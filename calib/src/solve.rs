@@ -117,6 +117,12 @@ impl Default for DepthScaleSetting {
     }
 }
 
+/// The depth scale is estimated only when the poses pin it down to this
+/// (one σ): looser, its estimate would cost the translation much accuracy
+/// (they correlate) and correct the depth by less than its own error. A
+/// Kinect's scale is off by up to about 1 %.
+pub const MAX_SCALE_SIGMA: f64 = 0.001;
+
 /// The distances of the poses must vary by at least this much (metres, RMS)
 /// beyond what their tilts explain for the depth scale to be estimated: the
 /// body's height must change. Tilts alone observe it only through the
@@ -472,20 +478,32 @@ pub fn solve(
         let Some(joint) = scale_fit(&used, settings, scale) else {
             break;
         };
-        if joint.leverage < MIN_SCALE_LEVERAGE {
-            // Not observable: solve at the fallback.
-            if (scale - solve_fallback(settings)).abs() > 0.0 {
+        let scale_sigma = scale
+            * (joint.covariance[(3, 3)] * solution.variance_factors.1)
+                .max(0.0)
+                .sqrt();
+        let unobserved = if joint.leverage < MIN_SCALE_LEVERAGE {
+            Some(format!(
+                "not estimated: the poses' distances vary by {:.0} mm beyond what their tilts explain, less than the {:.0} mm that observe it (change the body's height more)",
+                joint.leverage * 1e3,
+                MIN_SCALE_LEVERAGE * 1e3
+            ))
+        } else if scale_sigma > MAX_SCALE_SIGMA {
+            Some(format!(
+                "not estimated: these poses pin it down only to ±{:.2}% (one σ, at the noise assumed per pose), too loosely to correct the depth (±{:.2}% would); more poses, larger height changes or a measured [calibration.noise] would, and so would giving a known scale",
+                scale_sigma * 100.0,
+                MAX_SCALE_SIGMA * 100.0
+            ))
+        } else {
+            None
+        };
+        if let Some(note) = unobserved {
+            // Not observed well enough: solve at the fallback.
+            if scale != solve_fallback(settings) {
                 scale = solve_fallback(settings);
                 solution = solve_at_scale(observations, settings, scale)?;
             }
-            solution.depth_scale = DepthScale::fixed(
-                scale,
-                format!(
-                    "not estimated: the poses' distances vary by {:.0} mm beyond what their tilts explain, less than the {:.0} mm that observe it (change the body's height more)",
-                    joint.leverage * 1e3,
-                    MIN_SCALE_LEVERAGE * 1e3
-                ),
-            );
+            solution.depth_scale = DepthScale::fixed(scale, note);
             return Ok(solution);
         }
         if !(joint.scale_ratio.is_finite() && joint.scale_ratio > 0.0) {

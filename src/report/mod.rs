@@ -300,13 +300,12 @@ fn parameters_section(page: &mut String, result: &ResultJson) {
             .map_or_else(|| "—".to_string(), |s| num(s, 5));
         let _ = writeln!(
             page,
-            "<tr><th class=\"text\">depth scale s</th><td>{}</td><td>{s}</td><td class=\"text\">{}</td></tr>",
-            num(scale, 5),
-            if estimated { "× truth" } else { "given" }
+            "<tr><th class=\"text\">s</th><td>{}</td><td>{s}</td><td class=\"text\">×</td></tr>",
+            num(scale, 4)
         );
     }
     page.push_str("</tbody></table></div>\n");
-    page.push_str("<p class=\"note\">X-Y-Z fixed angles (γ about X, then β about Z, then α about Y) and the sensor's position in the body frame; σ is one standard deviation. The depth scale s: the Kinect's depth reads s × the truth (estimated with the mount when the body's heights observe it).</p>\n");
+    page.push_str("<p class=\"note\">X-Y-Z fixed angles (γ about X, then β about Z, then α about Y) and the sensor's position in the body frame; σ is one standard deviation. The depth scale s: the Kinect's depth reads s × the truth; estimated with the mount when the body's heights observe it (σ “—”: not estimated, see the notes).</p>\n");
     if let Some(tilt) = result.kinect_tilt_deg {
         let _ = writeln!(
             page,
