@@ -169,6 +169,12 @@ pub fn mount_of(result: &ResultJson) -> Result<ActiveMount, String> {
         sigma,
         correlations: result.correlations,
         depth_scale,
+        depth_scale_sigma: result
+            .sigma
+            .as_ref()
+            .and_then(|s| s.depth_scale)
+            .filter(|s| s.is_finite()),
+        depth_scale_correlations: result.depth_scale_correlations,
     })
 }
 

@@ -478,25 +478,13 @@ pub fn solve(
         let Some(joint) = scale_fit(&used, settings, scale) else {
             break;
         };
-        let scale_sigma = scale
-            * (joint.covariance[(3, 3)] * solution.variance_factors.1)
-                .max(0.0)
-                .sqrt();
-        let unobserved = if joint.leverage < MIN_SCALE_LEVERAGE {
-            Some(format!(
+        let unobserved = (joint.leverage < MIN_SCALE_LEVERAGE).then(|| {
+            format!(
                 "not estimated: the poses' distances vary by {:.0} mm beyond what their tilts explain, less than the {:.0} mm that observe it (change the body's height more)",
                 joint.leverage * 1e3,
                 MIN_SCALE_LEVERAGE * 1e3
-            ))
-        } else if scale_sigma > MAX_SCALE_SIGMA {
-            Some(format!(
-                "not estimated: these poses pin it down only to ±{:.2}% (one σ, at the noise assumed per pose), too loosely to correct the depth (±{:.2}% would); more poses, larger height changes or a measured [calibration.noise] would, and so would giving a known scale",
-                scale_sigma * 100.0,
-                MAX_SCALE_SIGMA * 100.0
-            ))
-        } else {
-            None
-        };
+            )
+        });
         if let Some(note) = unobserved {
             // Not observed well enough: solve at the fallback.
             if scale != solve_fallback(settings) {
@@ -524,8 +512,23 @@ pub fn solve(
                     solution.covariance[(3 + i, 3 + j)] = joint.covariance[(i, j)] * factor;
                 }
             }
-            // s = scale/q with q ≈ 1 here: σ_s = scale·σ_q.
+            // s = scale/q with q ≈ 1 here: σ_s = scale·σ_q. Judged here, at
+            // the settled scale: before, the residuals still hold the scale's
+            // own error and overstate the noise.
             let sigma = scale * (joint.covariance[(3, 3)] * factor).max(0.0).sqrt();
+            if sigma > MAX_SCALE_SIGMA {
+                let fallback = solve_fallback(settings);
+                let mut fallen = solve_at_scale(observations, settings, fallback)?;
+                fallen.depth_scale = DepthScale::fixed(
+                    fallback,
+                    format!(
+                        "not estimated: these poses pin it down only to ±{:.2}% (one σ, at the noise assumed per pose), too loosely to correct the depth (±{:.2}% would); more poses, larger height changes or a measured [calibration.noise] would, and so would giving a known scale",
+                        sigma * 100.0,
+                        MAX_SCALE_SIGMA * 100.0
+                    ),
+                );
+                return Ok(fallen);
+            }
             let translation_sigma: Vec<f64> = (0..3)
                 .map(|i| (joint.covariance[(i, i)] * factor).max(0.0).sqrt())
                 .collect();

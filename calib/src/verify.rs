@@ -33,7 +33,7 @@
 //! than blame the sensor (the ground's own test, relative to the feet, is
 //! not affected by a slope).
 
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, SMatrix, Vector3};
 
 use super::geometry::{Plane, PoseParams, Transform};
 use super::plan::NoiseModel;
@@ -49,6 +49,11 @@ pub struct ActiveMount {
     pub correlations: Option<[[f64; 6]; 6]>,
     /// The depth scale it found (measured distances are divided by it).
     pub depth_scale: f64,
+    /// Its σ and its correlations with α, β, γ, p_x, p_y, p_z, when it was
+    /// estimated: it correlates strongly with the height, and together they
+    /// predict the ground's distance far better than either alone.
+    pub depth_scale_sigma: Option<f64>,
+    pub depth_scale_correlations: Option<[f64; 6]>,
 }
 
 /// What was measured at one pose.
@@ -274,15 +279,16 @@ fn tangent_basis(n: &Vector3<f64>) -> [Vector3<f64>; 2] {
     [b1, n.cross(&b1)]
 }
 
-/// The calibration's covariance in `(ω, δt)` of the robot frame: the
-/// paper's angles turned into small rotations about the robot's axes.
-fn mount_covariance(mount: &ActiveMount) -> Matrix6<f64> {
+/// The calibration's covariance in `(ω, δt, δs)`: the paper's angles
+/// turned into small rotations about the robot's axes, the position, and the
+/// depth scale.
+fn mount_covariance(mount: &ActiveMount) -> SMatrix<f64, 7, 7> {
     let Some(sigma) = mount.sigma else {
-        return Matrix6::zeros();
+        return SMatrix::zeros();
     };
     let params = mount.robot_from_sensor;
     let base = params.rotation_matrix();
-    let mut jacobian = Matrix6::<f64>::zeros();
+    let mut jacobian = SMatrix::<f64, 7, 7>::zeros();
     let step = 1e-6;
     for j in 0..3 {
         let mut moved = params;
@@ -297,16 +303,23 @@ fn mount_covariance(mount: &ActiveMount) -> Matrix6<f64> {
             jacobian[(i, j)] = omega[i];
         }
     }
-    for i in 3..6 {
+    for i in 3..7 {
         jacobian[(i, i)] = 1.0;
     }
     let correlations = mount.correlations.unwrap_or_else(|| {
         std::array::from_fn(|i| std::array::from_fn(|j| if i == j { 1.0 } else { 0.0 }))
     });
-    let covariance = Matrix6::from_fn(|i, j| {
-        let r = if i == j { 1.0 } else { correlations[i][j] };
+    let scale_sigma = mount.depth_scale_sigma.unwrap_or(0.0);
+    let scale_correlations = mount.depth_scale_correlations.unwrap_or([0.0; 6]);
+    let sigma7 = |i: usize| if i < 6 { sigma[i] } else { scale_sigma };
+    let covariance = SMatrix::<f64, 7, 7>::from_fn(|i, j| {
+        let r = match (i, j) {
+            _ if i == j => 1.0,
+            (6, k) | (k, 6) => scale_correlations[k],
+            _ => correlations[i][j],
+        };
         let r = if r.is_finite() { r } else { 0.0 };
-        sigma[i] * sigma[j] * r
+        sigma7(i) * sigma7(j) * r
     });
     jacobian * covariance * jacobian.transpose()
 }
@@ -326,6 +339,9 @@ struct Rows {
     a: Vec<[f64; 6]>,
     r: Vec<f64>,
     sigma: Vec<f64>,
+    /// How each row moves with an error of the calibration's depth scale: a
+    /// distance `d` (already divided by the scale `s`) by `d/s` per unit.
+    scale: Vec<f64>,
 }
 
 impl Rows {
@@ -338,21 +354,24 @@ impl Rows {
             self.a.push([row[0], row[1], row[2], 0.0, 0.0, 0.0]);
             self.r.push(b.dot(&(measured - predicted)));
             self.sigma.push(sigma);
+            self.scale.push(0.0);
         }
     }
 
     /// The ground's distance: `d_m − d_p = n_p · δt`.
-    fn add_distance(&mut self, normal: &Vector3<f64>, residual: f64, sigma: f64) {
+    /// (`per_scale`: how it moves with the calibration's depth scale.)
+    fn add_distance(&mut self, normal: &Vector3<f64>, residual: f64, sigma: f64, per_scale: f64) {
         self.a.push([0.0, 0.0, 0.0, normal.x, normal.y, normal.z]);
         self.r.push(residual);
         self.sigma.push(sigma);
+        self.scale.push(per_scale);
     }
 
     /// The weighted least-squares change with the prior, and each
     /// direction's σ against `calibration` (zero rows: None).
     fn estimate(
         &self,
-        calibration: &Matrix6<f64>,
+        calibration: &SMatrix<f64, 7, 7>,
         rotations_only: bool,
     ) -> Option<Vec<DirectionChange>> {
         if self.a.is_empty() {
@@ -370,10 +389,25 @@ impl Rows {
         let inverse = normal.try_inverse()?;
         let atr = a.transpose() * r;
         let x = inverse * nalgebra::Vector6::from_fn(|i, _| atr[i]);
-        // The estimate's sensitivity to a true change: I minus the prior's pull.
-        let gain = inverse * Matrix6::from_fn(|i, j| ata[(i, j)]);
         let measurement = inverse * Matrix6::from_fn(|i, j| ata[(i, j)]) * inverse;
-        let total = measurement + gain * calibration * gain.transpose();
+        // How an error of the calibration moves the estimate: through each
+        // row as a change of the mount would, and through the distances as a
+        // change of the depth scale. (Height and scale correlate strongly in
+        // a calibration; together they predict the distance far better than
+        // either's σ alone says.)
+        let to_estimate = DMatrix::from_fn(6, n, |i, k| {
+            (0..6).map(|j| inverse[(i, j)] * a[(k, j)]).sum::<f64>() / self.sigma[k]
+        });
+        let rows_from_calibration =
+            DMatrix::from_fn(
+                n,
+                7,
+                |k, j| if j < 6 { self.a[k][j] } else { self.scale[k] },
+            );
+        let through = &to_estimate * rows_from_calibration;
+        let calibration = DMatrix::from_fn(7, 7, |i, j| calibration[(i, j)]);
+        let induced = &through * calibration * through.transpose();
+        let total = measurement + Matrix6::from_fn(|i, j| induced[(i, j)]);
         let count = if rotations_only { 3 } else { 6 };
         Some(
             Direction::ALL[..count]
@@ -437,7 +471,7 @@ pub fn verify(
             let measured = rotation * plane.normal.normalize();
             ground_rows.add_direction(&up, &measured, normal_sigma);
             let d = plane.d / mount.depth_scale;
-            ground_rows.add_distance(&up, d - predicted.d, offset_sigma);
+            ground_rows.add_distance(&up, d - predicted.d, offset_sigma, d / mount.depth_scale);
             comparison.theta = Some(super::geometry::angle_between(&measured, &up));
             comparison.e_d = Some(d - predicted.d);
         }
@@ -675,6 +709,8 @@ mod tests {
             ]),
             correlations: None,
             depth_scale: 1.0,
+            depth_scale_sigma: None,
+            depth_scale_correlations: None,
         }
     }
 

@@ -1,0 +1,210 @@
+//! The Kinect's depth scale: simulated Kinects whose depth reads 1 % long,
+//! 0.5 % short and true are calibrated live and from their recordings; the
+//! scale comes back within 0.1 % and the mount within 0.01° and 0.5 mm. A
+//! schedule at one body height cannot observe it (said, and 1 is taken), a
+//! known scale is taken as given, an implausible one fails its gate, and the
+//! exports carry it or say they cannot.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{groundcal, root, sim_config, temp_dir};
+use serde_json::Value;
+
+const KEYS: [&str; 6] = [
+    "alpha_deg",
+    "beta_deg",
+    "gamma_deg",
+    "px_mm",
+    "py_mm",
+    "pz_mm",
+];
+/// config/sim.toml's `[sim] mount`.
+const TRUTH: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+
+/// The simulator with its Kinect's depth reading `scale` × the truth.
+fn scaled_config(dir: &Path, scale: f64, extra: &[(&str, &str)]) -> PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    let world = format!("world = \"flat\"\ndepth_scale = {scale}");
+    let mut replacements = vec![("world = \"flat\"", world.as_str())];
+    replacements.extend_from_slice(extra);
+    sim_config(dir, &replacements)
+}
+
+fn run_json(args: &[&str]) -> (i32, Value) {
+    let (code, out, err) = groundcal(args);
+    let json = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}\n{err}"));
+    (code, json)
+}
+
+/// The largest angle and position errors against the truth.
+fn mount_errors(result: &Value) -> (f64, f64) {
+    let mount = &result["robot_from_sensor"];
+    let error = |k: usize| (mount[KEYS[k]].as_f64().unwrap() - TRUTH[k]).abs();
+    (
+        (0..3).map(error).fold(0.0, f64::max),
+        (3..6).map(error).fold(0.0, f64::max),
+    )
+}
+
+#[test]
+fn the_scale_is_recovered_live_and_from_the_recording() {
+    let dir = temp_dir("depth-scale");
+    for scale in [1.01, 0.995, 1.0] {
+        let case = dir.join(format!("scale-{scale}"));
+        let config = scaled_config(&case, scale, &[]);
+        let record = case.join("rec");
+        let (code, live) = run_json(&[
+            "calibrate",
+            "--config",
+            config.to_str().unwrap(),
+            "--record",
+            record.to_str().unwrap(),
+            "--json",
+        ]);
+        let (code_replay, replayed) = run_json(&["replay", record.to_str().unwrap(), "--json"]);
+        for (how, code, result) in [("live", code, &live), ("replay", code_replay, &replayed)] {
+            assert_eq!(code, 0, "{scale} {how}: {result:#}");
+            assert_eq!(result["depth_scale_estimated"], true, "{scale} {how}");
+            let found = result["depth_scale"].as_f64().unwrap();
+            assert!(
+                (found / scale - 1.0).abs() < 0.001,
+                "{scale} {how}: found {found}"
+            );
+            let sigma = result["sigma"]["depth_scale"].as_f64().unwrap();
+            assert!(sigma > 0.0 && sigma < 0.001, "{scale} {how}: σ {sigma}");
+            let (angle, position) = mount_errors(result);
+            assert!(
+                angle < 0.01 && position < 0.5,
+                "{scale} {how}: {angle}° {position} mm"
+            );
+            assert_eq!(
+                result["depth_scale_correlations"].as_array().unwrap().len(),
+                6
+            );
+            assert!(result["gate_checks"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|c| c["gate"] == "depth_scale_max_deviation" && c["passed"] == true));
+        }
+        if scale == 1.01 {
+            // The exports: JSON carries the scale, URDF says it cannot.
+            let file = case.join("result.json");
+            std::fs::write(&file, live.to_string()).unwrap();
+            let (code, urdf, _) =
+                groundcal(&["export", file.to_str().unwrap(), "--format", "urdf"]);
+            assert_eq!(code, 0);
+            assert!(
+                urdf.contains("depth_scale=1.01") && urdf.contains("cannot carry it"),
+                "{urdf}"
+            );
+            let (code, json) = run_json(&["export", file.to_str().unwrap(), "--format", "json"]);
+            assert_eq!(code, 0);
+            assert!(
+                (json["depth_scale"].as_f64().unwrap() - 1.01).abs() < 0.001,
+                "{json}"
+            );
+            let (code, _, err) =
+                groundcal(&["export", file.to_str().unwrap(), "--format", "ros-static"]);
+            assert_eq!(code, 0);
+            assert!(err.contains("cannot carry it"), "{err}");
+        }
+    }
+}
+
+/// The paper's tilts at one body height: `plan` says the scale will not be
+/// estimated, the calibration takes 1 and says why; a known scale given
+/// with --depth-scale is used as given.
+#[test]
+fn one_body_height_cannot_observe_the_scale() {
+    let dir = temp_dir("depth-scale-flat");
+    let paper = std::fs::read_to_string(root().join("config/schedules/octopus-52.toml")).unwrap();
+    let flat: String = paper
+        .lines()
+        .map(|line| match line.find("py_mm = ") {
+            Some(at) if line.trim_start().starts_with("{ alpha_deg") => {
+                let end = at + line[at..].find(',').unwrap();
+                format!("{}py_mm = 600{}", &line[..at], &line[end..])
+            }
+            _ => line.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let schedule = dir.join("one-height.toml");
+    std::fs::write(&schedule, flat).unwrap();
+    let line = format!("schedule = \"{}\"", schedule.display());
+    let paper_line = format!(
+        "schedule = \"{}\"",
+        root().join("config/schedules/octopus-52.toml").display()
+    );
+    let config = scaled_config(&dir, 1.01, &[(paper_line.as_str(), line.as_str())]);
+
+    let (code, plan) = run_json(&["plan", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{plan:#}");
+    assert_eq!(plan["depth_scale"]["estimated"], false, "{plan:#}");
+    assert!(
+        plan["depth_scale"]["note"]
+            .as_str()
+            .unwrap()
+            .contains("height"),
+        "{plan:#}"
+    );
+    let sim = root().join("config/sim.toml");
+    let (_, paper_plan) = run_json(&["plan", "--config", sim.to_str().unwrap(), "--json"]);
+    assert_eq!(
+        paper_plan["depth_scale"]["estimated"], true,
+        "{paper_plan:#}"
+    );
+    assert!(paper_plan["sigma"]["depth_scale"].as_f64().unwrap() < 0.001);
+
+    let (_, result) = run_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(result["depth_scale_estimated"], false, "{result:#}");
+    assert_eq!(result["depth_scale"], 1.0);
+    assert!(
+        result["notes"].to_string().contains("was not estimated"),
+        "{result:#}"
+    );
+    // Given as known, the scale is used and the mount is right.
+    let (code, given) = run_json(&[
+        "calibrate",
+        "--config",
+        config.to_str().unwrap(),
+        "--depth-scale",
+        "1.01",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{given:#}");
+    assert_eq!(given["depth_scale"], 1.01);
+    assert_eq!(given["depth_scale_estimated"], false);
+    let (angle, position) = mount_errors(&given);
+    assert!(angle < 0.01 && position < 0.5, "{angle}° {position} mm");
+    let (code, _, err) = groundcal(&[
+        "calibrate",
+        "--config",
+        config.to_str().unwrap(),
+        "--depth-scale",
+        "lots",
+    ]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("neither \"estimate\" nor a depth scale"),
+        "{err}"
+    );
+}
+
+/// A depth 5 % long is beyond what a Kinect's scale is off by: the gate
+/// rejects the calibration and says to check the depth model.
+#[test]
+fn an_implausible_scale_fails_its_gate() {
+    let dir = temp_dir("depth-scale-gate");
+    let config = scaled_config(&dir, 1.05, &[]);
+    let (code, result) = run_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 3, "{result:#}");
+    let reasons = result["reasons"].to_string();
+    assert!(
+        reasons.contains("the depth reads 5.0% longer") && reasons.contains("depth model"),
+        "{reasons}"
+    );
+}
