@@ -160,9 +160,51 @@ pub struct CalibrationConfig {
     /// `1.0032` (from an earlier calibration).
     #[serde(default, deserialize_with = "depth_scale_setting")]
     pub depth_scale: DepthScaleSetting,
+    /// Calibrate at each of these tilts of the Kinect's motor (two or more,
+    /// degrees) and fit the motor's axis, so that the calibration holds at
+    /// any tilt between them; empty (the default): at `sensor.tilt_deg` only.
+    #[serde(default)]
+    pub tilts: Vec<f64>,
 }
 
 pub use crate::calib::solve::DepthScaleSetting;
+
+/// Tilts to calibrate at: none, or two or more different ones within the
+/// Kinect's motor range (±27°).
+pub fn check_tilts(tilts: &[f64]) -> Result<(), String> {
+    if tilts.len() == 1 {
+        return Err("one tilt is no model: give two or more, or none".into());
+    }
+    for (k, t) in tilts.iter().enumerate() {
+        if !(t.is_finite() && (-27.0..=27.0).contains(t)) {
+            return Err(format!("{t}° is outside the Kinect's motor range (±27°)"));
+        }
+        if tilts[..k].iter().any(|u| (u - t).abs() < 1.0) {
+            return Err(format!(
+                "{t}° is given twice (tilts must differ by 1° or more)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The tilts of `--tilts` (a type of its own: clap reads a `Vec` as repeated flags).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tilts(pub Vec<f64>);
+
+/// `--tilts -20,-10,0`.
+pub fn parse_tilts(text: &str) -> Result<Tilts, String> {
+    let tilts = text
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("\"{}\" is not a tilt in degrees", t.trim()))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    check_tilts(&tilts)?;
+    Ok(Tilts(tilts))
+}
 
 /// `"estimate"` or a scale near 1 (`--depth-scale`, `calibration.depth_scale`).
 pub fn parse_depth_scale(text: &str) -> Result<DepthScaleSetting, String> {
@@ -385,6 +427,7 @@ impl Config {
                 ),
             ));
         }
+        check_tilts(&c.tilts).map_err(|e| bad("calibration.tilts", e))?;
         if let Some(noise) = &c.noise {
             noise.validate().map_err(|e| bad("calibration.noise", e))?;
         }

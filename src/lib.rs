@@ -49,4 +49,5 @@ pub mod session;
 pub mod store;
 pub mod systemd;
 pub mod terminal;
+pub mod tilts;
 pub mod verify;

@@ -121,6 +121,10 @@ enum Command {
         /// The format to write on stdout.
         #[arg(long, value_enum)]
         format: groundcal::export::ExportFormat,
+        /// The mount at this tilt of the Kinect's motor (degrees), from a
+        /// calibration made at several tilts (calibrate --tilts), within their range.
+        #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+        tilt: Option<f64>,
     },
     /// One calibration in the foreground (the daemon's session logic).
     #[command(
@@ -145,6 +149,11 @@ enum Command {
         /// (with the mount, when the body's heights observe it) or a known value such as 1.0032.
         #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::config::parse_depth_scale)]
         depth_scale: Option<groundcal::config::DepthScaleSetting>,
+        /// Calibrate at each of these tilts of the Kinect's motor (degrees, two or
+        /// more, e.g. -20,-10,0) and fit the motor's axis: the result then holds at
+        /// any tilt between them (export --tilt). Overrides calibration.tilts.
+        #[arg(long, value_name = "T1,T2,...", allow_hyphen_values = true, value_parser = groundcal::config::parse_tilts)]
+        tilts: Option<groundcal::config::Tilts>,
     },
     /// Whether the sensor still sits where the active (or a given) calibration says: the ground and the accelerometer now, or in a recording; exit 4 on drift.
     #[command(
@@ -369,6 +378,7 @@ fn run(args: Args) -> ExitStatus {
             json,
             ground_fit,
             depth_scale,
+            tilts,
         } => {
             let options = cli::calibrate::CalibrateOptions {
                 config,
@@ -377,6 +387,7 @@ fn run(args: Args) -> ExitStatus {
                 json,
                 ground_fit,
                 depth_scale,
+                tilts: tilts.map(|t| t.0),
             };
             cli::calibrate::run(&options)
         }
@@ -413,7 +424,7 @@ fn run(args: Args) -> ExitStatus {
             listen,
         }),
         Command::CheckConfig { file } => cli::check_config::run(&file),
-        Command::Export { file, format } => cli::export::run(&file, format),
+        Command::Export { file, format, tilt } => cli::export::run(&file, format, tilt),
         Command::Capture {
             config,
             sensor,

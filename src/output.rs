@@ -420,6 +420,15 @@ pub struct ResultJson {
     /// Correlation of the depth scale with α, β, γ, px, py, pz.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth_scale_correlations: Option<[f64; 6]>,
+    /// Calibrated at several tilts of the motor (`--tilts`): the motor's
+    /// axis and pivot, which give `robot_from_sensor` at any tilt in the
+    /// range (`export --tilt`). `robot_from_sensor` is then the one at the
+    /// configured tilt.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tilt_model: Option<crate::tilts::TiltModelJson>,
+    /// Each tilt's own calibration, in brief.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tilts: Vec<crate::tilts::TiltResultJson>,
 }
 
 impl ResultJson {
@@ -470,6 +479,8 @@ impl ResultJson {
             setup: None,
             predicted_sigma: None,
             motor: None,
+            tilt_model: None,
+            tilts: Vec::new(),
             depth_scale: Some(c.depth_scale.value),
             depth_scale_estimated: Some(c.depth_scale.estimated),
             depth_scale_correlations: c
@@ -496,6 +507,8 @@ impl ResultJson {
             setup: None,
             predicted_sigma: None,
             motor: None,
+            tilt_model: None,
+            tilts: Vec::new(),
             depth_scale: None,
             depth_scale_estimated: None,
             depth_scale_correlations: None,

@@ -19,6 +19,7 @@
 //! - [`solve`]: `robot_from_sensor` from all observations (paper 4.3);
 //! - [`quality`]: θ and e_d (paper 5.2), gates and the verdict;
 //! - [`calibrate`]: the solve then the verdict, in one call;
+//! - [`tilt`]: the motor's axis and pivot from calibrations at several tilts;
 //! - [`verify`]: whether the sensor still sits where a calibration says.
 
 // One exception, in `disparity`: the AVX2 build of the per-pixel loop, called
@@ -40,4 +41,5 @@ pub mod plane;
 pub mod quality;
 pub mod sensor;
 pub mod solve;
+pub mod tilt;
 pub mod verify;

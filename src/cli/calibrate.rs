@@ -23,6 +23,8 @@ pub struct CalibrateOptions {
     pub ground_fit: Option<GroundFitMethod>,
     /// Overrides `calibration.depth_scale`.
     pub depth_scale: Option<crate::config::DepthScaleSetting>,
+    /// Overrides `calibration.tilts`: the motor's tilts to calibrate at.
+    pub tilts: Option<Vec<f64>>,
 }
 
 /// Where the configuration comes from: the file given; the built-in
@@ -176,6 +178,13 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             return ExitStatus::RuntimeFailure;
         }
     };
+    let tilts = options
+        .tilts
+        .clone()
+        .unwrap_or_else(|| config.calibration.tilts.clone());
+    if tilts.len() == 1 {
+        config.sensor.tilt_deg = tilts[0];
+    }
     runtime.block_on(async {
         let (mut sensor, mut controller) = match hardware::open(&config, &options.selection).await {
             Ok(h) => h,
@@ -188,38 +197,104 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             hardware::Sensor::Playback(r) => Some(r.recording().clone()),
             _ => None,
         };
-        let plan =
-            match Plan::from_config(&config, schedule, replay.as_ref(), options.record.clone()) {
+        if tilts.len() < 2 {
+            let plan = match Plan::from_config(
+                &config,
+                schedule,
+                replay.as_ref(),
+                options.record.clone(),
+            ) {
                 Ok(p) => p,
                 Err(e) => {
                     eprintln!("groundcal calibrate: {e}");
                     return ExitStatus::BadInput;
                 }
             };
-        let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
-        let progress = show_progress(receiver, "calibrate");
-        let outcome =
-            session::run(&mut sensor, &mut controller, &plan, &events, stop_signal()).await;
-        drop(events);
-        let aborted = progress.await.ok().flatten();
-        match outcome {
-            Ok(outcome) => {
-                if let Some(dir) = &outcome.recording {
-                    eprintln!(
-                        "groundcal calibrate: recording written to {}",
-                        dir.display()
-                    );
+            return match calibrate_once(&mut sensor, &mut controller, &plan).await {
+                Ok(result) => finish("calibrate", &result, options.json),
+                Err(status) => status,
+            };
+        }
+        // Once per tilt, the same schedule; then the motor's model.
+        if replay.is_some() {
+            eprintln!("groundcal calibrate: --tilts needs a live or simulated sensor, not a played-back one (replay a recording made at several tilts instead)");
+            return ExitStatus::BadInput;
+        }
+        if let Some(dir) = &options.record {
+            if let Err(e) = std::fs::create_dir_all(dir) {
+                eprintln!("groundcal calibrate: {}: {e}", dir.display());
+                return ExitStatus::RuntimeFailure;
+            }
+        }
+        let mut results = Vec::new();
+        for (k, tilt) in tilts.iter().enumerate() {
+            let record = options
+                .record
+                .as_deref()
+                .map(|dir| crate::tilts::tilt_dir(dir, k + 1));
+            let mut plan = match Plan::from_config(&config, schedule.clone(), None, record) {
+                Ok(p) => p,
+                Err(e) => {
+                    eprintln!("groundcal calibrate: {e}");
+                    return ExitStatus::BadInput;
                 }
-                finish("calibrate", &outcome.result, options.json)
+            };
+            plan.tilt_deg = *tilt;
+            plan.nominal_mount = plan
+                .nominal_mount
+                .map(|n| crate::tilts::nominal_at(&n, config.sensor.tilt_deg, *tilt));
+            eprintln!(
+                "groundcal calibrate: tilt {} of {}: the Kinect at {tilt}°",
+                k + 1,
+                tilts.len()
+            );
+            match calibrate_once(&mut sensor, &mut controller, &plan).await {
+                Ok(result) => results.push((*tilt, result)),
+                Err(status) => return status,
             }
-            Err(SessionError::Refused(reason)) => {
-                eprintln!("groundcal calibrate: refused before moving: {reason}");
-                ExitStatus::BadInput
+        }
+        if let Some(dir) = &options.record {
+            if let Err(e) = crate::tilts::write_tilts_file(dir, &tilts, config.sensor.tilt_deg) {
+                eprintln!("groundcal calibrate: {}: {e}", dir.display());
+                return ExitStatus::RuntimeFailure;
             }
-            // Said last, with where the robot was left: "aborted:
-            // interrupted (SIGINT); halted and sent home; it stands at …"
-            // (the event's words are the error's cause and the robot's state).
-            Err(e) => match aborted {
+        }
+        let combined = crate::tilts::combine(results, config.sensor.tilt_deg);
+        finish("calibrate", &combined, options.json)
+    })
+}
+
+/// One calibration session with its progress; the result, or the exit
+/// status of why there is none (said on stderr).
+async fn calibrate_once(
+    sensor: &mut hardware::Sensor,
+    controller: &mut hardware::Controller,
+    plan: &Plan,
+) -> Result<crate::output::ResultJson, ExitStatus> {
+    let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
+    let progress = show_progress(receiver, "calibrate");
+    let outcome = session::run(sensor, controller, plan, &events, stop_signal()).await;
+    drop(events);
+    let aborted = progress.await.ok().flatten();
+    match outcome {
+        Ok(outcome) => {
+            if let Some(dir) = &outcome.recording {
+                eprintln!(
+                    "groundcal calibrate: recording written to {}",
+                    dir.display()
+                );
+            }
+            Ok(outcome.result)
+        }
+        Err(SessionError::Refused(reason)) => {
+            eprintln!("groundcal calibrate: refused before moving: {reason}");
+            Err(ExitStatus::BadInput)
+        }
+        // Said last, with where the robot was left: "aborted:
+        // interrupted (SIGINT); halted and sent home; it stands at …"
+        // (the event's words are the error's cause and the robot's state).
+        Err(e) => {
+            match aborted {
                 Some(reason) => {
                     let prefix = if matches!(e, SessionError::Aborted(_)) {
                         "aborted: "
@@ -227,13 +302,10 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
                         ""
                     };
                     eprintln!("groundcal calibrate: {prefix}{reason}");
-                    ExitStatus::RuntimeFailure
                 }
-                None => {
-                    eprintln!("groundcal calibrate: {e}");
-                    ExitStatus::RuntimeFailure
-                }
-            },
+                None => eprintln!("groundcal calibrate: {e}"),
+            }
+            Err(ExitStatus::RuntimeFailure)
         }
-    })
+    }
 }

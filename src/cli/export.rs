@@ -9,14 +9,23 @@ use crate::export::{read_result_with_scale, ExportFormat, RosMount};
 
 /// Runs the command: the export on stdout, messages on stderr. A rejected
 /// calibration, a missing file or an inconsistent result is bad input (exit 2).
-pub fn run(file: &Path, format: ExportFormat) -> ExitStatus {
-    let (robot_from_sensor, depth_scale) = match read_result_with_scale(file, false) {
+pub fn run(file: &Path, format: ExportFormat, tilt: Option<f64>) -> ExitStatus {
+    let (mut robot_from_sensor, depth_scale) = match read_result_with_scale(file, false) {
         Ok(read) => read,
         Err(e) => {
             eprintln!("groundcal export: {e}");
             return ExitStatus::BadInput;
         }
     };
+    if let Some(tilt) = tilt {
+        match at_tilt(file, tilt) {
+            Ok(mount) => robot_from_sensor = mount,
+            Err(e) => {
+                eprintln!("groundcal export: {}: {e}", file.display());
+                return ExitStatus::BadInput;
+            }
+        }
+    }
     let mount = RosMount {
         depth_scale,
         ..RosMount::from_groundcal(&robot_from_sensor)
@@ -35,4 +44,29 @@ pub fn run(file: &Path, format: ExportFormat) -> ExitStatus {
         return ExitStatus::RuntimeFailure;
     }
     ExitStatus::Success
+}
+
+/// The mount at another tilt of the motor, from the result's tilt model.
+fn at_tilt(file: &Path, tilt: f64) -> Result<crate::calib::geometry::PoseDegMm, String> {
+    let bytes = crate::recording::read_bounded(file, 64 << 20).map_err(|e| e.to_string())?;
+    let value: serde_json::Value =
+        serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))?;
+    let result = crate::output::ResultJson::parse(value)?;
+    let Some(model) = result.tilt_model.as_ref().map(|m| m.model()) else {
+        return Err(format!(
+            "this calibration holds for one tilt ({}): calibrate with --tilts to export others",
+            result
+                .kinect_tilt_deg
+                .map_or_else(|| "unknown".to_string(), |t| format!("{t}°"))
+        ));
+    };
+    if !tilt.is_finite() || !model.covers(tilt) {
+        return Err(format!(
+            "tilt {tilt}° lies outside the calibrated range {}° to {}°",
+            model.range_deg.0, model.range_deg.1
+        ));
+    }
+    Ok(crate::calib::geometry::PoseDegMm::from_params(
+        &model.at(tilt),
+    ))
 }

@@ -15,6 +15,14 @@ pub fn run(
     report_dir: Option<&Path>,
     options: &ReplayOptions,
 ) -> ExitStatus {
+    match crate::tilts::read_tilts_file(dir) {
+        Ok(Some(tilts)) => return replay_tilts(dir, &tilts, json, options),
+        Ok(None) => {}
+        Err(e) => {
+            eprintln!("groundcal replay: {e}");
+            return ExitStatus::BadInput;
+        }
+    }
     let recording = match Recording::open(dir) {
         Ok(r) => r,
         Err(e) => {
@@ -42,4 +50,28 @@ pub fn run(
         }
     }
     finish("replay", &outcome.result, json)
+}
+
+/// A recording made at several tilts (`tilts.json`): each tilt's recording
+/// replayed, then the motor's model, as `calibrate --tilts` made it.
+fn replay_tilts(
+    dir: &Path,
+    tilts: &crate::tilts::TiltsFile,
+    json: bool,
+    options: &ReplayOptions,
+) -> ExitStatus {
+    let mut results = Vec::new();
+    for entry in &tilts.tilts {
+        let sub = dir.join(&entry.dir);
+        let outcome = match Recording::open(&sub).and_then(|r| replay(&r, options)) {
+            Ok(o) => o,
+            Err(e) => {
+                eprintln!("groundcal replay: {e}");
+                return ExitStatus::BadInput;
+            }
+        };
+        results.push((entry.tilt_deg, outcome.result));
+    }
+    let reference = tilts.reference_tilt_deg.unwrap_or(tilts.tilts[0].tilt_deg);
+    finish("replay", &crate::tilts::combine(results, reference), json)
 }

@@ -1,0 +1,272 @@
+//! Calibrating once for every tilt of the Kinect's motor (`calibrate
+//! --tilts`, `replay` of a recording made so, `export --tilt`): the
+//! calibrations at each tilt combined into the motor's axis and pivot
+//! (`calib::tilt`), and how such a recording is laid out:
+//!
+//! ```text
+//! DIR/tilts.json        {"format": "groundcal-tilts", "version": 1,
+//!                        "tilts": [{"tilt_deg": -20, "dir": "tilt-1"}, ...]}
+//! DIR/tilt-1/ ...       one recording (recording.md) per tilt, in order
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::calib::geometry::{rot_z, PoseDegMm, PoseParams};
+use crate::calib::observe::NominalMount;
+use crate::calib::tilt::{fit, TiltCalibration, TiltModel};
+use crate::output::{MountJson, ResultJson, ResultStatus};
+use crate::recording::InputError;
+
+/// The motor's model as the result carries it (degrees, millimetres).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TiltModelJson {
+    /// The tilt of the reference calibration and its mount.
+    pub reference_tilt_deg: f64,
+    pub reference: MountJson,
+    /// The motor's axis in the robot frame (unit).
+    pub axis: [f64; 3],
+    /// The sensor's turn per commanded degree.
+    pub rate: f64,
+    /// A point of the axis in the robot frame.
+    pub pivot_mm: [f64; 3],
+    /// One σ of the axis's direction and of the pivot across it.
+    pub axis_sigma_deg: f64,
+    pub pivot_sigma_mm: f64,
+    /// The largest disagreement of a tilt's calibration with the model.
+    pub residual_deg: f64,
+    pub residual_mm: f64,
+    /// The calibrated range of tilts.
+    pub range_deg: [f64; 2],
+}
+
+impl TiltModelJson {
+    fn from_model(m: &TiltModel) -> Self {
+        TiltModelJson {
+            reference_tilt_deg: m.reference_tilt_deg,
+            reference: MountJson::from_params(&m.reference),
+            axis: [m.axis.x, m.axis.y, m.axis.z],
+            rate: m.rate,
+            pivot_mm: [m.pivot.x * 1e3, m.pivot.y * 1e3, m.pivot.z * 1e3],
+            axis_sigma_deg: m.axis_sigma.to_degrees(),
+            pivot_sigma_mm: m.pivot_sigma * 1e3,
+            residual_deg: m.residual_angle.to_degrees(),
+            residual_mm: m.residual_position * 1e3,
+            range_deg: [m.range_deg.0, m.range_deg.1],
+        }
+    }
+
+    /// The model back (for `export --tilt`).
+    pub fn model(&self) -> TiltModel {
+        let r = &self.reference;
+        TiltModel {
+            reference_tilt_deg: self.reference_tilt_deg,
+            reference: PoseDegMm::from_values(r.values()).to_params(),
+            axis: nalgebra::Vector3::from(self.axis),
+            rate: self.rate,
+            pivot: nalgebra::Vector3::from(self.pivot_mm) / 1e3,
+            axis_sigma: self.axis_sigma_deg.to_radians(),
+            pivot_sigma: self.pivot_sigma_mm / 1e3,
+            residual_angle: self.residual_deg.to_radians(),
+            residual_position: self.residual_mm / 1e3,
+            range_deg: (self.range_deg[0], self.range_deg[1]),
+        }
+    }
+}
+
+/// One tilt's calibration, in brief.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TiltResultJson {
+    pub tilt_deg: f64,
+    pub status: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_from_sensor: Option<MountJson>,
+    /// The optical axis's pitch against the body, from gravity and the feet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch_to_body_deg: Option<f64>,
+}
+
+/// The rough mount at another tilt: the nominal one turned about the
+/// sensor's right axis (the motor's, nearly) by the difference, so that the
+/// ground is still told from other planes.
+pub fn nominal_at(nominal: &NominalMount, nominal_tilt_deg: f64, tilt_deg: f64) -> NominalMount {
+    let p = nominal.pose().to_params();
+    let turned = p.rotation_matrix() * rot_z((tilt_deg - nominal_tilt_deg).to_radians());
+    let v = PoseDegMm::from_params(&PoseParams::from_rotation_translation(
+        &turned,
+        p.translation,
+    ))
+    .values();
+    NominalMount {
+        tolerance_deg: nominal.tolerance_deg,
+        tolerance_mm: nominal.tolerance_mm,
+        ..NominalMount::from_values(v)
+    }
+}
+
+/// The calibrations at each tilt combined: the one at (nearest) the
+/// reference tilt, with the motor's model and every tilt in brief. Rejected
+/// when a tilt's calibration was, or when no model fits.
+pub fn combine(results: Vec<(f64, ResultJson)>, reference_tilt_deg: f64) -> ResultJson {
+    let tilts: Vec<TiltResultJson> = results
+        .iter()
+        .map(|(tilt_deg, r)| TiltResultJson {
+            tilt_deg: *tilt_deg,
+            status: r.status.as_str().into(),
+            robot_from_sensor: r.robot_from_sensor.clone(),
+            pitch_to_body_deg: r.motor.as_ref().map(|m| m.pitch_to_body_deg),
+        })
+        .collect();
+    let calibrations: Vec<TiltCalibration> = results
+        .iter()
+        .filter_map(|(tilt_deg, r)| {
+            let mount = crate::verify::mount_of(r).ok()?;
+            Some(TiltCalibration {
+                tilt_deg: *tilt_deg,
+                robot_from_sensor: mount.robot_from_sensor,
+                sigma: mount.sigma.unwrap_or([0.0; 6]),
+            })
+        })
+        .collect();
+    let rejected: Vec<String> = results
+        .iter()
+        .filter(|(_, r)| !r.accepted())
+        .map(|(tilt, r)| {
+            format!(
+                "the calibration at tilt {tilt}° was rejected: {}",
+                r.reasons.join("; ")
+            )
+        })
+        .collect();
+    let Some(nearest) = results
+        .iter()
+        .min_by(|a, b| {
+            (a.0 - reference_tilt_deg)
+                .abs()
+                .total_cmp(&(b.0 - reference_tilt_deg).abs())
+        })
+        .map(|(tilt, _)| *tilt)
+    else {
+        return ResultJson::unsolved("no tilt was calibrated".into(), &[]);
+    };
+    let mut combined = results
+        .into_iter()
+        .find(|(tilt, _)| *tilt == nearest)
+        .map(|(_, r)| r)
+        .unwrap_or_else(|| ResultJson::unsolved("no tilt was calibrated".into(), &[]));
+    match fit(&calibrations, nearest) {
+        Ok(model) => {
+            if (nearest - reference_tilt_deg).abs() > 0.25 && model.covers(reference_tilt_deg) {
+                // The configured tilt lies between calibrated ones: the
+                // model's mount there (σ: the nearest tilt's).
+                combined.robot_from_sensor =
+                    Some(MountJson::from_params(&model.at(reference_tilt_deg)));
+                combined.notes.push(format!(
+                    "robot_from_sensor is the tilt model's at the configured tilt {reference_tilt_deg}°, between the calibrated tilts; σ are those of the calibration at {nearest}°"
+                ));
+                combined.kinect_tilt_deg = Some(reference_tilt_deg);
+            }
+            combined.tilt_model = Some(TiltModelJson::from_model(&model));
+        }
+        Err(e) => {
+            combined.status = ResultStatus::Rejected;
+            combined.reasons.push(format!("no tilt model: {e}"));
+        }
+    }
+    if !rejected.is_empty() {
+        combined.status = ResultStatus::Rejected;
+        combined.reasons.extend(rejected);
+    }
+    combined.tilts = tilts;
+    combined
+}
+
+/// `tilts.json` of a recording made at several tilts.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TiltsFile {
+    pub format: String,
+    pub version: u32,
+    /// The tilt the combined result's `robot_from_sensor` is for (the
+    /// configured one); default the first.
+    #[serde(default)]
+    pub reference_tilt_deg: Option<f64>,
+    pub tilts: Vec<TiltEntry>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TiltEntry {
+    pub tilt_deg: f64,
+    /// The tilt's recording, relative to the directory.
+    pub dir: String,
+}
+
+/// The sub-recording of the `k`-th tilt (from 1).
+pub fn tilt_dir(dir: &Path, k: usize) -> PathBuf {
+    dir.join(format!("tilt-{k}"))
+}
+
+/// Writes `tilts.json` (whole or not at all).
+pub fn write_tilts_file(dir: &Path, tilts: &[f64], reference_tilt_deg: f64) -> Result<(), String> {
+    let file = TiltsFile {
+        format: "groundcal-tilts".into(),
+        version: 1,
+        reference_tilt_deg: Some(reference_tilt_deg),
+        tilts: tilts
+            .iter()
+            .enumerate()
+            .map(|(k, t)| TiltEntry {
+                tilt_deg: *t,
+                dir: format!("tilt-{}", k + 1),
+            })
+            .collect(),
+    };
+    let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
+    crate::files::write_atomically(&dir.join("tilts.json"), text.as_bytes())
+        .map_err(|e| e.to_string())
+}
+
+/// Reads `DIR/tilts.json` if the recording has one.
+pub fn read_tilts_file(dir: &Path) -> Result<Option<TiltsFile>, InputError> {
+    let path = dir.join("tilts.json");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let bytes = crate::recording::read_bounded(&path, 1 << 20)?;
+    let file: TiltsFile = serde_json::from_slice(&bytes)
+        .map_err(|e| InputError::new(&path, None, format!("not a groundcal-tilts file: {e}")))?;
+    if file.format != "groundcal-tilts" || file.version != 1 {
+        return Err(InputError::new(
+            &path,
+            None,
+            "expected format \"groundcal-tilts\", version 1",
+        ));
+    }
+    if file.tilts.len() < 2 {
+        return Err(InputError::new(
+            &path,
+            None,
+            "a recording at several tilts names two or more",
+        ));
+    }
+    for t in &file.tilts {
+        if t.dir.contains('/')
+            || t.dir.contains('\\')
+            || t.dir == ".."
+            || t.dir.is_empty()
+            || !t.tilt_deg.is_finite()
+        {
+            return Err(InputError::new(
+                &path,
+                None,
+                format!(
+                    "tilt entry \"{}\" at {}° must name a plain directory and a finite tilt",
+                    t.dir, t.tilt_deg
+                ),
+            ));
+        }
+    }
+    Ok(Some(file))
+}
