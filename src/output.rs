@@ -365,6 +365,40 @@ pub struct MotorJson {
     pub poses: usize,
 }
 
+/// The motor's model as the result carries it (degrees, millimetres).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TiltModelJson {
+    /// The tilt of the reference calibration and its mount.
+    pub reference_tilt_deg: f64,
+    pub reference: MountJson,
+    /// The motor's axis in the robot frame (unit).
+    pub axis: [f64; 3],
+    /// The sensor's turn per commanded degree.
+    pub rate: f64,
+    /// A point of the axis in the robot frame.
+    pub pivot_mm: [f64; 3],
+    /// One σ of the axis's direction and of the pivot across it.
+    pub axis_sigma_deg: f64,
+    pub pivot_sigma_mm: f64,
+    /// The largest disagreement of a tilt's calibration with the model.
+    pub residual_deg: f64,
+    pub residual_mm: f64,
+    /// The calibrated range of tilts.
+    pub range_deg: [f64; 2],
+}
+
+/// One tilt's calibration, in brief.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TiltResultJson {
+    pub tilt_deg: f64,
+    pub status: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_from_sensor: Option<MountJson>,
+    /// The optical axis's pitch against the body, from gravity and the feet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch_to_body_deg: Option<f64>,
+}
+
 /// The whole result document.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ResultJson {
@@ -425,10 +459,10 @@ pub struct ResultJson {
     /// range (`export --tilt`). `robot_from_sensor` is then the one at the
     /// configured tilt.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub tilt_model: Option<crate::tilts::TiltModelJson>,
+    pub tilt_model: Option<TiltModelJson>,
     /// Each tilt's own calibration, in brief.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub tilts: Vec<crate::tilts::TiltResultJson>,
+    pub tilts: Vec<TiltResultJson>,
 }
 
 impl ResultJson {

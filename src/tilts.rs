@@ -16,75 +16,40 @@ use serde::{Deserialize, Serialize};
 use crate::calib::geometry::{rot_z, PoseDegMm, PoseParams};
 use crate::calib::observe::NominalMount;
 use crate::calib::tilt::{fit, TiltCalibration, TiltModel};
-use crate::output::{MountJson, ResultJson, ResultStatus};
+use crate::output::{MountJson, ResultJson, ResultStatus, TiltModelJson, TiltResultJson};
 use crate::recording::InputError;
 
-/// The motor's model as the result carries it (degrees, millimetres).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct TiltModelJson {
-    /// The tilt of the reference calibration and its mount.
-    pub reference_tilt_deg: f64,
-    pub reference: MountJson,
-    /// The motor's axis in the robot frame (unit).
-    pub axis: [f64; 3],
-    /// The sensor's turn per commanded degree.
-    pub rate: f64,
-    /// A point of the axis in the robot frame.
-    pub pivot_mm: [f64; 3],
-    /// One σ of the axis's direction and of the pivot across it.
-    pub axis_sigma_deg: f64,
-    pub pivot_sigma_mm: f64,
-    /// The largest disagreement of a tilt's calibration with the model.
-    pub residual_deg: f64,
-    pub residual_mm: f64,
-    /// The calibrated range of tilts.
-    pub range_deg: [f64; 2],
-}
-
-impl TiltModelJson {
-    fn from_model(m: &TiltModel) -> Self {
-        TiltModelJson {
-            reference_tilt_deg: m.reference_tilt_deg,
-            reference: MountJson::from_params(&m.reference),
-            axis: [m.axis.x, m.axis.y, m.axis.z],
-            rate: m.rate,
-            pivot_mm: [m.pivot.x * 1e3, m.pivot.y * 1e3, m.pivot.z * 1e3],
-            axis_sigma_deg: m.axis_sigma.to_degrees(),
-            pivot_sigma_mm: m.pivot_sigma * 1e3,
-            residual_deg: m.residual_angle.to_degrees(),
-            residual_mm: m.residual_position * 1e3,
-            range_deg: [m.range_deg.0, m.range_deg.1],
-        }
-    }
-
-    /// The model back (for `export --tilt`).
-    pub fn model(&self) -> TiltModel {
-        let r = &self.reference;
-        TiltModel {
-            reference_tilt_deg: self.reference_tilt_deg,
-            reference: PoseDegMm::from_values(r.values()).to_params(),
-            axis: nalgebra::Vector3::from(self.axis),
-            rate: self.rate,
-            pivot: nalgebra::Vector3::from(self.pivot_mm) / 1e3,
-            axis_sigma: self.axis_sigma_deg.to_radians(),
-            pivot_sigma: self.pivot_sigma_mm / 1e3,
-            residual_angle: self.residual_deg.to_radians(),
-            residual_position: self.residual_mm / 1e3,
-            range_deg: (self.range_deg[0], self.range_deg[1]),
-        }
+/// The model as the result carries it.
+fn model_json(m: &TiltModel) -> TiltModelJson {
+    TiltModelJson {
+        reference_tilt_deg: m.reference_tilt_deg,
+        reference: MountJson::from_params(&m.reference),
+        axis: [m.axis.x, m.axis.y, m.axis.z],
+        rate: m.rate,
+        pivot_mm: [m.pivot.x * 1e3, m.pivot.y * 1e3, m.pivot.z * 1e3],
+        axis_sigma_deg: m.axis_sigma.to_degrees(),
+        pivot_sigma_mm: m.pivot_sigma * 1e3,
+        residual_deg: m.residual_angle.to_degrees(),
+        residual_mm: m.residual_position * 1e3,
+        range_deg: [m.range_deg.0, m.range_deg.1],
     }
 }
 
-/// One tilt's calibration, in brief.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct TiltResultJson {
-    pub tilt_deg: f64,
-    pub status: String,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub robot_from_sensor: Option<MountJson>,
-    /// The optical axis's pitch against the body, from gravity and the feet.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub pitch_to_body_deg: Option<f64>,
+/// The model back from the result (for `export --tilt`).
+pub fn model_of(json: &TiltModelJson) -> TiltModel {
+    let r = &json.reference;
+    TiltModel {
+        reference_tilt_deg: json.reference_tilt_deg,
+        reference: PoseDegMm::from_values(r.values()).to_params(),
+        axis: nalgebra::Vector3::from(json.axis),
+        rate: json.rate,
+        pivot: nalgebra::Vector3::from(json.pivot_mm) / 1e3,
+        axis_sigma: json.axis_sigma_deg.to_radians(),
+        pivot_sigma: json.pivot_sigma_mm / 1e3,
+        residual_angle: json.residual_deg.to_radians(),
+        residual_position: json.residual_mm / 1e3,
+        range_deg: (json.range_deg[0], json.range_deg[1]),
+    }
 }
 
 /// The rough mount at another tilt: the nominal one turned about the
@@ -167,7 +132,7 @@ pub fn combine(results: Vec<(f64, ResultJson)>, reference_tilt_deg: f64) -> Resu
                 ));
                 combined.kinect_tilt_deg = Some(reference_tilt_deg);
             }
-            combined.tilt_model = Some(TiltModelJson::from_model(&model));
+            combined.tilt_model = Some(model_json(&model));
         }
         Err(e) => {
             combined.status = ResultStatus::Rejected;

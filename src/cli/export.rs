@@ -52,7 +52,7 @@ fn at_tilt(file: &Path, tilt: f64) -> Result<crate::calib::geometry::PoseDegMm, 
     let value: serde_json::Value =
         serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))?;
     let result = crate::output::ResultJson::parse(value)?;
-    let Some(model) = result.tilt_model.as_ref().map(|m| m.model()) else {
+    let Some(model) = result.tilt_model.as_ref().map(crate::tilts::model_of) else {
         return Err(format!(
             "this calibration holds for one tilt ({}): calibrate with --tilts to export others",
             result
