@@ -12,16 +12,8 @@ use std::path::{Path, PathBuf};
 use common::{groundcal, root, sim_config, temp_dir};
 use serde_json::Value;
 
-const KEYS: [&str; 6] = [
-    "alpha_deg",
-    "beta_deg",
-    "gamma_deg",
-    "px_mm",
-    "py_mm",
-    "pz_mm",
-];
-/// config/sim.toml's `[sim] mount`.
-const TRUTH: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+use common::MOUNT_KEYS as KEYS;
+use common::SIM_MOUNT as TRUTH;
 
 /// The simulator with its Kinect's depth reading `scale` × the truth.
 fn scaled_config(dir: &Path, scale: f64, extra: &[(&str, &str)]) -> PathBuf {

@@ -7,17 +7,9 @@ mod common;
 use common::{groundcal, groundcal_json, root, sim_config, temp_dir};
 use serde_json::Value;
 
-const KEYS: [&str; 6] = [
-    "alpha_deg",
-    "beta_deg",
-    "gamma_deg",
-    "px_mm",
-    "py_mm",
-    "pz_mm",
-];
+use common::MOUNT_KEYS as KEYS;
 
-/// The simulated robot's true mount (config/sim.toml's `[sim] mount`).
-const TRUTH: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+use common::SIM_MOUNT as TRUTH;
 
 /// The paper's schedule, planned with the simulator's noise model: each
 /// predicted σ lies within 0.7–1.5× of the RMS error that simulated

@@ -160,6 +160,40 @@ fn a_missing_frame_and_a_name_not_in_the_index_are_named() {
     );
 }
 
+/// The accelerometer readings a pose names (groundcal's key beyond
+/// recording.md) must be in the INDEX and be accelerometer files.
+#[test]
+fn an_accelerometer_reading_not_in_the_index_or_not_one_is_named() {
+    let copy = Copy::new("accelerometer");
+    copy.edit("poses.jsonl", |t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        let mut pose: serde_json::Value = serde_json::from_str(&lines[1]).unwrap();
+        pose["accelerometer"] = serde_json::json!(["a-1700000000.100000-1.dump"]);
+        lines[1] = pose.to_string();
+        lines.join("\n") + "\n"
+    });
+    assert_bad(
+        &copy,
+        &[
+            "poses.jsonl:2:",
+            "accelerometer reading \"a-1700000000.100000-1.dump\" is not in kinect/INDEX.txt",
+        ],
+    );
+    let copy = Copy::new("accelerometer-kind");
+    copy.edit("poses.jsonl", |t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        let mut pose: serde_json::Value = serde_json::from_str(&lines[1]).unwrap();
+        let frame = pose["depth_frames"][0].clone();
+        pose["accelerometer"] = serde_json::json!([frame]);
+        lines[1] = pose.to_string();
+        lines.join("\n") + "\n"
+    });
+    assert_bad(
+        &copy,
+        &["poses.jsonl:2:", "is not an accelerometer reading"],
+    );
+}
+
 #[test]
 fn bad_numbers_feet_and_versions_are_named() {
     let copy = Copy::new("version");

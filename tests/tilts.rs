@@ -10,9 +10,7 @@ use groundcal::calib::geometry::{rot_z, PoseDegMm, Transform};
 use nalgebra::{Rotation3, Translation3, Vector3};
 use serde_json::Value;
 
-/// config/sim.toml: the true mount at the configured tilt of -20°; the
-/// simulated motor turns the sensor about its own right axis (Z).
-const TRUTH: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+use common::SIM_MOUNT as TRUTH;
 
 fn true_mount_at(tilt_deg: f64) -> Transform {
     let turn = Transform::from_parts(

@@ -13,7 +13,7 @@ use serde_json::Value;
 
 /// config/sim.toml's `[sim] mount`, the simulated robot's true mount.
 const TRUE_MOUNT: &str = "mount = { alpha_deg = 0.8, beta_deg = -33.0, gamma_deg = 1.5, px_mm = 510.0, py_mm = 370.0, pz_mm = 15.0 }";
-const TRUTH: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+use common::SIM_MOUNT as TRUTH;
 
 /// The true mount knocked: turned by `degrees` about the robot's `axis`
 /// (about the sensor's optical centre) and moved by `shift_mm`.

@@ -144,25 +144,41 @@ impl Recording {
         let names: std::collections::HashMap<&str, &DumpEntry> =
             index.iter().map(|e| (e.name.as_str(), e)).collect();
         for pose in &poses_file.poses {
-            for name in &pose.depth_frames {
-                let at = |m: String| {
-                    InputError::new(
-                        &poses_path,
-                        Some(pose.line),
-                        format!("pose {}: {m}", pose.index),
-                    )
-                };
-                match names.get(name.as_str()) {
-                    None => {
-                        return Err(at(format!(
-                            "depth frame \"{name}\" is not in kinect/INDEX.txt"
-                        )))
+            let at = |m: String| {
+                InputError::new(
+                    &poses_path,
+                    Some(pose.line),
+                    format!("pose {}: {m}", pose.index),
+                )
+            };
+            // Every file a pose names is in the INDEX, of the kind it says.
+            for (names_listed, kind, what, a_what) in [
+                (
+                    &pose.depth_frames,
+                    EntryKind::Depth,
+                    "depth frame",
+                    "a depth frame",
+                ),
+                (
+                    &pose.accelerometer,
+                    EntryKind::Accelerometer,
+                    "accelerometer reading",
+                    "an accelerometer reading",
+                ),
+            ] {
+                for name in names_listed {
+                    match names.get(name.as_str()) {
+                        None => {
+                            return Err(at(format!("{what} \"{name}\" is not in kinect/INDEX.txt")))
+                        }
+                        Some(entry) if entry.kind != kind => {
+                            return Err(at(format!("\"{name}\" is not {a_what}")))
+                        }
+                        Some(_) => {}
                     }
-                    Some(entry) if entry.kind != EntryKind::Depth => {
-                        return Err(at(format!("\"{name}\" is not a depth frame")))
-                    }
-                    Some(_) => {}
                 }
+            }
+            for name in &pose.depth_frames {
                 let frame_path = dir.join("kinect").join(name);
                 let len = std::fs::metadata(&frame_path)
                     .map_err(|e| {
@@ -182,28 +198,6 @@ impl Recording {
                             intrinsics.width, intrinsics.height
                         ),
                     ));
-                }
-            }
-        }
-        for pose in &poses_file.poses {
-            for name in &pose.accelerometer {
-                let at = |m: String| {
-                    InputError::new(
-                        &poses_path,
-                        Some(pose.line),
-                        format!("pose {}: {m}", pose.index),
-                    )
-                };
-                match names.get(name.as_str()) {
-                    None => {
-                        return Err(at(format!(
-                            "accelerometer reading \"{name}\" is not in kinect/INDEX.txt"
-                        )))
-                    }
-                    Some(entry) if entry.kind != EntryKind::Accelerometer => {
-                        return Err(at(format!("\"{name}\" is not an accelerometer reading")))
-                    }
-                    Some(_) => {}
                 }
             }
         }

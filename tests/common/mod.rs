@@ -6,6 +6,20 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
+/// The keys of `robot_from_sensor`'s six parameters, in order.
+pub const MOUNT_KEYS: [&str; 6] = [
+    "alpha_deg",
+    "beta_deg",
+    "gamma_deg",
+    "px_mm",
+    "py_mm",
+    "pz_mm",
+];
+
+/// config/sim.toml's `[sim] mount`: the simulated robot's true mount (at the
+/// configured tilt of -20°), what a calibration must find.
+pub const SIM_MOUNT: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+
 /// `shared/` beside the project (CI clones main with shared/ beside it).
 pub fn shared() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared")
