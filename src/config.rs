@@ -264,6 +264,18 @@ pub struct SimConfig {
     /// 1 % long); default 1.
     #[serde(default)]
     pub depth_scale: Option<f64>,
+    /// A tilt motor that slips during a calibration (tests of the motor's
+    /// check): `{ from_pose = 26, degrees = 1.0 }`.
+    #[serde(default)]
+    pub motor_slip: Option<MotorSlipConfig>,
+}
+
+/// `[sim] motor_slip`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotorSlipConfig {
+    pub from_pose: u16,
+    pub degrees: f64,
 }
 
 /// `[sim] sinking_foot`.

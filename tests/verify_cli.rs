@@ -255,3 +255,51 @@ fn bad_calibrations_are_refused_in_words() {
     assert_eq!(code, 2);
     assert!(err.contains("no calibration is active"), "{err}");
 }
+
+/// The tilt motor during a calibration, from the accelerometer: steady, its
+/// angle against the body is the mount's pitch; slipped by 1° from pose 27
+/// on, the calibration is rejected naming a pose before and one after.
+#[test]
+fn a_motor_that_moves_during_a_calibration_rejects_it() {
+    let dir = temp_dir("verify-motor");
+    let steady = calibration(&dir);
+    let result: Value = serde_json::from_str(&std::fs::read_to_string(steady).unwrap()).unwrap();
+    let motor = &result["motor"];
+    assert_eq!(motor["moved"], false, "{motor}");
+    assert_eq!(motor["poses"], 52, "{motor}");
+    assert!(
+        (motor["pitch_to_body_deg"].as_f64().unwrap() + 33.0).abs() < 0.05,
+        "{motor}"
+    );
+    assert!(motor["turn_spread_deg"].as_f64().unwrap() < 0.5, "{motor}");
+
+    let config = sim_config(
+        &dir,
+        &[(
+            "world = \"flat\"",
+            "world = \"flat\"\nmotor_slip = { from_pose = 27, degrees = 1.0 }",
+        )],
+    );
+    let (code, out, err) =
+        groundcal(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 3, "{err}");
+    let result: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(result["motor"]["moved"], true, "{result:#}");
+    let reason = result["reasons"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .find(|r| r.contains("tilt motor moved"))
+        .unwrap_or_else(|| panic!("{result:#}"))
+        .to_string();
+    let poses: Vec<u32> = reason
+        .split("pose ")
+        .skip(1)
+        .filter_map(|w| w.split_whitespace().next()?.parse().ok())
+        .collect();
+    assert!(
+        poses.len() == 2 && poses[0] < 27 && poses[1] >= 27,
+        "{reason}"
+    );
+}

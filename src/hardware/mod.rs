@@ -240,6 +240,7 @@ pub async fn open(
                 time_scale: parts.sim.time_scale,
                 mount_tilt_deg: config.sensor.tilt_deg,
                 depth_scale: parts.sim.depth_scale.unwrap_or(1.0),
+                motor_slip: parts.sim.motor_slip.map(|m| (m.from_pose, m.degrees)),
                 ..SimKinectConfig::default()
             };
             if let Some(model) = config.sensor.depth_model {

@@ -111,6 +111,10 @@ pub struct SimKinectConfig {
     /// σ of each accelerometer axis per reading, in g (before the reading is
     /// rounded to whole counts of 1/819 g, as a real Kinect's is).
     pub accelerometer_noise_g: f64,
+    /// A motor that slips: from this pose id on, the sensor is turned by
+    /// this many degrees more about its right axis than the motor says (a
+    /// knock, or a motor that moved during a calibration). None: steady.
+    pub motor_slip: Option<(u16, f64)>,
     /// The depth the sensor reads, as a multiple of the true depth (a real
     /// Kinect's is often off by a fraction of a percent to about 1 %): 1.01
     /// reads 1 % long. Every point moves along its ray, so a plane keeps its
@@ -136,6 +140,7 @@ impl Default for SimKinectConfig {
             tilt_speed_deg_s: 20.0,
             mount_tilt_deg: 0.0,
             accelerometer_noise_g: ACCELEROMETER_NOISE_G,
+            motor_slip: None,
             depth_scale: 1.0,
         }
     }
@@ -183,6 +188,13 @@ impl SimKinectConfig {
         ] {
             if !(value.is_finite() && value > 0.0) {
                 return bad(format!("{name} must be a positive number, not {value}"));
+            }
+        }
+        if let Some((_, degrees)) = self.motor_slip {
+            if !(degrees.is_finite() && degrees.abs() <= TILT_LIMIT_DEG) {
+                return bad(format!(
+                    "motor_slip of {degrees}° is not a slip of the motor (±{TILT_LIMIT_DEG}°)"
+                ));
             }
         }
         if !(0.5..=2.0).contains(&self.depth_scale) {
@@ -608,6 +620,8 @@ pub struct SimKinect {
     frames_delivered: u64,
     /// Accelerometer readings so far (their noise is drawn by this number).
     readings: u64,
+    /// The slip of the motor now, degrees (see `SimKinectConfig::motor_slip`).
+    slipped_deg: f64,
     /// Started at the first frame requested (inside the runtime whose clock
     /// counts, paused or not).
     clock: Option<Clock>,
@@ -633,6 +647,7 @@ impl SimKinect {
             led: Led::Off,
             frames_delivered: 0,
             readings: 0,
+            slipped_deg: 0.0,
             clock: None,
             last_tick: None,
         })
@@ -668,7 +683,7 @@ impl SimKinect {
     /// `mount_tilt_deg`, positive up. The answer a calibration should find;
     /// for tests only.
     pub fn true_robot_from_sensor(&self) -> Transform {
-        let turn = (self.tilt_deg - self.config().mount_tilt_deg).to_radians();
+        let turn = (self.tilt_deg + self.slipped_deg - self.config().mount_tilt_deg).to_radians();
         let tilt = Transform::from_parts(
             nalgebra::Translation3::identity(),
             nalgebra::Rotation3::from_matrix_unchecked(rot_z(turn)),
@@ -743,6 +758,15 @@ impl DepthSensor for SimKinect {
     async fn set_led(&mut self, led: Led) -> Result<(), Self::Error> {
         self.led = led;
         Ok(())
+    }
+
+    /// The motor slips at its configured pose (and stays slipped).
+    fn begin_pose(&mut self, pose_id: u16) {
+        if let Some((from, degrees)) = self.config().motor_slip {
+            if pose_id >= from {
+                self.slipped_deg = degrees;
+            }
+        }
     }
 
     /// Waits for the next tick of the frame clock, then renders the world
