@@ -200,38 +200,58 @@ pub fn read_tilts_file(dir: &Path) -> Result<Option<TiltsFile>, InputError> {
         return Ok(None);
     }
     let bytes = crate::recording::read_bounded(&path, 1 << 20)?;
-    let file: TiltsFile = serde_json::from_slice(&bytes)
-        .map_err(|e| InputError::new(&path, None, format!("not a groundcal-tilts file: {e}")))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|e| InputError::new(&path, None, format!("not UTF-8 text: {e}")))?;
+    parse_tilts_file(&path, &text).map(Some)
+}
+
+/// Parses and checks a `tilts.json`: two or more tilts, each finite and
+/// naming a plain directory beside the file.
+pub fn parse_tilts_file(path: &Path, text: &str) -> Result<TiltsFile, InputError> {
+    let file: TiltsFile = serde_json::from_str(text).map_err(|e| {
+        InputError::new(
+            path,
+            (e.line() > 0).then_some(e.line()),
+            format!("not a groundcal-tilts file: {e}"),
+        )
+    })?;
     if file.format != "groundcal-tilts" || file.version != 1 {
         return Err(InputError::new(
-            &path,
+            path,
             None,
             "expected format \"groundcal-tilts\", version 1",
         ));
     }
     if file.tilts.len() < 2 {
         return Err(InputError::new(
-            &path,
+            path,
             None,
             "a recording at several tilts names two or more",
         ));
     }
+    if let Some(t) = file.reference_tilt_deg.filter(|t| !t.is_finite()) {
+        return Err(InputError::new(
+            path,
+            None,
+            format!("reference_tilt_deg {t} is not a finite number of degrees"),
+        ));
+    }
     for t in &file.tilts {
-        if t.dir.contains('/')
-            || t.dir.contains('\\')
+        let plain = !(t.dir.is_empty()
+            || t.dir == "."
             || t.dir == ".."
-            || t.dir.is_empty()
-            || !t.tilt_deg.is_finite()
-        {
+            || t.dir.contains('/')
+            || t.dir.contains('\\'));
+        if !plain || !t.tilt_deg.is_finite() {
             return Err(InputError::new(
-                &path,
+                path,
                 None,
                 format!(
-                    "tilt entry \"{}\" at {}° must name a plain directory and a finite tilt",
+                    "tilt entry \"{}\" at {}° must name a plain directory beside tilts.json and a finite tilt",
                     t.dir, t.tilt_deg
                 ),
             ));
         }
     }
-    Ok(Some(file))
+    Ok(file)
 }

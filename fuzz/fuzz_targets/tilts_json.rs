@@ -1,0 +1,29 @@
+//! A recording at several tilts: `tilts.json` (`tilts::parse_tilts_file`).
+#![no_main]
+
+use groundcal::tilts::parse_tilts_file;
+use groundcal_fuzz::{check_input_error, path, text_of};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let text = text_of(data);
+    let file = match parse_tilts_file(path(), &text) {
+        Err(e) => return check_input_error(&e, &text),
+        Ok(file) => file,
+    };
+    // What parse promises about a file it returns.
+    assert_eq!(file.format, "groundcal-tilts");
+    assert!(file.tilts.len() >= 2);
+    for t in &file.tilts {
+        assert!(t.tilt_deg.is_finite());
+        assert!(!t.dir.is_empty() && !t.dir.contains('/') && t.dir != "..");
+    }
+    // Written back out it reads back the same.
+    let written = serde_json::to_string(&file).expect("a tilts file serialises");
+    let again = parse_tilts_file(path(), &written)
+        .unwrap_or_else(|e| panic!("a written tilts file does not read back: {e}\n{written}"));
+    assert_eq!(
+        serde_json::to_value(&file).unwrap(),
+        serde_json::to_value(&again).unwrap()
+    );
+});
