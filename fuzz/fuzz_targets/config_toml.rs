@@ -44,6 +44,9 @@ const KEYS: &[&str] = &[
     "sim.sinking_foot.depth_mm",
     "sim",
     "serve.listen",
+    "verify.tilt_deg",
+    "verify",
+    "calibration.tilts",
 ];
 
 fn plain_relative(path: &Path) -> bool {

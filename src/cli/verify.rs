@@ -113,7 +113,11 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
     }
 
     let tilted = options.poses.unwrap_or(config.verify.poses);
-    let check = check_schedule(schedule.home, tilted, config.verify.tilt_deg);
+    let check = check_schedule(
+        schedule.home,
+        tilted,
+        config.verify.tilt_deg(&config.robot.limits),
+    );
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -117,7 +117,7 @@ pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
             let schedule = check_schedule(
                 state.schedule().home,
                 config.verify.poses,
-                config.verify.tilt_deg,
+                config.verify.tilt_deg(&config.robot.limits),
             );
             let plan = session::Plan::for_check(config, schedule, &calibration, None)?;
             let (tx, rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
