@@ -47,14 +47,19 @@ impl MountJson {
     /// The six parameters in the order α, β, γ, px, py, pz (degrees,
     /// millimetres).
     pub fn values(&self) -> [f64; 6] {
-        [
-            self.alpha_deg,
-            self.beta_deg,
-            self.gamma_deg,
-            self.px_mm,
-            self.py_mm,
-            self.pz_mm,
-        ]
+        self.pose().values()
+    }
+
+    /// The six parameters as a pose (the matrix and quaternion left out).
+    pub fn pose(&self) -> PoseDegMm {
+        PoseDegMm {
+            alpha_deg: self.alpha_deg,
+            beta_deg: self.beta_deg,
+            gamma_deg: self.gamma_deg,
+            px_mm: self.px_mm,
+            py_mm: self.py_mm,
+            pz_mm: self.pz_mm,
+        }
     }
 
     pub fn from_params(p: &PoseParams) -> Self {
@@ -106,6 +111,19 @@ pub struct SigmaJson {
 
 impl SigmaJson {
     /// From σ in radians and metres, in the order α, β, γ, px, py, pz.
+    /// σ in radians and metres, in the order α, β, γ, px, py, pz (the
+    /// inverse of [`SigmaJson::from_radians_metres`]).
+    pub fn radians_metres(&self) -> [f64; 6] {
+        [
+            self.alpha_deg.to_radians(),
+            self.beta_deg.to_radians(),
+            self.gamma_deg.to_radians(),
+            self.px_mm / 1000.0,
+            self.py_mm / 1000.0,
+            self.pz_mm / 1000.0,
+        ]
+    }
+
     pub fn from_radians_metres(sigma: &[f64; 6]) -> Self {
         Self {
             alpha_deg: sigma[0].to_degrees(),

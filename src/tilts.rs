@@ -40,7 +40,7 @@ pub fn model_of(json: &TiltModelJson) -> TiltModel {
     let r = &json.reference;
     TiltModel {
         reference_tilt_deg: json.reference_tilt_deg,
-        reference: PoseDegMm::from_values(r.values()).to_params(),
+        reference: r.pose().to_params(),
         axis: nalgebra::Vector3::from(json.axis),
         rate: json.rate,
         pivot: nalgebra::Vector3::from(json.pivot_mm) / 1e3,

@@ -17,7 +17,7 @@ use crate::calib::verify::{
     VerifySettings,
 };
 use crate::config::Config;
-use crate::output::{MotorJson, MountJson, ResultJson, ResultStatus};
+use crate::output::{MotorJson, MountJson, ResultJson, ResultStatus, SigmaJson};
 use crate::schedule::Schedule;
 use crate::store::Store;
 
@@ -146,26 +146,19 @@ pub fn mount_of(result: &ResultJson) -> Result<ActiveMount, String> {
         "it has no \"robot_from_sensor\": it was not solved, so there is nothing to verify"
             .to_string()
     })?;
-    let values = mount.values();
     let depth_scale = result.depth_scale.unwrap_or(1.0);
     if !(0.5..=2.0).contains(&depth_scale) {
         return Err(format!(
             "\"depth_scale\" is {depth_scale}, not a Kinect's depth scale (near 1)"
         ));
     }
-    let sigma = result.sigma.as_ref().and_then(|s| {
-        let v = [
-            s.alpha_deg.to_radians(),
-            s.beta_deg.to_radians(),
-            s.gamma_deg.to_radians(),
-            s.px_mm / 1000.0,
-            s.py_mm / 1000.0,
-            s.pz_mm / 1000.0,
-        ];
-        v.iter().all(|x| x.is_finite()).then_some(v)
-    });
+    let sigma = result
+        .sigma
+        .as_ref()
+        .map(SigmaJson::radians_metres)
+        .filter(|v| v.iter().all(|x| x.is_finite()));
     Ok(ActiveMount {
-        robot_from_sensor: PoseDegMm::from_values(values).to_params(),
+        robot_from_sensor: mount.pose().to_params(),
         sigma,
         correlations: result.correlations,
         depth_scale,
