@@ -1,7 +1,9 @@
-//! `groundcal serve` under a flood of connections that never finish their
-//! request, as the real process under the usual 1,024-descriptor limit: the
-//! operator's status and Abort still answer within 3 s, and the result of a
-//! calibration run through the flood is kept.
+//! `groundcal serve` under floods, as the real process under the usual
+//! 1,024-descriptor limit: connections that never finish their request, and
+//! live event streams opened by a client without a token (each a request in
+//! flight that never ends). The operator's status and Abort still answer
+//! (within 1 s under streams), the robot is halted and sent home, and the
+//! result of a calibration run through a flood is kept.
 
 mod common;
 
@@ -208,4 +210,175 @@ fn a_flood_of_half_open_connections_does_not_lock_the_operator_out() {
     let stderr = stderr + &log.join().unwrap();
     assert_eq!(code, 0, "{stderr}");
     assert!(!stderr.contains("Too many open files"), "{stderr}");
+}
+
+/// Keeps `count` live event streams open (no token needed to read), opening
+/// a new one every few ms and dropping its own oldest, as a client that
+/// reconnects whatever the server closes. Returns how many it opened.
+fn stream_flood(address: String, count: usize, stop: Arc<AtomicBool>, opened: Arc<AtomicUsize>) {
+    let mut open = std::collections::VecDeque::new();
+    while !stop.load(Ordering::Relaxed) {
+        match TcpStream::connect_timeout(&address.parse().unwrap(), Duration::from_secs(1)) {
+            Ok(mut s) => {
+                let _ = write!(
+                    s,
+                    "GET /api/events HTTP/1.1\r\nHost: {address}\r\nAccept: text/event-stream\r\n\r\n"
+                );
+                open.push_back(s);
+                opened.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(_) => std::thread::sleep(Duration::from_millis(5)),
+        }
+        if open.len() > count {
+            open.pop_front();
+        }
+        if opened.load(Ordering::Relaxed) > count {
+            std::thread::sleep(Duration::from_millis(3));
+        }
+    }
+}
+
+/// A flood running on its own thread until dropped.
+struct Flood {
+    stop: Arc<AtomicBool>,
+    opened: Arc<AtomicUsize>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Flood {
+    fn start(
+        target: usize,
+        run: impl FnOnce(Arc<AtomicBool>, Arc<AtomicUsize>) + Send + 'static,
+    ) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let opened = Arc::new(AtomicUsize::new(0));
+        let thread = {
+            let (stop, opened) = (stop.clone(), opened.clone());
+            std::thread::spawn(move || run(stop, opened))
+        };
+        let started = Instant::now();
+        while opened.load(Ordering::Relaxed) < target {
+            assert!(
+                started.elapsed() < Duration::from_secs(60),
+                "the flood did not start"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Flood {
+            stop,
+            opened,
+            thread: Some(thread),
+        }
+    }
+
+    fn opened(&self) -> usize {
+        self.opened.load(Ordering::Relaxed)
+    }
+}
+
+impl Drop for Flood {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// During a calibration against a lower computer in its own process, under
+/// `streams` event streams and `half_open` half-open connections: status
+/// answers 200 and Abort 202 within 1 s each, the run ends aborted with
+/// the robot at home, and HALT then HOME reached the lower computer.
+fn abort_gets_through(tag: &str, streams: usize, half_open: usize) {
+    let me = std::process::id();
+    let (soft, hard) = open_files_limit(me);
+    let wanted = 4 * (streams + half_open) as u64 + 256;
+    if soft < wanted {
+        set_open_files_limit(me, wanted.min(hard), hard);
+    }
+    let dir = common::TempDir::new(tag);
+    // Real-time motion (the simulator's time scale 1 on the robot's side is
+    // not needed: 50× with 52 poses still runs for many seconds).
+    let (mut server, address, robot, receipts) =
+        common::spawn_serve_towards_sim_robot(&dir.0, TOKEN, &[]);
+    let pid = server.id();
+    set_open_files_limit(pid, u64::from(DESCRIPTORS), u64::from(DESCRIPTORS));
+    let stderr = server.stderr.take().unwrap();
+    let log = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = std::io::BufReader::new(stderr).read_to_string(&mut text);
+        text
+    });
+
+    let (code, body, _) = request(&address, "POST", "/api/calibrations", true);
+    assert_eq!(code, 202, "{body}");
+    let streaming = (streams > 0).then(|| {
+        let a = address.clone();
+        Flood::start(streams, move |stop, opened| {
+            stream_flood(a, streams, stop, opened)
+        })
+    });
+    let half_opening = (half_open > 0).then(|| {
+        let a = address.clone();
+        Flood::start(half_open, move |stop, opened| flood(a, stop, opened))
+    });
+    // The body is moving through its poses by now.
+    std::thread::sleep(Duration::from_millis(1500));
+    let mut slowest = Duration::ZERO;
+    let mut most_descriptors = 0;
+    for _ in 0..5 {
+        let (code, status, took) = request(&address, "GET", "/api/status", false);
+        assert_eq!(code, 200, "{status}");
+        assert_eq!(status["state"], "running", "{status}");
+        slowest = slowest.max(took);
+        most_descriptors = most_descriptors.max(descriptors_of(pid));
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let (code, body, abort_took) =
+        request(&address, "POST", "/api/calibrations/current/abort", true);
+    assert_eq!(code, 202, "{body}");
+    let (status, slowest_status) =
+        wait_until(&address, |s| s["state"] == "idle", Duration::from_secs(60));
+    slowest = slowest.max(slowest_status);
+    most_descriptors = most_descriptors.max(descriptors_of(pid));
+    let stream_count = streaming.as_ref().map_or(0, Flood::opened);
+    let half_open_count = half_opening.as_ref().map_or(0, Flood::opened);
+    drop(streaming);
+    drop(half_opening);
+    eprintln!(
+        "{tag}: {stream_count} streams and {half_open_count} half-open connections opened ({streams} and {half_open} standing); \
+         status at worst {slowest:?}, Abort {abort_took:?}; at most {most_descriptors} descriptors of {DESCRIPTORS}"
+    );
+    assert!(slowest < Duration::from_secs(1), "status took {slowest:?}");
+    assert!(
+        abort_took < Duration::from_secs(1),
+        "Abort took {abort_took:?}"
+    );
+    assert_eq!(status["abort"]["state"], "aborted", "{status}");
+    assert_eq!(status["abort"]["robot_left"], "home", "{status}");
+    let (code, stderr) = common::terminate(server);
+    let stderr = stderr + &log.join().unwrap();
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!stderr.contains("Too many open files"), "{stderr}");
+    common::stop_sim_robot(robot);
+    let kinds = common::received_kinds(&receipts);
+    let halt = kinds
+        .iter()
+        .rposition(|k| k == "HALT")
+        .unwrap_or_else(|| panic!("no HALT reached the lower computer: {kinds:?}"));
+    assert!(
+        kinds[halt..].iter().any(|k| k == "HOME"),
+        "no HOME after the HALT: {:?}",
+        &kinds[halt..]
+    );
+}
+
+#[test]
+fn event_streams_opened_without_a_token_do_not_lock_out_abort() {
+    abort_gets_through("serve-stream-flood", 600, 0);
+}
+
+#[test]
+fn event_streams_and_half_open_connections_together_do_not_lock_out_abort() {
+    abort_gets_through("serve-both-floods", 600, FLOOD);
 }

@@ -14,10 +14,21 @@
 //!   through, while connections that only take room are the first to go.
 //!
 //! A request in flight includes the streaming of its response, so the live
-//! event stream of a page is never taken for idle.
+//! event stream of a page is never taken for idle. Streams therefore have a
+//! budget of their own, or they would take every slot and then nothing
+//! could be evicted to make room for the operator's Abort:
+//! - at most [`ConnectionLimits::max_streams`] are open at once, and at most
+//!   [`ConnectionLimits::max_streams_per_client`] from one address; a new
+//!   stream closes that client's oldest (or, over the whole budget, the
+//!   oldest of all) so that a page that reconnects always gets its stream;
+//! - the slots left, `max_connections - max_streams`, are for short requests
+//!   (status, Abort) and can never be taken by streams.
+//!
+//! A page whose stream is closed reconnects with a back-off and meanwhile
+//! polls the status (`page.js`).
 
 use std::collections::BTreeMap;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -42,6 +53,11 @@ pub struct ConnectionLimits {
     pub request_timeout: Duration,
     /// With no request in flight.
     pub idle_timeout: Duration,
+    /// Live event streams open at once (each holds a connection).
+    pub max_streams: usize,
+    /// Live event streams open at once from one address: a few pages on one
+    /// phone or pad.
+    pub max_streams_per_client: usize,
 }
 
 impl Default for ConnectionLimits {
@@ -50,6 +66,8 @@ impl Default for ConnectionLimits {
             max_connections: 256,
             request_timeout: Duration::from_secs(5),
             idle_timeout: Duration::from_secs(60),
+            max_streams: 32,
+            max_streams_per_client: 4,
         }
     }
 }
@@ -58,6 +76,10 @@ impl Default for ConnectionLimits {
 #[derive(Debug)]
 struct Connection {
     opened: Instant,
+    /// Who it is from, for the per-client budget of streams.
+    client: IpAddr,
+    /// Carries a live event stream (since when, µs since `opened`; 0: none).
+    stream_since_us: AtomicU64,
     /// Whether a whole request has arrived on it.
     served: AtomicBool,
     /// Requests whose response is not yet fully sent.
@@ -71,6 +93,15 @@ struct Connection {
 }
 
 impl Connection {
+    fn is_stream(&self) -> bool {
+        self.stream_since_us.load(Ordering::Relaxed) > 0
+    }
+
+    /// When its stream started, to find the oldest.
+    fn stream_started(&self) -> Instant {
+        self.opened + Duration::from_micros(self.stream_since_us.load(Ordering::Relaxed))
+    }
+
     fn idle_for(&self, now: Instant) -> Duration {
         let since_open = now.saturating_duration_since(self.opened);
         since_open.saturating_sub(Duration::from_millis(
@@ -113,9 +144,58 @@ impl Connections {
         self.lock().len()
     }
 
-    /// Registers a new connection, making room if the limit is reached.
-    /// `None`: every open connection is in use, and the new one is refused.
-    fn admit(&self, limits: &ConnectionLimits) -> Option<(u64, Arc<Connection>)> {
+    /// How many live event streams are open (not counting those told to go).
+    pub fn streams(&self) -> usize {
+        self.lock()
+            .values()
+            .filter(|c| c.is_stream() && !c.leaving.load(Ordering::Relaxed))
+            .count()
+    }
+
+    /// Marks `connection` as carrying a live event stream, within the
+    /// streams' budget: over the client's share its own oldest stream is
+    /// told to close, else over the whole budget the oldest of all.
+    fn start_stream(&self, connection: &Arc<Connection>, limits: &ConnectionLimits) {
+        let open = self.lock();
+        let streams: Vec<&Arc<Connection>> = open
+            .values()
+            .filter(|c| {
+                c.is_stream() && !c.leaving.load(Ordering::Relaxed) && !Arc::ptr_eq(c, connection)
+            })
+            .collect();
+        let own: Vec<&&Arc<Connection>> = streams
+            .iter()
+            .filter(|c| c.client == connection.client)
+            .collect();
+        let victim = if own.len() >= limits.max_streams_per_client {
+            own.into_iter()
+                .min_by_key(|c| c.stream_started())
+                .map(|c| (*c).clone())
+        } else if streams.len() >= limits.max_streams {
+            streams
+                .iter()
+                .min_by_key(|c| c.stream_started())
+                .map(|c| (*c).clone())
+        } else {
+            None
+        };
+        if let Some(victim) = victim {
+            victim.leaving.store(true, Ordering::Relaxed);
+            victim.evicted.notify_one();
+        }
+        let since_open = Instant::now().saturating_duration_since(connection.opened);
+        connection.stream_since_us.store(
+            u64::try_from(since_open.as_micros())
+                .unwrap_or(u64::MAX)
+                .max(1),
+            Ordering::Relaxed,
+        );
+    }
+
+    /// Registers a new connection from `client`, making room if the limit
+    /// is reached. `None`: every open connection is in use, and the new one
+    /// is refused.
+    fn admit(&self, limits: &ConnectionLimits, client: IpAddr) -> Option<(u64, Arc<Connection>)> {
         let mut open = self.lock();
         if open.len() >= limits.max_connections {
             let now = Instant::now();
@@ -142,6 +222,8 @@ impl Connections {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         let connection = Arc::new(Connection {
             opened: Instant::now(),
+            client,
+            stream_since_us: AtomicU64::new(0),
             served: AtomicBool::new(false),
             in_flight: AtomicUsize::new(0),
             last_done_ms: AtomicU64::new(0),
@@ -191,6 +273,15 @@ impl Drop for InFlight {
     }
 }
 
+/// Marks a connection's live stream until dropped (with the stream).
+struct StreamSlot(Arc<Connection>);
+
+impl Drop for StreamSlot {
+    fn drop(&mut self) {
+        self.0.stream_since_us.store(0, Ordering::Relaxed);
+    }
+}
+
 /// Accepts a connection from the listener: registers it, then serves it on a
 /// task of its own until it closes, is closed for its timeouts or to make
 /// room, or the service stops (`stopping` becomes true: the connection
@@ -203,27 +294,32 @@ pub fn spawn(
     limits: ConnectionLimits,
     mut stopping: watch::Receiver<bool>,
 ) {
-    let Some((id, connection)) = connections.admit(&limits) else {
+    let Some((id, connection)) = connections.admit(&limits, peer.ip()) else {
         tracing::warn!(%peer, "refused a connection: all {} are in use", limits.max_connections);
         return;
     };
     tokio::spawn(async move {
         let tracked = connection.clone();
+        let registry = connections.clone();
         let service = hyper::service::service_fn(move |mut request: hyper::Request<Incoming>| {
             let in_flight = InFlight::new(&tracked);
             request.extensions_mut().insert(ConnectInfo(peer));
             let mut app = app.clone();
+            let (tracked, registry) = (tracked.clone(), registry.clone());
             async move {
                 let response = app.call(request).await?;
                 // A body of known size goes out at once, with its length. A
                 // stream (the live events) stays in flight while it is sent,
-                // so that it is never taken for idle.
+                // so that it is never taken for idle, and takes a place in
+                // the streams' budget.
                 if HttpBody::size_hint(response.body()).exact().is_some() {
                     return Ok(response);
                 }
+                registry.start_stream(&tracked, &limits);
+                let streaming = StreamSlot(tracked);
                 Ok::<_, std::convert::Infallible>(response.map(|body| {
                     Body::from_stream(body.into_data_stream().map(move |chunk| {
-                        let _ = &in_flight;
+                        let _ = (&in_flight, &streaming);
                         chunk
                     }))
                 }))
@@ -265,6 +361,52 @@ pub fn spawn(
 mod tests {
     use super::*;
 
+    const LOCAL: IpAddr = IpAddr::V4(std::net::Ipv4Addr::LOCALHOST);
+
+    fn told(c: &Arc<Connection>) -> bool {
+        let notified = c.evicted.notified();
+        let mut notified = std::pin::pin!(notified);
+        // A stored permit completes at once.
+        std::future::Future::poll(
+            notified.as_mut(),
+            &mut std::task::Context::from_waker(std::task::Waker::noop()),
+        )
+        .is_ready()
+    }
+
+    #[test]
+    fn streams_keep_to_their_budget_per_client_and_in_all() {
+        let connections = Connections::default();
+        let l = ConnectionLimits {
+            max_streams: 3,
+            max_streams_per_client: 2,
+            ..ConnectionLimits::default()
+        };
+        let client = |n: u8| IpAddr::V4(std::net::Ipv4Addr::new(10, 0, 0, n));
+        let stream = |ip| {
+            let (_, c) = connections.admit(&l, ip).unwrap();
+            let _request = InFlight::new(&c);
+            connections.start_stream(&c, &l);
+            std::thread::sleep(Duration::from_millis(2));
+            c
+        };
+        // One client's third stream closes its own oldest.
+        let a1 = stream(client(1));
+        let a2 = stream(client(1));
+        let a3 = stream(client(1));
+        assert!(told(&a1) && !told(&a2) && !told(&a3));
+        assert_eq!(connections.streams(), 2);
+        // Over the whole budget, the oldest of all goes, whoever it is.
+        let b1 = stream(client(2));
+        assert_eq!(connections.streams(), 3);
+        let c1 = stream(client(3));
+        assert!(told(&a2) && !told(&a3) && !told(&b1) && !told(&c1));
+        assert_eq!(connections.streams(), 3);
+        // A stream that ended frees its place.
+        a3.stream_since_us.store(0, Ordering::Relaxed);
+        assert_eq!(connections.streams(), 2);
+    }
+
     fn limits(max: usize) -> ConnectionLimits {
         ConnectionLimits {
             max_connections: max,
@@ -275,22 +417,12 @@ mod tests {
     #[test]
     fn a_full_house_makes_room_by_closing_the_oldest_that_never_sent_a_request() {
         let connections = Connections::default();
-        let (_, operator) = connections.admit(&limits(3)).unwrap();
+        let (_, operator) = connections.admit(&limits(3), LOCAL).unwrap();
         let _request = InFlight::new(&operator);
-        let (_, first_idle) = connections.admit(&limits(3)).unwrap();
-        let (_, second_idle) = connections.admit(&limits(3)).unwrap();
+        let (_, first_idle) = connections.admit(&limits(3), LOCAL).unwrap();
+        let (_, second_idle) = connections.admit(&limits(3), LOCAL).unwrap();
         // Full: the oldest that never sent a request is told to go.
-        assert!(connections.admit(&limits(3)).is_some());
-        let told = |c: &Arc<Connection>| {
-            let notified = c.evicted.notified();
-            let mut notified = std::pin::pin!(notified);
-            // A stored permit completes at once.
-            std::future::Future::poll(
-                notified.as_mut(),
-                &mut std::task::Context::from_waker(std::task::Waker::noop()),
-            )
-            .is_ready()
-        };
+        assert!(connections.admit(&limits(3), LOCAL).is_some());
         assert!(told(&first_idle));
         assert!(!told(&second_idle));
         assert!(!told(&operator));
@@ -299,17 +431,17 @@ mod tests {
     #[test]
     fn a_house_full_of_requests_in_flight_refuses_the_newcomer() {
         let connections = Connections::default();
-        let (_, a) = connections.admit(&limits(1)).unwrap();
+        let (_, a) = connections.admit(&limits(1), LOCAL).unwrap();
         let request = InFlight::new(&a);
-        assert!(connections.admit(&limits(1)).is_none());
+        assert!(connections.admit(&limits(1), LOCAL).is_none());
         drop(request);
-        assert!(connections.admit(&limits(1)).is_some());
+        assert!(connections.admit(&limits(1), LOCAL).is_some());
     }
 
     #[test]
     fn silence_closes_a_connection_but_a_stream_in_flight_stays() {
         let connections = Connections::default();
-        let (_, c) = connections.admit(&limits(4)).unwrap();
+        let (_, c) = connections.admit(&limits(4), LOCAL).unwrap();
         let l = ConnectionLimits::default();
         let later = |d: Duration| c.opened + d;
         assert_eq!(c.expired(later(Duration::from_secs(1)), &l), None);

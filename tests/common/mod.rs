@@ -476,3 +476,36 @@ pub fn calibrate_live(recording: &Path, work: &Path, faults: &str, robot_keys: &
         receipts,
     }
 }
+
+/// `groundcal serve` on the simulation configuration, its robot a
+/// `groundcal sim-robot` in its own process (time-scaled 50×) that logs every
+/// datagram it handles to `dir/receipts.jsonl`, line by line. Returns the
+/// daemon, its address, the lower computer and the receipts' path.
+pub fn spawn_serve_towards_sim_robot(
+    dir: &Path,
+    token: &str,
+    replacements: &[(&str, &str)],
+) -> (Child, String, Child, PathBuf) {
+    let receipts = dir.join("receipts.jsonl");
+    let (robot, robot_address) = spawn_sim_robot(
+        &["--time-scale", "50"],
+        &[("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str())],
+    );
+    let address_line = format!("\naddress = \"{robot_address}\"\n");
+    let mut all = vec![("\naddress = \"sim\"\n", address_line.as_str())];
+    all.extend_from_slice(replacements);
+    let (serve, address) = spawn_serve_with(dir, token, &all, &[], &[]);
+    (serve, address, robot, receipts)
+}
+
+/// The kinds of the datagrams the lower computer handled (its receipts
+/// log), in order.
+pub fn received_kinds(receipts: &Path) -> Vec<String> {
+    std::fs::read_to_string(receipts)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["event"] == "datagram")
+        .filter_map(|v| v["kind"].as_str().map(String::from))
+        .collect()
+}

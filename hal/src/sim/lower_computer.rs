@@ -607,9 +607,12 @@ impl SimServer {
 
     fn log(&mut self, line: &ReceiptLine<'_>) {
         if let Some(file) = &mut self.receipts {
+            // Flushed line by line: a test reads what reached the lower
+            // computer while it runs (after a crash of the upper computer).
             let written = serde_json::to_string(line)
                 .map_err(io::Error::other)
-                .and_then(|text| writeln!(file, "{text}"));
+                .and_then(|text| writeln!(file, "{text}"))
+                .and_then(|()| file.flush());
             if let Err(e) = written {
                 tracing::warn!("receipts log: {e}; no more receipts");
                 self.receipts = None;
