@@ -127,7 +127,14 @@ async fn calibrate_with(
     drop(events);
     let mut reason = None;
     while let Some(event) = received.recv().await {
-        if let Event::Aborted { reason: r } = event {
+        if let Event::Aborted {
+            reason: r,
+            robot_left,
+        } = event
+        {
+            // Every sensor fault leaves the robot halted at home, and the
+            // event says so in a type, not only in words.
+            assert_eq!(robot_left, groundcal::session::RobotLeft::Home, "{r}");
             reason = Some(r);
         }
     }

@@ -111,7 +111,7 @@ pub(super) fn show_progress(
                     "back home; {}",
                     if *consistent { "consistent" } else { "drift" }
                 ),
-                Event::Aborted { reason } => {
+                Event::Aborted { reason, .. } => {
                     aborted = Some(reason.clone());
                     continue;
                 }

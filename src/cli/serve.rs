@@ -130,6 +130,8 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
         state.set_hardware(hardware);
         if check_at_start && opened_at_start {
             terminal::check_at_start(&state);
+        } else if check_at_start {
+            state.set_startup_check(terminal::api::StartupCheck::NotPossible);
         }
         match terminal::serve(listener, state, stop).await {
             Ok(()) => ExitStatus::Success,

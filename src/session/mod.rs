@@ -63,7 +63,26 @@ pub enum Event {
     /// A check of the active calibration ended (`verify`).
     Verified { consistent: bool },
     /// The session was aborted; the robot was halted and sent home.
-    Aborted { reason: String },
+    Aborted {
+        /// Why, and how the robot was left, in words.
+        reason: String,
+        /// How the robot was left, for a page that must not guess from words.
+        robot_left: RobotLeft,
+    },
+}
+
+/// How an aborted session left the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RobotLeft {
+    /// It was never told to move (the schedule was refused first).
+    NotMoved,
+    /// Halted, sent home, and it reported the home stance.
+    Home,
+    /// Halted, but it did not reach (or did not report) the home stance.
+    Halted,
+    /// It could not be halted: nobody knows where it stands.
+    Unknown,
 }
 
 /// One pose in a provisional solve.

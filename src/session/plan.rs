@@ -24,6 +24,9 @@ pub struct Plan {
     pub settle: Duration,
     /// The Kinect's motor tilt during calibration.
     pub tilt_deg: f64,
+    /// The robot's name (`[robot] name`), kept with the result and the
+    /// recording.
+    pub robot_name: Option<String>,
     pub nominal_mount: Option<NominalMount>,
     /// The noise of one pose's ground, for the σ predicted before moving.
     pub noise: crate::calib::plan::NoiseModel,
@@ -82,6 +85,7 @@ impl Plan {
         };
         let mut plan = Plan {
             schedule,
+            robot_name: config.robot.name.clone(),
             limits: config.robot.limits,
             frames_per_pose: c.frames_per_pose,
             motion: Duration::from_millis(u64::from(c.motion_ms)),
@@ -126,6 +130,7 @@ impl Plan {
                 name: format!("replay of {}", recording.dir.display()),
                 home: recording.session.home.commanded,
                 poses: recording.poses.iter().map(|p| p.commanded).collect(),
+                file: None,
             };
             plan.accelerometer_readings = recording
                 .poses

@@ -13,7 +13,7 @@ use tokio::sync::mpsc::UnboundedSender;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::{Event, GravityReading, Plan, PoseFit, ProvisionalPose, VisitedPose};
+use super::{Event, GravityReading, Plan, PoseFit, ProvisionalPose, RobotLeft, VisitedPose};
 use crate::calib::geometry::Transform;
 use crate::calib::observe::{BodyEstimate, PoseObserver};
 use crate::calib::plane::FitBuffers;
@@ -399,7 +399,12 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
             &Session {
                 format: "groundcal-recording".into(),
                 version: 1,
-                robot: welcome.firmware.clone(),
+                // The robot's name when it has one (recording.md's
+                // "octopus"), else what its lower computer calls itself.
+                robot: plan
+                    .robot_name
+                    .clone()
+                    .unwrap_or_else(|| welcome.firmware.clone()),
                 home: Home {
                     commanded: schedule.home,
                     feet_body_mm: home_feet.clone(),
@@ -521,11 +526,14 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         of,
         prior_note: processor.prior_note(),
         recording,
+        firmware: welcome.firmware.clone(),
     })
 }
 
 /// What visiting the poses gave.
 struct Visited {
+    /// The lower computer's firmware, as its WELCOME said.
+    firmware: String,
     poses: Vec<VisitedPose>,
     /// Poses in the schedule.
     of: usize,
@@ -554,6 +562,10 @@ fn solve_visited(visited: Visited, plan: &Plan, events: &UnboundedSender<Event>)
         result.notes.insert(0, note);
     }
     result.predicted_sigma = predicted_sigma(plan);
+    result.robot = Some(crate::output::RobotJson {
+        name: plan.robot_name.clone(),
+        firmware: Some(visited.firmware.clone()),
+    });
     crate::verify::judge_motor(&mut result, &visited.poses, plan.tilt_deg, &plan.verify);
     send(
         events,
@@ -721,7 +733,7 @@ const MAX_CORRUPT_FRAMES: usize = 3;
 /// half second for `plan.link_recovery`: its own watchdog has halted the body
 /// meanwhile, and once the link returns the body is sent home. Returns a
 /// description of how the robot was left.
-async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> String {
+async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> (RobotLeft, String) {
     let deadline = tokio::time::Instant::now() + plan.link_recovery;
     let mut retries = 0u32;
     let halted = loop {
@@ -735,7 +747,10 @@ async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> Stri
         }
     };
     if let Err(e) = halted {
-        return format!("could not halt the robot ({e}); check it");
+        return (
+            RobotLeft::Unknown,
+            format!("could not halt the robot ({e}); check it"),
+        );
     }
     let after = if retries > 0 {
         format!(" (the link came back after {retries} more tries)")
@@ -743,13 +758,20 @@ async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> Stri
         String::new()
     };
     if let Err(e) = controller.home(millis(plan.motion)).await {
-        return format!("halted{after}, but could not send it home ({e})");
+        return (
+            RobotLeft::Halted,
+            format!("halted{after}, but could not send it home ({e})"),
+        );
     }
     match wait_until_home(controller, plan).await {
-        Ok(_) => format!("halted and sent home{after}; it stands at the home stance"),
-        Err(e) => {
-            format!("halted and sent home{after}, but it did not report the home stance: {e}")
-        }
+        Ok(_) => (
+            RobotLeft::Home,
+            format!("halted and sent home{after}; it stands at the home stance"),
+        ),
+        Err(e) => (
+            RobotLeft::Halted,
+            format!("halted and sent home{after}, but it did not report the home stance: {e}"),
+        ),
     }
 }
 
@@ -813,12 +835,13 @@ async fn guarded<S: DepthSensor, C: BodyController>(
                 events,
                 Event::Aborted {
                     reason: reason.clone(),
+                    robot_left: RobotLeft::NotMoved,
                 },
             );
             Err(SessionError::Refused(reason))
         }
         Err(e) => {
-            let left = stop_safely(controller, plan).await;
+            let (robot_left, left) = stop_safely(controller, plan).await;
             let _ = bounded(plan, "the LED", sensor.set_led(Led::Red)).await;
             for fit in pending {
                 fit.handle.abort();
@@ -827,6 +850,7 @@ async fn guarded<S: DepthSensor, C: BodyController>(
                 events,
                 Event::Aborted {
                     reason: format!("{}; {left}", e.cause()),
+                    robot_left,
                 },
             );
             Err(e)

@@ -9,7 +9,7 @@ use serde_json::Value;
 
 use crate::calib::quality::Gates;
 use crate::schedule::body_pose_in_words;
-use crate::session::Event;
+use crate::session::{Event, RobotLeft};
 
 /// A serializable mirror of [`Event`] for the API.
 #[derive(Debug, Clone, Serialize)]
@@ -58,6 +58,19 @@ pub enum EventJson {
     },
     Aborted {
         reason: String,
+        robot_left: RobotLeft,
+    },
+    /// Not a session event: Abort was asked for (by whom); the session is
+    /// halting the robot and sending it home.
+    Aborting {
+        by: String,
+    },
+    /// Not a session event: a calibration was made active (accepted, or
+    /// rolled back to), by whom.
+    Activated {
+        id: String,
+        activated: String,
+        by: String,
     },
     /// Not a session event: the result was kept in the store under `id`.
     Stored {
@@ -68,6 +81,9 @@ pub enum EventJson {
     Failed {
         error: String,
     },
+    /// Not a session event: the daemon is alive (every second on each live
+    /// stream, never kept in the status).
+    Heartbeat,
     /// Not a session event: a check of the active calibration ended,
     /// `consistent`, `drift` or `failed` (with the reasons or the error).
     Checked {
@@ -148,8 +164,9 @@ impl From<&Event> for EventJson {
             Event::Verified { consistent } => EventJson::Verified {
                 consistent: *consistent,
             },
-            Event::Aborted { reason } => EventJson::Aborted {
+            Event::Aborted { reason, robot_left } => EventJson::Aborted {
                 reason: reason.clone(),
+                robot_left: *robot_left,
             },
         }
     }
@@ -173,10 +190,72 @@ pub enum Task {
     Check,
 }
 
+/// The active calibration, as every page shows it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct ActiveRef {
+    pub id: String,
+    /// When it was made active (RFC 3339).
+    pub activated: String,
+}
+
+impl ActiveRef {
+    /// The id and time of an `active.json` document.
+    pub fn of(active: &Value) -> Option<ActiveRef> {
+        Some(ActiveRef {
+            id: active.get("id")?.as_str()?.to_string(),
+            activated: active
+                .get("activated")
+                .and_then(Value::as_str)
+                .unwrap_or_default()
+                .to_string(),
+        })
+    }
+}
+
+/// An abort, asked for or done.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "state", rename_all = "snake_case")]
+pub enum AbortState {
+    /// Abort reached the daemon; the session is halting the robot.
+    Aborting { by: String },
+    /// The session ended aborted, leaving the robot so.
+    Aborted {
+        reason: String,
+        robot_left: RobotLeft,
+    },
+}
+
+/// A run that the service's last stop cut off (a kill, a crash, a power
+/// cut): said until the next calibration starts.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Interrupted {
+    /// Who started it, and when (RFC 3339).
+    pub by: String,
+    pub started: String,
+}
+
+/// What became of the check at the service's start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartupCheck {
+    /// `[verify] at_start` is off.
+    #[default]
+    Off,
+    /// Nothing to check: no calibration is active, or the hardware did not open.
+    NotPossible,
+    /// It ran (see `check`).
+    Started,
+    /// Held: the last run was interrupted, so nothing moves until a person
+    /// asks for it (Check on the page).
+    HeldForAPerson,
+}
+
 /// The last check of the active calibration (`verify`), at the service's
 /// start or on "Check".
 #[derive(Debug, Clone, Serialize)]
 pub struct CheckStatus {
+    /// The calibration checked (its store id): the outcome holds for it only.
+    pub calibration_id: Option<String>,
     /// `running`, `consistent`, `drift` or `failed`.
     pub outcome: String,
     pub by: String,
@@ -223,9 +302,15 @@ pub struct Status {
     pub result_id: Option<String>,
     /// Why the last session produced no result.
     pub error: Option<String>,
-    /// A calibration the service's last stop cut off, in words (until the
-    /// next one starts).
-    pub interrupted: Option<String>,
+    /// A calibration the service's last stop cut off (until the next one
+    /// starts).
+    pub interrupted: Option<Interrupted>,
+    /// The check at the service's start.
+    pub startup_check: StartupCheck,
+    /// The active calibration (None: none yet).
+    pub active: Option<ActiveRef>,
+    /// The running (or last) session's abort.
+    pub abort: Option<AbortState>,
     /// Whether the hardware opened when the service started, in words (it
     /// is opened again for each calibration).
     pub hardware: String,
@@ -343,8 +428,26 @@ impl Status {
                     if *consistent { "consistent" } else { "drift" }
                 )
             }
-            EventJson::Aborted { reason } => self.robot = format!("aborted: {reason}"),
-            EventJson::Stored { .. } | EventJson::Failed { .. } | EventJson::Checked { .. } => {}
+            EventJson::Aborted { reason, robot_left } => {
+                self.robot = format!("aborted: {reason}");
+                self.abort = Some(AbortState::Aborted {
+                    reason: reason.clone(),
+                    robot_left: *robot_left,
+                });
+            }
+            EventJson::Aborting { by } => {
+                self.abort = Some(AbortState::Aborting { by: by.clone() });
+            }
+            EventJson::Activated { id, activated, .. } => {
+                self.active = Some(ActiveRef {
+                    id: id.clone(),
+                    activated: activated.clone(),
+                });
+            }
+            EventJson::Stored { .. }
+            | EventJson::Failed { .. }
+            | EventJson::Checked { .. }
+            | EventJson::Heartbeat => {}
             EventJson::Provisional { poses } => self.provisional = Some(poses.clone()),
         }
     }
@@ -396,13 +499,17 @@ fn step_in_words(event: &EventJson) -> Option<String> {
                 "the sensor has moved since it was calibrated"
             }
         ),
-        EventJson::Aborted { reason } => format!("aborted: {reason}"),
+        EventJson::Aborted { reason, .. } => format!("aborted: {reason}"),
+        EventJson::Aborting { .. } => "aborting: halting the robot and sending it home".into(),
+        EventJson::Activated { .. } => return None,
         EventJson::Failed { error } => format!("stopped without a result: {error}"),
         EventJson::Checked { outcome, .. } if outcome == "failed" => {
             "the check could not be made (see below)".into()
         }
         EventJson::Checked { .. } => return None,
-        EventJson::Stored { .. } | EventJson::Provisional { .. } => return None,
+        EventJson::Stored { .. } | EventJson::Provisional { .. } | EventJson::Heartbeat => {
+            return None
+        }
     })
 }
 

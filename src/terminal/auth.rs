@@ -50,23 +50,35 @@ pub async fn require_token_for_writes(
     }
 }
 
-/// Whether the request carries the token, compared in constant time.
+/// Whether the request carries the token. The scheme is matched without
+/// regard to case (RFC 7235); the token is compared by the digests of both,
+/// in constant time, so that neither its bytes nor its length can be timed.
 fn carries_token(headers: &HeaderMap, expected: &str) -> bool {
     let given = headers
         .get("authorization")
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .map(str::trim);
-    let expected = expected.as_bytes();
+        .and_then(bearer_token);
     match given {
-        Some(g) if !expected.is_empty() && g.len() == expected.len() => {
-            g.bytes()
-                .zip(expected)
+        Some(g) if !expected.is_empty() => {
+            let (g, e) = (
+                blake3::hash(g.as_bytes()),
+                blake3::hash(expected.as_bytes()),
+            );
+            g.as_bytes()
+                .iter()
+                .zip(e.as_bytes())
                 .fold(0u8, |acc, (a, b)| acc | (a ^ b))
                 == 0
         }
         _ => false,
     }
+}
+
+/// The credentials of an `Authorization: Bearer TOKEN` value, whatever the
+/// case of the scheme.
+fn bearer_token(value: &str) -> Option<&str> {
+    let (scheme, token) = value.trim_start().split_once(' ')?;
+    scheme.eq_ignore_ascii_case("bearer").then(|| token.trim())
 }
 
 /// The layer: a request must name this daemon as its host, and a browser's
@@ -151,6 +163,42 @@ fn names_this_daemon(host: &str, allowed: &[String], machine: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn with_authorization(value: &str) -> HeaderMap {
+        let mut headers = HeaderMap::new();
+        headers.insert("authorization", value.parse().unwrap());
+        headers
+    }
+
+    #[test]
+    fn the_bearer_scheme_is_matched_in_any_case() {
+        for value in [
+            "Bearer s3cret",
+            "bearer s3cret",
+            "BEARER s3cret",
+            "  BeArEr   s3cret ",
+        ] {
+            assert!(
+                carries_token(&with_authorization(value), "s3cret"),
+                "{value}"
+            );
+        }
+        for value in [
+            "Basic s3cret",
+            "Bearer",
+            "Bearers3cret",
+            "Bearer s3cre",
+            "Bearer s3cret2",
+            "Bearer ",
+        ] {
+            assert!(
+                !carries_token(&with_authorization(value), "s3cret"),
+                "{value}"
+            );
+        }
+        assert!(!carries_token(&HeaderMap::new(), "s3cret"));
+        assert!(!carries_token(&with_authorization("Bearer "), ""));
+    }
 
     #[test]
     fn a_host_must_name_this_daemon() {

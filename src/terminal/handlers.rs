@@ -6,14 +6,14 @@ use std::net::SocketAddr;
 
 use axum::extract::{ConnectInfo, Path as UrlPath, State};
 use axum::http::{HeaderMap, StatusCode};
-use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
+use axum::response::sse::{Event as SseEvent, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde_json::{json, Value};
 use tokio::sync::oneshot;
 use tokio_stream::StreamExt;
 
-use super::api::{CheckStatus, RunClock, RunState, Status, Task};
+use super::api::{ActiveRef, CheckStatus, EventJson, RunClock, RunState, Status, Task};
 use super::state::{now, AppState};
 use super::worker;
 use crate::store::StoreError;
@@ -63,13 +63,21 @@ pub async fn get_events(
     let events = tokio_stream::wrappers::BroadcastStream::new(state.subscribe_events())
         .filter_map(|e| e.ok())
         .map(|e| Some(Some(e)));
+    // A page that hears nothing for two beats declares contact lost: a
+    // stopped daemon or a link that dropped without closing cannot look alive.
+    let beats = tokio_stream::wrappers::IntervalStream::new(tokio::time::interval(HEARTBEAT))
+        .map(|_| Some(Some(EventJson::Heartbeat)));
     let stream = events
+        .merge(beats)
         .merge(stop)
         .take_while(Option::is_some)
         .filter_map(|e| e.flatten())
         .map(|e| Ok(SseEvent::default().data(serde_json::to_string(&e).unwrap_or_default())));
-    Sse::new(stream).keep_alive(KeepAlive::default())
+    Sse::new(stream)
 }
+
+/// How often the event stream says the daemon is alive.
+pub const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(1);
 
 pub async fn get_history(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
     let history = state.store().history().map_err(store_error)?;
@@ -93,16 +101,47 @@ pub async fn get_active(State(state): State<AppState>) -> Result<Json<Value>, Ap
     }
 }
 
-/// Accept a result, or roll back to an earlier one: both make it active.
+/// Accept a result, or roll back to an earlier one: both make it active,
+/// and every open page is told. Refused while a check runs: its outcome
+/// would otherwise be shown for a calibration it did not check (wait for
+/// it, or abort it).
 pub async fn post_activate(
     State(state): State<AppState>,
+    headers: HeaderMap,
+    ConnectInfo(addr): ConnectInfo<SocketAddr>,
     UrlPath(id): UrlPath<String>,
 ) -> Result<Json<Value>, ApiError> {
-    state
-        .store()
-        .activate(&id, &now())
-        .map(Json)
-        .map_err(store_error)
+    let by = client_name(&headers, addr);
+    let store = state.store().clone();
+    let activated = {
+        // The status is held from the test to the write: a check cannot
+        // start in between (it takes the same lock to start).
+        let status = state.status_mut();
+        if status.state == RunState::Running && status.task == Task::Check {
+            let checking = status
+                .check
+                .as_ref()
+                .and_then(|c| c.calibration_id.clone())
+                .unwrap_or_else(|| "the active calibration".into());
+            return Err(ApiError(
+                StatusCode::CONFLICT,
+                format!(
+                    "a check of calibration {checking} is running: wait for it to finish, or abort it, before you change the active calibration"
+                ),
+            ));
+        }
+        let activated = store.activate(&id, &now()).map_err(store_error)?;
+        drop(status);
+        activated
+    };
+    if let Some(active) = ActiveRef::of(&activated) {
+        state.publish(EventJson::Activated {
+            id: active.id,
+            activated: active.activated,
+            by,
+        });
+    }
+    Ok(Json(activated))
 }
 
 pub async fn post_reject(
@@ -126,10 +165,9 @@ pub async fn post_abort(
     let abort = state.take_abort();
     match abort {
         Some(abort) => {
-            let _ = abort.send(format!(
-                "stopped by the operator ({})",
-                client_name(&headers, addr)
-            ));
+            let by = client_name(&headers, addr);
+            let _ = abort.send(format!("stopped by the operator ({by})"));
+            state.publish(EventJson::Aborting { by });
             Ok((StatusCode::ACCEPTED, Json(json!({ "aborting": true }))).into_response())
         }
         None => Err(ApiError(
@@ -203,6 +241,12 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             ));
         }
         let previous = std::mem::take(&mut *status);
+        // A check keeps the notice of an interrupted run on screen: only a
+        // new calibration, which a person asked for, replaces it.
+        let interrupted = match task {
+            Task::Check => previous.interrupted,
+            Task::Calibration => None,
+        };
         let mut next = Status {
             state: RunState::Running,
             task,
@@ -214,6 +258,9 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             gates: previous.gates,
             hardware: previous.hardware,
             check: previous.check,
+            interrupted,
+            startup_check: previous.startup_check,
+            active: previous.active,
             ..Status::default()
         };
         if task == Task::Check {
@@ -221,6 +268,7 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             next.result = previous.result;
             next.result_id = previous.result_id;
             next.check = Some(CheckStatus {
+                calibration_id: next.active.as_ref().map(|a| a.id.clone()),
                 outcome: "running".into(),
                 by: by.clone(),
                 started: started.clone(),

@@ -125,18 +125,41 @@ async fn protective_headers(mut response: Response) -> Response {
 /// Checks the active calibration against the sensor once, as the service
 /// starts (when one is active): on the session's thread, so that systemd's
 /// READY is not delayed by it. The outcome goes to the journal and the status.
+///
+/// Not after an unclean stop: a run was cut off, the robot may stand
+/// anywhere and people may be near it, so nothing moves until a person asks
+/// for it (Check on the page, which asks to keep clear first).
 pub fn check_at_start(state: &AppState) {
+    if let Some(cut_off) = state.status().interrupted {
+        tracing::warn!(
+            "not checking the active calibration at start: the calibration started by {} at {} was interrupted, so the robot moves only when a person presses Check on the page",
+            cut_off.by,
+            cut_off.started
+        );
+        state.set_startup_check(api::StartupCheck::HeldForAPerson);
+        return;
+    }
     match state.store().active() {
         Ok(Some(_)) => {
             match handlers::start(state, "the service's start".into(), api::Task::Check) {
-                Ok(_) => tracing::info!("checking the active calibration against the sensor"),
+                Ok(_) => {
+                    state.set_startup_check(api::StartupCheck::Started);
+                    tracing::info!("checking the active calibration against the sensor")
+                }
                 Err(handlers::ApiError(_, e)) => {
+                    state.set_startup_check(api::StartupCheck::NotPossible);
                     tracing::warn!("cannot check the active calibration at start: {e}")
                 }
             }
         }
-        Ok(None) => tracing::info!("no calibration is active yet: nothing to check at start"),
-        Err(e) => tracing::warn!("cannot read the active calibration to check it: {e}"),
+        Ok(None) => {
+            state.set_startup_check(api::StartupCheck::NotPossible);
+            tracing::info!("no calibration is active yet: nothing to check at start")
+        }
+        Err(e) => {
+            state.set_startup_check(api::StartupCheck::NotPossible);
+            tracing::warn!("cannot read the active calibration to check it: {e}")
+        }
     }
 }
 

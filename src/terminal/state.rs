@@ -8,7 +8,7 @@ use std::time::{Instant, SystemTime};
 
 use tokio::sync::{broadcast, oneshot, watch};
 
-use super::api::{EventJson, RunState, Status};
+use super::api::{ActiveRef, EventJson, Interrupted, RunState, Status};
 use crate::config::Config;
 use crate::hardware::Selection;
 use crate::schedule::Schedule;
@@ -61,12 +61,18 @@ impl AppState {
         // A calibration cut off by the service's end (a kill, a crash, a
         // power cut) is said, not forgotten.
         let interrupted = store.take_interrupted().map(|(by, started)| {
-            let words = format!(
-                "the calibration started by {by} at {started} was interrupted: the service stopped before it finished. The robot's own watchdog halts the body once groundcal falls silent; check where it stands before you calibrate again"
+            tracing::warn!(
+                "the calibration started by {by} at {started} was interrupted: the service stopped before it finished. The robot's own watchdog halts the body once groundcal falls silent; nothing moves until a person asks for it on the page"
             );
-            tracing::warn!("{words}");
-            words
+            Interrupted { by, started }
         });
+        let active = match store.active() {
+            Ok(active) => active.as_ref().and_then(ActiveRef::of),
+            Err(e) => {
+                tracing::warn!("cannot read the active calibration: {e}");
+                None
+            }
+        };
         let gates = config.calibration.gates;
         AppState(Arc::new(Shared {
             config,
@@ -79,8 +85,8 @@ impl AppState {
                 robot: "idle".into(),
                 step: "idle".into(),
                 gates: Some(gates),
-                error: interrupted.clone(),
                 interrupted,
+                active,
                 ..Status::default()
             }),
             events,
@@ -104,6 +110,11 @@ impl AppState {
     /// Records how the hardware check at start went (shown on the page).
     pub fn set_hardware(&self, words: String) {
         self.status_mut().hardware = words;
+    }
+
+    /// Records what became of the check at the service's start.
+    pub fn set_startup_check(&self, startup: super::api::StartupCheck) {
+        self.status_mut().startup_check = startup;
     }
 
     /// Aborts a running session (if any) and waits until it has stopped the robot.
@@ -180,16 +191,20 @@ impl AppState {
         lock(&self.0.abort).take()
     }
 
-    /// Joins a finished session thread, then keeps the new one.
+    /// Keeps the new session thread. The previous one has finished its
+    /// session (the status went idle before a new one could start); it may
+    /// still be sending its last event, so it is let go rather than joined
+    /// here, where a join would block a thread of the async runtime.
     pub(super) fn replace_worker(
         &self,
         start: impl FnOnce() -> std::io::Result<std::thread::JoinHandle<()>>,
     ) -> std::io::Result<()> {
-        if let Some(old) = lock(&self.0.worker).take() {
-            let _ = old.join();
-        }
         let handle = start()?;
-        *lock(&self.0.worker) = Some(handle);
+        let previous = lock(&self.0.worker).replace(handle);
+        // Joined only if already done; otherwise it ends by itself.
+        if let Some(previous) = previous.filter(|p| p.is_finished()) {
+            let _ = previous.join();
+        }
         Ok(())
     }
 

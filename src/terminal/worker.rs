@@ -110,6 +110,21 @@ pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
         let work = async {
             let calibration = calibration_in_store(state.store())?
                 .ok_or_else(|| "no calibration is active: there is nothing to check".to_string())?;
+            calibration.same_robot(
+                state.config().robot.name.as_deref(),
+                "the configuration's [robot] name",
+            )?;
+            // The check is bound to the calibration it was started for.
+            let expected = state
+                .status()
+                .check
+                .and_then(|c| c.calibration_id);
+            if calibration.id != expected {
+                return Err(format!(
+                    "the active calibration changed to {} before the check began; press Check again",
+                    calibration.id.as_deref().unwrap_or("one without an id")
+                ));
+            }
             let (mut sensor, mut controller) = hardware::open(state.config(), state.selection())
                 .await
                 .map_err(|e| e.to_string())?;
@@ -195,6 +210,7 @@ fn finish_check(state: &AppState, outcome: Result<(VerifyJson, String), String>)
         let mut status = state.status_mut();
         let previous = status.check.take();
         status.check = Some(CheckStatus {
+            calibration_id: previous.as_ref().and_then(|c| c.calibration_id.clone()),
             outcome: outcome_words.into(),
             by: previous.as_ref().map_or_else(String::new, |c| c.by.clone()),
             started: previous.map_or_else(String::new, |c| c.started),
