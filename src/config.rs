@@ -91,6 +91,11 @@ impl VerifyConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotConfig {
+    /// The robot's name ("octopus"), kept with each calibration and in each
+    /// recording: a calibration holds for its own robot only, and `verify`
+    /// refuses another's.
+    #[serde(default)]
+    pub name: Option<String>,
     /// `host:port` of the lower computer (hexapod-udp.md), or `sim` for the
     /// simulated one in process.
     #[serde(deserialize_with = "robot_address")]
@@ -222,7 +227,8 @@ pub fn parse_depth_scale(text: &str) -> Result<DepthScaleSetting, String> {
     match text.parse::<f64>() {
         Ok(s) if (0.5..=2.0).contains(&s) => Ok(DepthScaleSetting::Fixed(s)),
         Ok(s) => Err(format!(
-            "a depth scale of {s} is not a Kinect's (it lies near 1, e.g. 1.0032)"
+            "a depth scale of {} is not a Kinect's (it lies near 1, e.g. 1.0032)",
+            crate::output::brief_number(s)
         )),
         Err(_) => Err(format!(
             "\"{text}\" is neither \"estimate\" nor a depth scale such as 1.0032"
@@ -379,6 +385,17 @@ impl Config {
                 "robot.limits",
                 "must be finite, with min_height_mm < max_height_mm and positive tilt".into(),
             ));
+        }
+        if let Some(name) = &self.robot.name {
+            let plain = !name.trim().is_empty()
+                && name.chars().count() <= 64
+                && !name.chars().any(char::is_control);
+            if !plain {
+                return Err(bad(
+                    "robot.name",
+                    "must be 1 to 64 printable characters, such as \"octopus\"".into(),
+                ));
+            }
         }
         if self.robot.retry_interval_ms == 0 || self.robot.retries == 0 {
             return Err(bad(
@@ -672,7 +689,17 @@ mod tests {
         let (embedded, schedule) = Config::embedded_sim();
         let (shipped, shipped_schedule) = Config::load(&shipped("sim.toml")).unwrap();
         assert_eq!(embedded, shipped);
-        assert_eq!(schedule, shipped_schedule);
+        // The same poses; only the file named in messages differs.
+        assert_eq!(
+            Schedule {
+                file: None,
+                ..schedule
+            },
+            Schedule {
+                file: None,
+                ..shipped_schedule
+            }
+        );
     }
 
     #[test]

@@ -155,6 +155,7 @@ pub fn design_schedule(
             name: format!("designed-{count}"),
             home: configured.home,
             poses,
+            file: None,
         },
         candidates: candidates.len() + unseen,
         unseen,

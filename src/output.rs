@@ -417,6 +417,17 @@ pub struct TiltResultJson {
     pub pitch_to_body_deg: Option<f64>,
 }
 
+/// Which robot a calibration was made for: the name of the configuration's
+/// `[robot] name` (or a recording's `robot`), and the lower computer's
+/// firmware as its WELCOME said.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct RobotJson {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub firmware: Option<String>,
+}
+
 /// The whole result document.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ResultJson {
@@ -453,6 +464,9 @@ pub struct ResultJson {
     /// How the input was made and solved, when it says.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub setup: Option<SetupJson>,
+    /// The robot it was made for (a calibration holds for one robot only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<RobotJson>,
     /// The σ `groundcal plan` predicted for the schedule before the robot
     /// moved (live calibrations), to compare with `sigma`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -529,6 +543,7 @@ impl ResultJson {
             },
             gate_checks: c.checks.iter().map(GateCheckJson::from).collect(),
             setup: None,
+            robot: None,
             predicted_sigma: None,
             motor: None,
             tilt_model: None,
@@ -557,6 +572,7 @@ impl ResultJson {
             notes: Vec::new(),
             gate_checks: Vec::new(),
             setup: None,
+            robot: None,
             predicted_sigma: None,
             motor: None,
             tilt_model: None,
@@ -878,5 +894,38 @@ mod tests {
         doc["gate_checks"][0]["passed"] = serde_json::json!("yes");
         let e = ResultJson::parse(doc).unwrap_err();
         assert!(e.contains("gate_checks[0].passed"), "{e}");
+    }
+}
+
+/// A number for a message, short whatever its size: `1.0032`, `1e308`,
+/// `-2.5e-9` (an input echoed back in full could run to 309 digits).
+pub fn brief_number(value: f64) -> String {
+    let plain = format!("{value}");
+    if plain.len() <= 12 {
+        plain
+    } else {
+        let scientific = format!("{value:.6e}");
+        match scientific.split_once('e') {
+            Some((mantissa, exponent)) if mantissa.contains('.') => format!(
+                "{}e{exponent}",
+                mantissa.trim_end_matches('0').trim_end_matches('.')
+            ),
+            _ => scientific,
+        }
+    }
+}
+
+#[cfg(test)]
+mod brief_number_tests {
+    use super::brief_number;
+
+    #[test]
+    fn numbers_in_messages_stay_short() {
+        assert_eq!(brief_number(1.0032), "1.0032");
+        assert_eq!(brief_number(1e308), "1e308");
+        assert_eq!(brief_number(1e300), "1e300");
+        assert_eq!(brief_number(-2.5e-9), "-2.5e-9");
+        assert_eq!(brief_number(f64::MAX).len(), "1.797693e308".len());
+        assert_eq!(brief_number(12345.678), "12345.678");
     }
 }

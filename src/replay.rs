@@ -278,6 +278,12 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             .find(|r| r.index == pose.index)
             .map(|r| r.commanded);
     }
+    result.robot = Some(session.robot.clone())
+        .filter(|r| !r.is_empty())
+        .map(|name| crate::output::RobotJson {
+            name: Some(name),
+            firmware: None,
+        });
     result.setup = Some(SetupJson {
         robot: Some(session.robot.clone()).filter(|r| !r.is_empty()),
         schedule: session.schedule.clone(),

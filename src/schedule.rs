@@ -23,6 +23,9 @@ pub struct Schedule {
     pub home: PoseDegMm,
     /// The poses, visited in order; pose `i` (1-based) is `poses[i - 1]`.
     pub poses: Vec<PoseDegMm>,
+    /// The file it was read from, for messages (None: made in the program).
+    #[serde(skip)]
+    pub file: Option<std::path::PathBuf>,
 }
 
 /// A commanded body pose in an operator's words, as the page and the
@@ -125,23 +128,33 @@ impl Limits {
 /// Why a schedule cannot be run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ScheduleError {
-    #[error("schedule \"{schedule}\" has no poses")]
+    #[error("schedule {schedule} has no poses")]
     Empty { schedule: String },
-    #[error("schedule \"{schedule}\": {which} {reason}")]
+    #[error("schedule {schedule}: {which} {reason}")]
     OutOfLimits {
         schedule: String,
         which: String,
         reason: String,
     },
-    #[error("schedule \"{schedule}\" cannot calibrate: {reason}")]
+    #[error("schedule {schedule} cannot calibrate: {reason}")]
     Unobservable { schedule: String, reason: String },
 }
 
 impl Schedule {
     /// Parses a schedule file's text.
     pub fn parse(path: &Path, text: &str) -> Result<Self, InputError> {
-        let schedule: Schedule = parse_toml(path, text)?;
+        let mut schedule: Schedule = parse_toml(path, text)?;
+        schedule.file = Some(path.to_path_buf());
         Ok(schedule)
+    }
+
+    /// The schedule as messages name it: its name, and its file when it
+    /// has one (`"octopus-52" in /etc/groundcal/schedules/octopus-52.toml`).
+    pub fn label(&self) -> String {
+        match &self.file {
+            Some(file) => format!("\"{}\" in {}", self.name, file.display()),
+            None => format!("\"{}\"", self.name),
+        }
     }
 
     /// Reads a schedule file.
@@ -164,11 +177,11 @@ impl Schedule {
     pub fn validate_limits(&self, limits: &Limits) -> Result<(), ScheduleError> {
         if self.poses.is_empty() {
             return Err(ScheduleError::Empty {
-                schedule: self.name.clone(),
+                schedule: self.label(),
             });
         }
         let out = |which: String, reason: String| ScheduleError::OutOfLimits {
-            schedule: self.name.clone(),
+            schedule: self.label(),
             which,
             reason,
         };
@@ -204,7 +217,7 @@ impl Schedule {
         let report = observability(&refs, &SolveSettings::default());
         if let Some(reason) = report.problems.first() {
             return Err(ScheduleError::Unobservable {
-                schedule: self.name.clone(),
+                schedule: self.label(),
                 reason: reason.clone(),
             });
         }
@@ -262,9 +275,13 @@ mod tests {
             ..SIMULATOR
         };
         let err = octopus().validate(&strict).unwrap_err().to_string();
+        // The schedule is named by its file, where an operator can fix it.
         assert_eq!(
             err,
-            "schedule \"octopus-52\": pose 1 gamma = 20° is beyond the ±18° tilt limit"
+            format!(
+                "schedule \"octopus-52\" in {}/config/schedules/octopus-52.toml: pose 1 gamma = 20° is beyond the ±18° tilt limit",
+                env!("CARGO_MANIFEST_DIR")
+            )
         );
         let low = Limits {
             max_height_mm: 700.0,

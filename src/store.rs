@@ -287,6 +287,7 @@ impl Store {
             "summary",
             "created",
             "provenance",
+            "robot",
         ] {
             if let Some(v) = entry.get(key) {
                 active[key] = v.clone();

@@ -193,7 +193,14 @@ pub fn write_tilts_file(dir: &Path, tilts: &[f64], reference_tilt_deg: f64) -> R
         .map_err(|e| e.to_string())
 }
 
-/// Reads `DIR/tilts.json` if the recording has one.
+/// The most tilts a recording may have: a motor of ±27° calibrated every
+/// 2° is 28, and each tilt is a whole calibration (a replay of one takes
+/// seconds, so this bounds a replay to minutes, not hours).
+pub const MAX_TILTS: usize = 32;
+
+/// Reads `DIR/tilts.json` if the recording has one. Each tilt's directory
+/// must be a real directory inside `DIR`: a symbolic link could lead the
+/// replay anywhere on the machine.
 pub fn read_tilts_file(dir: &Path) -> Result<Option<TiltsFile>, InputError> {
     let path = dir.join("tilts.json");
     if !path.exists() {
@@ -202,11 +209,44 @@ pub fn read_tilts_file(dir: &Path) -> Result<Option<TiltsFile>, InputError> {
     let bytes = crate::recording::read_bounded(&path, 1 << 20)?;
     let text = String::from_utf8(bytes)
         .map_err(|e| InputError::new(&path, None, format!("not UTF-8 text: {e}")))?;
-    parse_tilts_file(&path, &text).map(Some)
+    let file = parse_tilts_file(&path, &text)?;
+    for t in &file.tilts {
+        let sub = dir.join(&t.dir);
+        match std::fs::symlink_metadata(&sub) {
+            Ok(m) if m.file_type().is_symlink() => {
+                return Err(InputError::new(
+                    &path,
+                    None,
+                    format!(
+                        "the tilt {}°'s directory {} is a symbolic link: each tilt's recording must lie inside the recording",
+                        t.tilt_deg,
+                        sub.display()
+                    ),
+                ))
+            }
+            Ok(m) if !m.is_dir() => {
+                return Err(InputError::new(
+                    &path,
+                    None,
+                    format!("the tilt {}°'s {} is not a directory", t.tilt_deg, sub.display()),
+                ))
+            }
+            Ok(_) => {}
+            Err(e) => {
+                return Err(InputError::new(
+                    &path,
+                    None,
+                    format!("the tilt {}°'s directory {}: {e}", t.tilt_deg, sub.display()),
+                ))
+            }
+        }
+    }
+    Ok(Some(file))
 }
 
-/// Parses and checks a `tilts.json`: two or more tilts, each finite and
-/// naming a plain directory beside the file.
+/// Parses and checks a `tilts.json`: two to [`MAX_TILTS`] tilts, each
+/// finite, within the motor's range, 1° or more from the others, and
+/// naming a plain directory beside the file that no other tilt names.
 pub fn parse_tilts_file(path: &Path, text: &str) -> Result<TiltsFile, InputError> {
     let file: TiltsFile = serde_json::from_str(text).map_err(|e| {
         InputError::new(
@@ -222,11 +262,14 @@ pub fn parse_tilts_file(path: &Path, text: &str) -> Result<TiltsFile, InputError
             "expected format \"groundcal-tilts\", version 1",
         ));
     }
-    if file.tilts.len() < 2 {
+    if file.tilts.len() < 2 || file.tilts.len() > MAX_TILTS {
         return Err(InputError::new(
             path,
             None,
-            "a recording at several tilts names two or more",
+            format!(
+                "it names {} tilts: a recording at several tilts names 2 to {MAX_TILTS}",
+                file.tilts.len()
+            ),
         ));
     }
     if let Some(t) = file.reference_tilt_deg.filter(|t| !t.is_finite()) {
@@ -253,5 +296,90 @@ pub fn parse_tilts_file(path: &Path, text: &str) -> Result<TiltsFile, InputError
             ));
         }
     }
+    let tilts: Vec<f64> = file.tilts.iter().map(|t| t.tilt_deg).collect();
+    crate::config::check_tilts(&tilts).map_err(|e| InputError::new(path, None, e))?;
+    for (k, t) in file.tilts.iter().enumerate() {
+        if file.tilts[..k].iter().any(|u| u.dir == t.dir) {
+            return Err(InputError::new(
+                path,
+                None,
+                format!(
+                    "the directory \"{}\" is named by two tilts: each tilt has its own",
+                    t.dir
+                ),
+            ));
+        }
+    }
     Ok(file)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn document(tilts: &[(f64, &str)]) -> String {
+        let entries: Vec<String> = tilts
+            .iter()
+            .map(|(t, d)| format!("{{\"tilt_deg\": {t}, \"dir\": \"{d}\"}}"))
+            .collect();
+        format!(
+            "{{\"format\": \"groundcal-tilts\", \"version\": 1, \"tilts\": [{}]}}",
+            entries.join(", ")
+        )
+    }
+
+    fn parse(tilts: &[(f64, &str)]) -> Result<TiltsFile, String> {
+        parse_tilts_file(Path::new("rec/tilts.json"), &document(tilts)).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn too_many_tilts_are_refused_at_once_with_the_count_and_the_bound() {
+        let many: Vec<(f64, String)> = (0..10_000)
+            .map(|k| (-27.0 + 54.0 * k as f64 / 10_000.0, format!("tilt-{k}")))
+            .collect();
+        let many: Vec<(f64, &str)> = many.iter().map(|(t, d)| (*t, d.as_str())).collect();
+        let e = parse(&many).unwrap_err();
+        assert!(e.contains("10000 tilts") && e.contains("2 to 32"), "{e}");
+        let most: Vec<(f64, String)> = (0..MAX_TILTS)
+            .map(|k| (-26.0 + 1.5 * k as f64, format!("tilt-{}", k + 1)))
+            .collect();
+        let most: Vec<(f64, &str)> = most.iter().map(|(t, d)| (*t, d.as_str())).collect();
+        assert!(parse(&most).is_ok());
+    }
+
+    #[test]
+    fn a_duplicated_tilt_or_directory_is_named() {
+        let e = parse(&[(-20.0, "tilt-1"), (-10.0, "tilt-2"), (-20.0, "tilt-3")]).unwrap_err();
+        assert!(
+            e.contains("rec/tilts.json") && e.contains("-20° is given twice"),
+            "{e}"
+        );
+        let e = parse(&[(-20.0, "tilt-1"), (-10.0, "tilt-1")]).unwrap_err();
+        assert!(e.contains("\"tilt-1\" is named by two tilts"), "{e}");
+        let e = parse(&[(-20.0, "tilt-1"), (40.0, "tilt-2")]).unwrap_err();
+        assert!(e.contains("40° is outside"), "{e}");
+    }
+
+    #[test]
+    fn a_tilt_directory_that_is_a_symbolic_link_is_refused() {
+        let root =
+            std::env::temp_dir().join(format!("groundcal-tilts-link-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let recording = root.join("rec");
+        let elsewhere = root.join("elsewhere");
+        std::fs::create_dir_all(recording.join("tilt-1")).unwrap();
+        std::fs::create_dir_all(&elsewhere).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, recording.join("tilt-2")).unwrap();
+        std::fs::write(
+            recording.join("tilts.json"),
+            document(&[(-20.0, "tilt-1"), (-10.0, "tilt-2")]),
+        )
+        .unwrap();
+        let e = read_tilts_file(&recording).unwrap_err().to_string();
+        assert!(e.contains("tilt-2") && e.contains("symbolic link"), "{e}");
+        std::fs::remove_file(recording.join("tilt-2")).unwrap();
+        std::fs::create_dir(recording.join("tilt-2")).unwrap();
+        assert!(read_tilts_file(&recording).unwrap().is_some());
+        let _ = std::fs::remove_dir_all(&root);
+    }
 }

@@ -73,6 +73,26 @@ pub struct Calibration {
     pub tilt_deg: Option<f64>,
     /// Where it came from, for messages.
     pub source: String,
+    /// Its store id (`id`), when it has one.
+    pub id: Option<String>,
+    /// The robot it was made for, when it says (`robot.name`, or a
+    /// replay's `setup.robot`).
+    pub robot: Option<String>,
+}
+
+impl Calibration {
+    /// Refuses to compare this calibration with another robot's poses:
+    /// `other` is the robot they come from, as `what` names it ("this
+    /// recording", "the configuration").
+    pub fn same_robot(&self, other: Option<&str>, what: &str) -> Result<(), String> {
+        match (self.robot.as_deref(), other) {
+            (Some(ours), Some(theirs)) if ours != theirs => Err(format!(
+                "{} was made for robot \"{ours}\", but {what} is robot \"{theirs}\": a calibration holds for its own robot only",
+                self.source
+            )),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// Reads the calibration from a file, or the store's active one.
@@ -118,11 +138,27 @@ pub fn calibration_in_store(store: &Store) -> Result<Option<Calibration>, String
     }
 }
 
+/// A document's store id.
+fn document_id(document: &serde_json::Value) -> Option<String> {
+    document
+        .get("id")
+        .and_then(serde_json::Value::as_str)
+        .map(String::from)
+}
+
 /// A calibration from its document.
 fn calibration_of(document: serde_json::Value, source: String) -> Result<Calibration, String> {
+    let id = document_id(&document);
+    let robot = document
+        .pointer("/robot/name")
+        .or_else(|| document.pointer("/setup/robot"))
+        .and_then(serde_json::Value::as_str)
+        .map(String::from);
     let result = ResultJson::parse(document).map_err(|e| format!("{source}: {e}"))?;
     let mount = mount_of(&result).map_err(|e| format!("{source}: {e}"))?;
     Ok(Calibration {
+        id,
+        robot,
         mount,
         tilt_deg: result.kinect_tilt_deg,
         source,
@@ -315,6 +351,7 @@ pub fn check_schedule(home: PoseDegMm, tilted: usize, tilt_deg: f64) -> Schedule
         },
         home,
         poses,
+        file: None,
     }
 }
 

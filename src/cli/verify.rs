@@ -80,6 +80,12 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
                 return ExitStatus::BadInput;
             }
         };
+        let theirs = Some(recording.session.robot.as_str()).filter(|r| !r.is_empty());
+        if let Err(e) = calibration.same_robot(theirs, &format!("the recording {}", dir.display()))
+        {
+            eprintln!("groundcal verify: {e}");
+            return ExitStatus::BadInput;
+        }
         let mut pose_settings = crate::calib::observe::ObserveSettings::default();
         pose_settings.plane.method = config.calibration.ground_fit;
         pose_settings.slip_threshold_m = config.calibration.slip_threshold_mm / 1000.0;
@@ -112,6 +118,13 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
         };
     }
 
+    if let Err(e) = calibration.same_robot(
+        config.robot.name.as_deref(),
+        "the configuration's [robot] name",
+    ) {
+        eprintln!("groundcal verify: {e}");
+        return ExitStatus::BadInput;
+    }
     let tilted = options.poses.unwrap_or(config.verify.poses);
     let check = check_schedule(
         schedule.home,
