@@ -234,6 +234,24 @@ pub struct Interrupted {
     pub started: String,
 }
 
+/// What pressing Calibrate or Check will do to the robot, for the page's
+/// confirmation ("the robot will move for about 2 min: keep clear").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MotionPlan {
+    /// Body poses visited (the home stance not counted).
+    pub poses: usize,
+    /// About how long the robot moves, in seconds (the poses' motion, settle
+    /// and capture, at the simulator's speed when it is simulated).
+    pub about_s: f64,
+}
+
+/// What the two buttons that move the robot will do.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MotionPlans {
+    pub calibration: MotionPlan,
+    pub check: MotionPlan,
+}
+
 /// What became of the check at the service's start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -311,6 +329,8 @@ pub struct Status {
     pub active: Option<ActiveRef>,
     /// The running (or last) session's abort.
     pub abort: Option<AbortState>,
+    /// What Calibrate and Check will do to the robot.
+    pub motion: Option<MotionPlans>,
     /// Whether the hardware opened when the service started, in words (it
     /// is opened again for each calibration).
     pub hardware: String,

@@ -260,6 +260,7 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             check: previous.check,
             interrupted,
             startup_check: previous.startup_check,
+            motion: previous.motion,
             active: previous.active,
             ..Status::default()
         };

@@ -13,13 +13,21 @@ const model = {
   status: null, // the last GET /api/status
   contact: 'connecting', // 'connecting' | 'ok' | 'lost'
   lostSince: null,
+  heardAt: 0, // when the daemon was last heard from (a heartbeat, an event, a status)
   active: null, // GET /api/active, or null when none
   history: [], // GET /api/calibrations
-  aborting: false, // Abort pressed; the session has not ended yet
+  sending: null, // a button's request on its way: 'Abort', 'Calibrate', …
   confirm: null, // {kind: 'accept' | 'rollback', id}
+  confirmRun: null, // 'calibration' | 'check': a button that moves the robot, asked first
   message: null, // {text, kind: 'error' | 'ok'}
   statusAt: 0, // when the status was read (for the time so far)
 };
+
+// Contact is lost when the daemon has said nothing for this long: two
+// heartbeats of its event stream (one a second) missed, and the status polls
+// (one a second) unanswered. A request gives up after REQUEST_MS.
+const SILENCE_MS = 2200;
+const REQUEST_MS = 3000;
 
 const PARAMS = [
   ['alpha_deg', 'α', '°', 'rotation about the vertical'],
@@ -52,40 +60,71 @@ function explain(response, body) {
   return (body && body.error) || ('the robot answered ' + response.status);
 }
 
-async function call(method, url) {
+// A request that gives up after `ms`: a daemon that stopped, or a link that
+// dropped without closing, must not leave a button waiting for ever.
+async function fetchWithin(url, options, ms) {
+  const controller = new AbortController();
+  const timer = setTimeout(() => controller.abort(), ms || REQUEST_MS);
+  try {
+    return await fetch(url, { ...(options || {}), signal: controller.signal });
+  } finally {
+    clearTimeout(timer);
+  }
+}
+
+// What the page can say when a button's request did not get through: it
+// cannot know what the robot does, so it says what it knows.
+function notSent(what) {
+  const running = model.status && model.status.state === 'running';
+  return what + ' could not be sent: the robot\'s computer did not answer within ' + (REQUEST_MS / 1000) + ' s.'
+    + (running ? ' If groundcal has stopped, the robot\'s own watchdog halts the body within 1 s; if only this device\'s link is down, the run goes on. Use the robot\'s emergency stop if anyone is at risk.' : '');
+}
+
+// `what` names the button in the words shown when it fails ("Abort").
+async function call(method, url, what) {
   const headers = { 'Authorization': 'Bearer ' + tokenField.value.trim(), 'X-Groundcal-Client': 'terminal page' };
   let response;
   let body = {};
+  model.sending = what;
+  render();
   try {
-    response = await fetch(url, { method, headers });
+    response = await fetchWithin(url, { method, headers });
     try { body = await response.json(); } catch (e) { body = {}; }
   } catch (e) {
-    model.message = { text: 'The robot did not answer: the request did not reach it.', kind: 'error' };
+    model.sending = null;
+    model.message = { text: notSent(what), kind: 'error' };
     lose();
     return null;
   }
+  model.sending = null;
+  heard();
   model.message = response.ok ? null : { text: explain(response, body), kind: 'error' };
   if (response.ok) $('token-card').open = false;
   render();
   return response.ok ? body : null;
 }
 
-$('calibrate').onclick = async () => {
-  model.confirm = null;
-  if (await call('POST', '/api/calibrations')) refresh();
-};
+// Calibrate and Check move a legged robot: each asks first, saying for how
+// long and to keep clear. Cancel sends nothing.
+$('calibrate').onclick = () => { model.confirm = null; model.confirmRun = 'calibration'; render(); };
 // A check of the active calibration against the sensor now (the robot holds
 // its home stance, or tilts a little with [verify] poses).
-$('check').onclick = async () => {
-  model.confirm = null;
-  if (await call('POST', '/api/check')) refresh();
+$('check').onclick = () => { model.confirm = null; model.confirmRun = 'check'; render(); };
+$('confirm-run-no').onclick = () => { model.confirmRun = null; render(); };
+$('confirm-run-yes').onclick = async () => {
+  const kind = model.confirmRun;
+  model.confirmRun = null;
+  if (!kind) return;
+  const started = kind === 'calibration'
+    ? await call('POST', '/api/calibrations', 'Calibrate')
+    : await call('POST', '/api/check', 'Check');
+  if (started) refresh();
 };
-// Between Abort and the session's end the robot halts and walks home, which
-// takes seconds on a real robot: the page says so.
+// Abort is never pretended: the page says "aborting…" only once the daemon
+// has it (the status's `abort`), and says so when it could not be sent.
 $('abort').onclick = async () => {
-  model.aborting = true;
-  render();
-  if (!await call('POST', '/api/calibrations/current/abort')) model.aborting = false;
+  model.confirmRun = null;
+  await call('POST', '/api/calibrations/current/abort', 'Abort');
   refresh();
 };
 $('accept').onclick = () => {
@@ -98,10 +137,11 @@ $('confirm-yes').onclick = async () => {
   if (!c) return;
   model.confirm = null;
   const url = c.kind === 'accept' ? '/api/calibrations/' + c.id + '/accept' : '/api/rollback/' + c.id;
-  const active = await call('POST', url);
+  const active = await call('POST', url, c.kind === 'accept' ? 'Accept' : 'Roll back');
   if (active) {
     model.active = active;
-    model.message = { text: (c.kind === 'accept' ? 'Accepted: ' : 'Rolled back: ') + c.id + ' is now the active calibration.', kind: 'ok' };
+    const wasActive = model.status && model.status.active;
+    model.message = { text: (c.kind === 'accept' ? 'Accepted: ' : wasActive ? 'Rolled back: ' : 'Made active: ') + c.id + ' is now the active calibration.', kind: 'ok', activeId: c.id };
     loadStore();
   }
   render();
@@ -113,6 +153,10 @@ function duration(seconds) {
   const s = Math.max(0, Math.round(seconds));
   if (s < 60) return s + ' s';
   return Math.floor(s / 60) + ' min ' + String(s % 60).padStart(2, '0') + ' s';
+}
+// "about 2 min", "about 10 s": how long the robot will move.
+function about(seconds) {
+  return seconds >= 90 ? 'about ' + Math.round(seconds / 60) + ' min' : 'about ' + Math.max(1, Math.round(seconds)) + ' s';
 }
 function when(rfc3339) {
   const t = new Date(rfc3339);
@@ -287,29 +331,43 @@ function redraw(id, key, draw) {
   draw();
 }
 
+// How an aborted run left the robot, in words (the status's `robot_left`).
+const LEFT = {
+  home: 'at home',
+  halted: 'halted, not at home',
+  unknown: 'stopped: where the robot stands is not known',
+  not_moved: 'stopped before moving',
+};
+
 function render() {
   const s = model.status;
   const lost = model.contact === 'lost';
   const running = !!s && s.state === 'running';
-  if (s && !running) model.aborting = false;
+  const abort = s && s.abort;
+  const aborting = running && !!abort && abort.state === 'aborting';
+  const aborted = s && !running && abort && abort.state === 'aborted' ? abort : null;
+  const activeId = s && s.active ? s.active.id : null;
 
   $('contact').textContent = model.contact === 'ok' ? 'connected' : (lost ? 'no contact' : 'connecting…');
   const banner = $('lost');
   banner.hidden = !lost;
   if (lost) {
-    const seconds = Math.round((Date.now() - model.lostSince) / 1000);
-    banner.textContent = 'Connection lost ' + seconds + ' s ago: this page shows its last state, and its buttons cannot reach the robot.'
-      + (running ? ' A calibration was running: the robot\'s own watchdog stops the body within 1 s of losing its link.' : '')
+    const seconds = Math.round((Date.now() - (model.heardAt || model.lostSince)) / 1000);
+    banner.textContent = 'No contact with the robot\'s computer for ' + seconds + ' s: this page shows the last state it heard, which may be out of date.'
+      + (running ? ' A run was going on: if groundcal has stopped, the robot\'s own watchdog halts the body within 1 s; if only this device\'s link is down, the run goes on.' : '')
       + ' Reconnecting…';
   }
 
-  // What matters for safety stands out: a robot that may not have stopped.
-  const unsafe = s && [s.step, s.robot, s.error].find((t) => /could not halt|could not send it home/.test(t || ''));
+  // What matters for safety stands out: a robot that may not have stopped,
+  // or that did not reach home.
+  const unsafe = aborted && (aborted.robot_left === 'unknown' || aborted.robot_left === 'halted') ? aborted.reason : null;
   $('safety').hidden = !unsafe;
-  $('safety').textContent = unsafe ? 'The robot may not have stopped: ' + unsafe + '. Check it before anything else.' : '';
+  $('safety').textContent = unsafe ? (aborted.robot_left === 'unknown' ? 'The robot may not have stopped: ' : 'The robot halted but is not at home: ') + unsafe + '. Check it before anything else.' : '';
 
-  // A sensor that moved since its calibration: the terrain map is wrong.
-  const ck = s && s.check;
+  // A sensor that moved since its calibration: the terrain map is wrong. The
+  // check speaks only for the calibration it checked: after a new one is made
+  // active, its banner goes.
+  const ck = s && s.check && s.check.calibration_id === activeId ? s.check : null;
   const drift = ck && ck.outcome === 'drift';
   $('drift').hidden = !drift;
   $('drift').textContent = drift ? 'The sensor has moved since it was calibrated: '
@@ -318,22 +376,25 @@ function render() {
 
   // Progress.
   const checking = running && s.task === 'check';
-  const stoppedAtHome = s && !running && /^aborted/.test(s.robot || '') && /stands at the home stance/.test(s.robot || '');
   let title = 'connecting…';
   if (s) {
-    if (running) title = model.aborting ? 'aborting…' : checking ? 'checking the sensor' : (s.pose ? 'pose ' + s.pose + ' of ' + s.of : 'starting');
-    else title = stoppedAtHome ? 'at home' : (s.result ? 'finished' : 'idle');
+    if (running) title = aborting ? 'aborting…' : checking ? 'checking the sensor' : (s.pose ? 'pose ' + s.pose + ' of ' + s.of : 'starting');
+    else title = aborted ? LEFT[aborted.robot_left] || 'stopped' : (s.result ? 'finished' : 'idle');
   }
+  if (model.sending === 'Abort' && !aborting) title = 'sending Abort…';
   $('progress').textContent = title;
-  $('bar').hidden = !running;
+  $('bar').hidden = !running || aborting;
   if (running) $('bar-fill').style.width = (s.of ? 100 * Math.max(0, (s.pose || 1) - 1) / s.of : 0) + '%';
   // The step without the "pose i of N" the title already says.
   const step = ((s && s.step) || '').replace(/^pose \d+ of \d+: /, '');
   let stepText = step + (running && s.by ? ' — started by ' + s.by : '');
   if (!s || step === title) stepText = '';
-  if (running && model.aborting) stepText = 'halting the robot and sending it home';
+  if (aborting) stepText = 'halting the robot and sending it home (Abort by ' + abort.by + ')';
+  // Without contact the page knows only what it last heard, and no clock
+  // runs on from it.
+  if (lost && stepText) stepText = 'last heard: ' + stepText;
   $('step').textContent = stepText;
-  if (running && typeof s.elapsed_s === 'number') {
+  if (running && !aborting && !lost && typeof s.elapsed_s === 'number') {
     const elapsed = s.elapsed_s + (Date.now() - model.statusAt) / 1000;
     $('times').textContent = duration(elapsed) + ' so far · '
       + (typeof s.remaining_s === 'number' ? 'about ' + duration(Math.max(0, s.remaining_s - (Date.now() - model.statusAt) / 1000)) + ' left' : 'time left: after the first pose');
@@ -341,9 +402,25 @@ function render() {
     $('times').textContent = '';
   }
   $('hardware').textContent = s && !running && s.hardware ? 'Hardware at the service\'s start: ' + s.hardware : '';
-  $('calibrate').disabled = lost || !s || running;
-  $('check').disabled = lost || !s || running || !model.active;
-  $('abort').disabled = lost || !running || model.aborting;
+  $('calibrate').disabled = lost || !s || running || !!model.sending;
+  $('check').disabled = lost || !s || running || !activeId || !!model.sending;
+  // Abort stays pressable while the last known state is running, even with
+  // no contact: pressing it then says that it could not be sent.
+  $('abort').disabled = !running || aborting || model.sending === 'Abort';
+  const plans = s && s.motion;
+  const cr = model.confirmRun;
+  $('confirm-run').hidden = !cr || running || lost;
+  if (cr && plans) {
+    const plan = plans[cr];
+    $('confirm-run-text').textContent = (cr === 'calibration'
+      ? 'Start a calibration? The robot will move its body through ' + plan.poses + ' poses for ' + about(plan.about_s) + '.'
+      : 'Check the active calibration? The robot will walk to its home stance' + (plan.poses > 1 ? ' and tilt its body ' + (plan.poses - 1) + ' times' : '') + ', for ' + about(plan.about_s) + '.')
+      + ' Keep everyone clear of the robot and its legs until it is back at home.';
+    $('confirm-run-yes').textContent = cr === 'calibration' ? 'Yes, calibrate' : 'Yes, check';
+  }
+  // A message about the active calibration goes once another is active
+  // (another device changed it).
+  if (model.message && model.message.activeId && s && model.message.activeId !== activeId) model.message = null;
   const m = $('message');
   m.textContent = model.message ? model.message.text : '';
   m.className = model.message ? model.message.kind : '';
@@ -362,29 +439,39 @@ function render() {
     verdict.textContent = passed ? 'Passed checks' : 'Failed checks';
     verdict.className = passed ? 'passed' : 'failed';
     for (const reason of r.reasons || []) say(reason);
-    const against = model.active && model.active.id !== s.result_id ? model.active : null;
+    const activeDoc = model.active && model.active.id === activeId ? model.active : null;
+    const against = activeDoc && activeDoc.id !== s.result_id ? activeDoc : null;
     redraw('values', JSON.stringify([s.result_id, against && against.id]), () => {
       const scale = typeof r.depth_scale === 'number'
         ? { value: r.depth_scale, sigma: r.sigma && r.sigma.depth_scale, estimated: !!r.depth_scale_estimated } : null;
       if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against, r.predicted_sigma, scale);
       else $('values').innerHTML = '';
     });
-    activeHere = !!model.active && model.active.id === s.result_id;
-    $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, model.active) : '';
+    activeHere = !!activeId && activeId === s.result_id;
+    $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, activeDoc) : '';
     $('activeline').innerHTML = '';
     if (activeHere) {
       const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active';
-      $('activeline').append(badge, ' since ' + when(model.active.activated));
+      $('activeline').append(badge, ' since ' + when(s.active.activated));
     } else {
       $('activeline').textContent = passed ? 'Not active yet: Accept makes it the calibration the robot uses.' : 'It failed its checks, so it cannot become active.';
     }
     $('resultid').textContent = s.result_id ? 'calibration ' + s.result_id : '';
     redraw('charts', 'result ' + s.result_id, () => charts(r.poses || [], s.of, false));
-  } else if (s && !running && s.error && !stoppedAtHome) {
+  } else if (s && !running && (s.interrupted || (s.error && !aborted))) {
     card.hidden = false;
-    verdict.textContent = s.interrupted ? 'Interrupted' : 'No result';
-    verdict.className = s.interrupted ? 'interrupted' : 'failed';
-    say(s.error);
+    const cut = s.interrupted;
+    verdict.textContent = cut ? 'Interrupted' : 'No result';
+    verdict.className = cut ? 'interrupted' : 'failed';
+    if (cut) {
+      say('The calibration started by ' + cut.by + ' on ' + when(cut.started) + ' was cut off: the service stopped before it finished.');
+      say('The robot\'s own watchdog halts the body within 1 s once groundcal falls silent, so it stands where the run was cut off. Check that it stands safely and that nobody is near it.');
+      say(s.startup_check === 'held_for_a_person'
+        ? 'Nothing moves until someone asks: the check at start was held. Press Check (the robot walks home first) or Calibrate when the robot is clear.'
+        : 'Nothing moves until someone presses Calibrate or Check.');
+    } else {
+      say(s.error);
+    }
     redraw('values', 'none', () => { $('values').innerHTML = ''; });
     $('change').textContent = ''; $('activeline').textContent = ''; $('resultid').textContent = '';
     redraw('charts', 'none', () => charts([], 1, false));
@@ -405,12 +492,13 @@ function render() {
   }
   $('confirm-yes').disabled = lost;
 
-  // The active calibration and the history.
-  const a = model.active;
+  // The active calibration and the history. The status names the active one
+  // (every device the same); its document is loaded when that changes.
+  const a = model.active && model.active.id === activeId ? model.active : null;
   $('active').textContent = a ? a.id + ', active since ' + when(a.activated) : 'None yet: the robot uses no calibration from groundcal.';
   const line = $('checkline');
   line.className = ck ? ck.outcome : '';
-  if (!ck) line.textContent = a ? 'Not checked since the service started: Check compares it with the sensor now.' : '';
+  if (!ck) line.textContent = a ? 'Not checked since it became active or since the service started: Check compares it with the sensor now.' : '';
   else if (ck.outcome === 'running') line.textContent = 'Checking it against the sensor now…';
   else if (ck.outcome === 'failed') line.textContent = 'The last check (' + when(ck.started) + ') could not be made: ' + (ck.error || 'no reason given');
   else line.textContent = 'Checked ' + when(ck.finished) + (ck.by ? ' (' + ck.by + ')' : '') + ': '
@@ -431,7 +519,7 @@ function render() {
       row.insertCell().textContent = when(h.created);
       row.insertCell().textContent = h.status === 'accepted' ? 'passed' : h.status === 'rejected' ? 'failed or rejected' : h.status;
       const cell = row.insertCell();
-      if (h.active) {
+      if (h.id === activeId) {
         const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active'; cell.appendChild(badge);
       } else if (h.status === 'accepted') {
         const b = document.createElement('button');
@@ -447,9 +535,22 @@ function render() {
 
 // ---- contact with the daemon ----------------------------------------------
 
-// A page that cannot reach the daemon must not look alive. Lost when a
-// status request fails or the event stream breaks; found again when a status
-// request succeeds. Reconnection backs off from 1 s to 5 s.
+// A page that cannot reach the daemon must not look alive. The daemon is
+// heard from through the heartbeat of its event stream (every second), its
+// events and the status polls (every second, each given up after 2 s);
+// contact is lost when it has said nothing for SILENCE_MS, or at once when a
+// request fails outright (a refused connection). A stopped daemon, or a
+// link that dropped without closing, is therefore declared lost within
+// about 2 s. A closed event stream (the daemon closes the oldest under a
+// flood of streams) is opened again after a back-off from 1 s to 5 s, while
+// the status polls go on.
+function heard() {
+  const wasLost = model.contact !== 'ok';
+  model.heardAt = Date.now();
+  model.contact = 'ok';
+  model.lostSince = null;
+  if (wasLost) { loadStore(); render(); }
+}
 function lose() {
   if (model.contact !== 'lost') { model.contact = 'lost'; model.lostSince = Date.now(); }
   render();
@@ -457,55 +558,63 @@ function lose() {
 let retry = 1000;
 async function refresh() {
   try {
-    const r = await fetch('/api/status');
+    const r = await fetchWithin('/api/status', {}, 2000);
     if (!r.ok) { lose(); return false; }
     const s = await r.json();
-    const wasLost = model.contact !== 'ok';
+    const activeBefore = model.status && model.status.active ? model.status.active.id : null;
     model.status = s;
     model.statusAt = Date.now();
-    model.contact = 'ok';
-    model.lostSince = null;
+    heard();
     retry = 1000;
-    if (wasLost) loadStore();
+    // Another device accepted or rolled back: the store is read again.
+    const activeNow = s.active ? s.active.id : null;
+    if (activeNow !== activeBefore || (activeNow && (!model.active || model.active.id !== activeNow))) loadStore();
     render();
     return true;
   } catch (e) { lose(); return false; }
 }
-// The history says which calibration is active; only then is there an
-// active.json to read (GET /api/active answers 404 when none is).
-async function loadStore() {
-  try {
-    const history = await fetch('/api/calibrations');
-    model.history = history.ok ? (await history.json()).calibrations || [] : [];
-    let active = null;
-    if (model.history.some((h) => h.active)) {
-      const r = await fetch('/api/active');
-      active = r.ok ? await r.json() : null;
-    }
-    model.active = active;
-    render();
-  } catch (e) { lose(); }
+// The history, and the active calibration's document (GET /api/active
+// answers 404 when none is).
+let loading = null;
+function loadStore() {
+  if (loading) return loading;
+  loading = (async () => {
+    try {
+      const history = await fetchWithin('/api/calibrations');
+      model.history = history.ok ? (await history.json()).calibrations || [] : [];
+      let active = null;
+      if (model.status && model.status.active) {
+        const r = await fetchWithin('/api/active');
+        active = r.ok ? await r.json() : null;
+      }
+      model.active = active;
+      render();
+    } catch (e) { lose(); } finally { loading = null; }
+  })();
+  return loading;
 }
 
 let events = null;
 function listen() {
   events = new EventSource('/api/events');
-  events.onopen = () => refresh();
+  events.onopen = () => { retry = 1000; refresh(); };
   events.onerror = () => {
     // EventSource retries by itself, but not after some failures: start over
-    // with a back-off.
+    // with a back-off. The status poll says whether the daemon is there.
     events.close();
-    lose();
+    refresh();
     setTimeout(listen, retry);
     retry = Math.min(retry * 2, 5000);
   };
   events.onmessage = (m) => {
     let e; try { e = JSON.parse(m.data); } catch (x) { return; }
+    heard();
+    if (e.type === 'heartbeat') return;
     if (e.type === 'provisional' && model.status) {
       model.status.provisional = e.poses;
       render();
     } else {
-      if (e.type === 'stored' || e.type === 'failed' || e.type === 'checked') loadStore();
+      if (e.type === 'stored' || e.type === 'failed' || e.type === 'checked' || e.type === 'activated') loadStore();
       refresh();
     }
   };
@@ -513,5 +622,9 @@ function listen() {
 
 listen();
 refresh();
-setInterval(() => { if (model.contact === 'ok') refresh(); else render(); }, 1000);
-setInterval(() => { if (model.contact !== 'ok') refresh(); }, 1500);
+setInterval(() => { refresh(); }, 1000);
+// Silence: no heartbeat, no event and no status for SILENCE_MS.
+setInterval(() => {
+  if (model.contact === 'ok' && Date.now() - model.heardAt > SILENCE_MS) lose();
+  else if (model.contact === 'lost') render();
+}, 200);

@@ -8,7 +8,7 @@ use std::time::{Instant, SystemTime};
 
 use tokio::sync::{broadcast, oneshot, watch};
 
-use super::api::{ActiveRef, EventJson, Interrupted, RunState, Status};
+use super::api::{ActiveRef, EventJson, Interrupted, MotionPlan, MotionPlans, RunState, Status};
 use crate::config::Config;
 use crate::hardware::Selection;
 use crate::schedule::Schedule;
@@ -73,6 +73,7 @@ impl AppState {
                 None
             }
         };
+        let motion = motion_plans(&config, &schedule);
         let gates = config.calibration.gates;
         AppState(Arc::new(Shared {
             config,
@@ -87,6 +88,7 @@ impl AppState {
                 gates: Some(gates),
                 interrupted,
                 active,
+                motion: Some(motion),
                 ..Status::default()
             }),
             events,
@@ -220,6 +222,27 @@ impl AppState {
 
     pub(super) fn last_beat(&self) -> Option<Instant> {
         *lock(&self.0.heartbeat)
+    }
+}
+
+/// About how long a calibration and a check move the robot: each pose's
+/// motion, settle and capture (30 frames a second), plus walking home and
+/// back; at the simulator's speed when the robot is simulated.
+fn motion_plans(config: &Config, schedule: &Schedule) -> MotionPlans {
+    let c = &config.calibration;
+    let scale = match (&config.robot.address, &config.sim) {
+        (crate::config::RobotAddress::Sim, Some(sim)) if sim.time_scale > 0.0 => sim.time_scale,
+        _ => 1.0,
+    };
+    let per_pose_s =
+        (f64::from(c.motion_ms) + c.settle_ms as f64) / 1000.0 + c.frames_per_pose as f64 / 30.0;
+    let plan = |poses: usize| MotionPlan {
+        poses,
+        about_s: (poses + 2) as f64 * per_pose_s / scale,
+    };
+    MotionPlans {
+        calibration: plan(schedule.poses.len()),
+        check: plan(1 + config.verify.poses),
     }
 }
 

@@ -5,9 +5,11 @@
 //
 // At phone size: waits for the check the service makes at start to show the
 // drift banner and the check's figures beside the active calibration; then
-// types the token and presses Check, and waits for a second check's outcome.
+// types the token and presses Check (and confirms), and waits for a second
+// check's outcome. Then calibrates again and accepts: the drift banner,
+// which spoke of the previous calibration, must go.
 // Checks: no console error, no page error, no page wider than the screen.
-// Saves serve-10-drift.png and serve-11-checked.png. Prints one JSON line of
+// Saves serve-10-drift.png, serve-11-checked.png and serve-15-recalibrated.png. Prints one JSON line of
 // what it saw; exits 0 when every check passes, 1 otherwise, 2 on bad usage.
 
 import { resolve } from 'node:path';
@@ -57,6 +59,9 @@ try {
   if (!await page.$eval('#token-card', (d) => d.open)) await page.click('#token-card summary');
   await page.fill('#token', token);
   await page.click('#check');
+  await page.waitForSelector('#confirm-run:not([hidden])');
+  seen.confirmCheck = await text('confirm-run-text');
+  await page.click('#confirm-run-yes');
   await page.waitForFunction(async (previous) => {
     const check = (await (await fetch('/api/status')).json()).check;
     return check && check.finished && check.finished !== previous && check.by.includes('terminal page');
@@ -67,6 +72,24 @@ try {
   seen.message = await text('message');
   await overflow('checked');
   await shot(page, '11-checked');
+
+  // Recalibrate the knocked sensor and make the result active: the banner
+  // spoke of the previous calibration, and goes.
+  await page.click('#calibrate');
+  await page.waitForSelector('#confirm-run:not([hidden])');
+  await page.click('#confirm-run-yes');
+  await page.waitForFunction(() => document.getElementById('verdict').textContent === 'Passed checks'
+    && !document.getElementById('result').hidden, null, { timeout: 120_000 });
+  seen.bannerBeforeAccept = !(await page.$eval('#drift', (e) => e.hidden));
+  await page.click('#accept');
+  await page.waitForSelector('#confirm:not([hidden])');
+  const accepted = Date.now();
+  await page.click('#confirm-yes');
+  await page.waitForFunction(() => document.getElementById('drift').hidden, null, { timeout: 10_000, polling: 50 });
+  seen.bannerGoneAfterMs = Date.now() - accepted;
+  seen.checklineAfterAccept = await text('checkline');
+  await overflow('recalibrated');
+  await shot(page, '15-recalibrated');
 } catch (error) {
   problems.push(`the browser failed: ${error.stack ?? error}`);
 } finally {

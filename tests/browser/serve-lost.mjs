@@ -3,8 +3,9 @@
 //
 //   node tests/browser/serve-lost.mjs URL TOKEN SCREENSHOT_DIR PID RESTART_JSON
 //
-// Presses Calibrate, waits for pose 3, kills the daemon (SIGKILL, PID), and
-// measures how long the page takes to say that contact is lost; then starts
+// Presses Calibrate (and confirms), waits for pose 3, kills the daemon
+// (SIGKILL, PID), and measures how long the page takes to say that contact
+// is lost; Abort then says that it could not be sent; then starts
 // the daemon again (RESTART_JSON: the command as a JSON array) and waits for
 // the page to find it and show the run as interrupted. Saves
 // serve-5-lost.png and serve-6-interrupted.png. Prints one JSON line of what
@@ -33,6 +34,8 @@ try {
   await page.goto(url, { waitUntil: 'load', timeout: 30_000 });
   await page.fill('#token', token);
   await page.click('#calibrate');
+  await page.waitForSelector('#confirm-run:not([hidden])');
+  await page.click('#confirm-run-yes');
   await page.waitForFunction(() => /pose ([3-9]|\d\d+) of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
 
   const killed = Date.now();
@@ -40,11 +43,15 @@ try {
   await page.waitForFunction(() => !document.getElementById('lost').hidden, null, { timeout: 10_000 });
   seen.lostAfterMs = Date.now() - killed;
   seen.banner = await page.locator('#lost').innerText();
-  seen.buttonsDisabled = await page.evaluate(() => ['calibrate', 'abort', 'accept'].every((id) => document.getElementById(id).disabled));
+  seen.buttonsDisabled = await page.evaluate(() => ['calibrate', 'check', 'accept'].every((id) => document.getElementById(id).disabled));
+  // Abort stays pressable (the run may still go on) and says it did not get through.
+  await page.click('#abort');
+  await page.waitForFunction(() => /could not be sent/.test(document.getElementById('message').textContent), null, { timeout: 10_000 });
+  seen.abortMessage = await page.locator('#message').innerText();
   await page.waitForTimeout(1200);
   await shot(page, '5-lost');
   if (seen.lostAfterMs > 3000) problems.push(`the page said contact was lost only after ${seen.lostAfterMs} ms`);
-  if (!seen.buttonsDisabled) problems.push('the buttons stayed enabled with no contact');
+  if (!seen.buttonsDisabled) problems.push('Calibrate, Check or Accept stayed enabled with no contact');
 
   const [program, ...args] = JSON.parse(restartJson);
   const daemon = spawn(program, args, { detached: true, stdio: 'ignore' });

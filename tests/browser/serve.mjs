@@ -3,14 +3,16 @@
 //
 //   node tests/browser/serve.mjs URL TOKEN SCREENSHOT_DIR
 //
-// Types the token, presses Calibrate, watches the bar, the time left, the
+// Types the token, presses Calibrate: a confirmation says how long the robot
+// will move and to keep clear, and Cancel sends nothing; pressed again and
+// confirmed, watches the bar, the time left, the
 // step in words and the live θ/e_d chart fill in, waits for the verdict with
 // the six values, presses Accept and confirms: the result shows as Active. A
 // second calibration is accepted, then the first is rolled back to from the
 // history. A third is aborted: "aborting…", then "at home". Last the same
 // page at pad size (1024×1366) must show two columns. Checks: no console
 // error, no page error, no request leaving the server (the page works
-// offline), no page wider than the screen. Saves serve-1-idle.png,
+// offline), no page wider than the screen. Saves serve-1-idle.png, serve-1b-confirm-calibrate.png,
 // serve-2-progress.png, serve-3-verdict.png, serve-3b-confirm.png,
 // serve-4-accepted.png, serve-8-rollback.png, serve-7-aborted.png and
 // serve-9-pad.png. Prints one JSON line of what it saw; exits 0 when every
@@ -68,6 +70,15 @@ try {
       && !document.getElementById('result').hidden, null, { timeout: 180_000 });
     return (await text('resultid')).replace('calibration ', '');
   };
+  // Every POST the page sends (Cancel must send none).
+  const posts = [];
+  page.on('request', (r) => { if (r.method() === 'POST') posts.push(r.url()); });
+  // Presses Calibrate and confirms that the robot may move.
+  const calibrate = async () => {
+    await page.click('#calibrate');
+    await page.waitForSelector('#confirm-run:not([hidden])');
+    await page.click('#confirm-run-yes');
+  };
   // Presses a button that asks for confirmation, then confirms.
   const confirmed = async (selector, shotName) => {
     await page.click(selector);
@@ -80,7 +91,19 @@ try {
 
   if (!await page.$eval('#token-card', (d) => d.open)) await page.click('#token-card summary');
   await page.fill('#token', token);
+  // Calibrate asks first; Cancel sends nothing and nothing starts.
   await page.click('#calibrate');
+  await page.waitForSelector('#confirm-run:not([hidden])');
+  seen.confirmCalibrate = await text('confirm-run-text');
+  await shot(page, '1b-confirm-calibrate');
+  await page.click('#confirm-run-no');
+  await page.waitForTimeout(1500);
+  seen.cancelled = {
+    posts: posts.length,
+    confirmHidden: await page.$eval('#confirm-run', (e) => e.hidden),
+    state: await page.evaluate(async () => (await (await fetch('/api/status')).json()).state),
+  };
+  await calibrate();
   await page.waitForFunction(() => /pose [1-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
   seen.step = await text('step');
   // The motion in words ("rolled 20° right, …"): every pose of the paper's
@@ -121,7 +144,7 @@ try {
   await shot(page, '4-accepted');
 
   // A second calibration, accepted; then roll back to the first.
-  await page.click('#calibrate');
+  await calibrate();
   await page.waitForFunction(() => /pose \d+ of \d+/.test(document.getElementById('progress').textContent)
     && document.getElementById('result').hidden, null, { timeout: 60_000 });
   const second = await verdict();
@@ -134,13 +157,16 @@ try {
   seen.afterRollback = { active: await text('active'), first, second, history: await page.$$eval('#history tr', (rows) => rows.map((r) => r.innerText)) };
   await shot(page, '8-rollback');
 
-  // A third calibration, aborted: "aborting…" while the robot halts and
-  // walks home, then "at home".
-  await page.click('#calibrate');
+  // A third calibration, aborted: "aborting…" once the daemon has the
+  // Abort, while the robot halts and walks home, with no time left shown;
+  // then "at home".
+  await calibrate();
   await page.waitForFunction(() => /pose [2-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
   await page.click('#abort');
+  await page.waitForFunction(() => ['aborting…', 'at home'].includes(document.getElementById('progress').textContent), null, { timeout: 10_000 });
   seen.aborting = await text('progress');
-  if (seen.aborting !== 'aborting…') problems.push(`after Abort the page said ${JSON.stringify(seen.aborting)}`);
+  seen.abortingTimes = await text('times');
+  if (seen.aborting === 'aborting…' && seen.abortingTimes) problems.push(`while aborting the page said ${JSON.stringify(seen.abortingTimes)}`);
   await page.waitForFunction(() => document.getElementById('progress').textContent === 'at home', null, { timeout: 60_000 });
   seen.aborted = await text('step');
   if (/aborted: aborted/.test(seen.aborted)) problems.push(`the reason repeats itself: ${seen.aborted}`);
