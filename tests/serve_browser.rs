@@ -531,22 +531,6 @@ fn a_link_that_drops_without_closing_is_declared_lost() {
     let _ = fs::remove_dir_all(&dir);
 }
 
-/// Two accepted calibrations of the simulated robot in the store of `dir`
-/// (none active); returns their ids, oldest first.
-fn two_calibrations_in_store(dir: &std::path::Path) -> (String, String) {
-    let sim = common::root().join("config/sim.toml");
-    let store = groundcal::store::Store::new(&dir.join("state.sim"));
-    let mut ids = Vec::new();
-    for created in ["2026-12-01T00:00:00Z", "2026-12-01T01:00:00Z"] {
-        let (code, out, err) =
-            common::groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
-        assert_eq!(code, 0, "{err}");
-        let result: serde_json::Value = serde_json::from_str(&out).unwrap();
-        ids.push(store.add(&result, created).unwrap());
-    }
-    (ids[0].clone(), ids[1].clone())
-}
-
 /// A phone and a pad on one daemon: an accept on one, and a rollback on the
 /// other, show on both within 2 s (the store's changes are events, and the
 /// status names the active calibration).
@@ -556,7 +540,7 @@ fn an_accept_or_a_rollback_on_one_device_shows_on_the_other() {
         return;
     }
     let dir = common::temp_dir("serve-two-devices");
-    let (first, second) = two_calibrations_in_store(&dir);
+    let (first, second) = common::two_calibrations_in_store(&dir.join("state.sim"));
     let (server, addr) = common::spawn_serve(&dir, TOKEN, &[], &[]);
     let shots = common::root().join("target/test-screenshots");
     fs::create_dir_all(&shots).expect("screenshot directory");
@@ -608,7 +592,7 @@ fn after_a_crash_nothing_moves_until_a_person_confirms() {
         return;
     }
     let dir = common::temp_dir("serve-crash-restart");
-    let (first, _) = two_calibrations_in_store(&dir);
+    let (first, _) = common::two_calibrations_in_store(&dir.join("state.sim"));
     groundcal::store::Store::new(&dir.join("state.sim"))
         .activate(&first, "2026-12-01T02:00:00Z")
         .unwrap();

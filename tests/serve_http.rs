@@ -449,3 +449,79 @@ fn serve_refuses_a_missing_config_or_token_before_listening() {
     assert_eq!(run(&options), ExitStatus::BadInput);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A check is bound to the calibration it checks: while it runs, a rollback
+/// to another calibration is refused (409, naming the one being checked),
+/// and afterwards the check's outcome stays with its own calibration's id,
+/// which is no longer the active one.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_check_holds_the_active_calibration_until_it_ends() {
+    let dir = temp_dir("check-bound");
+    let state_dir = dir.join("state");
+    let (a, b) = tokio::task::spawn_blocking({
+        let state_dir = state_dir.clone();
+        move || common::two_calibrations_in_store(&state_dir)
+    })
+    .await
+    .unwrap();
+    groundcal::store::Store::new(&state_dir)
+        .activate(&a, "2026-12-01T02:00:00Z")
+        .unwrap();
+    let (mut config, schedule) = Config::embedded_sim();
+    // Slow enough that the check lasts a few seconds.
+    if let Some(sim) = &mut config.sim {
+        sim.time_scale = 1.0;
+    }
+    let state = AppState::new(
+        config,
+        schedule,
+        Selection::default(),
+        format!("{TOKEN}\n"),
+        &state_dir,
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(listener, state, async move {
+        let _ = stopped.await;
+    }));
+
+    let (code, body) = request(addr, "POST", "/api/check", Some(TOKEN)).await;
+    assert_eq!(code, 202, "{body}");
+    let (_, status) = request(addr, "GET", "/api/status", None).await;
+    assert_eq!(status["state"], "running", "{status}");
+    assert_eq!(status["check"]["calibration_id"], a.as_str(), "{status}");
+    let (code, body) = request(addr, "POST", &format!("/api/rollback/{b}"), Some(TOKEN)).await;
+    assert_eq!(code, 409, "{body}");
+    let said = body["error"].as_str().unwrap();
+    assert!(
+        said.contains(&format!("a check of calibration {a} is running")),
+        "{said}"
+    );
+    let (_, active) = request(addr, "GET", "/api/active", None).await;
+    assert_eq!(
+        active["id"],
+        a.as_str(),
+        "the active calibration changed: {active}"
+    );
+
+    // Once the check has ended, the rollback goes through; the check's
+    // outcome still names the calibration it checked.
+    let start = Instant::now();
+    loop {
+        let (_, status) = request(addr, "GET", "/api/status", None).await;
+        if status["state"] == "idle" && status["check"]["outcome"] != "running" {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "{status}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let (code, body) = request(addr, "POST", &format!("/api/rollback/{b}"), Some(TOKEN)).await;
+    assert_eq!(code, 200, "{body}");
+    let (_, status) = request(addr, "GET", "/api/status", None).await;
+    assert_eq!(status["active"]["id"], b.as_str(), "{status}");
+    assert_eq!(status["check"]["calibration_id"], a.as_str(), "{status}");
+    let _ = stop.send(());
+    server.await.unwrap().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -303,3 +303,65 @@ fn a_motor_that_moves_during_a_calibration_rejects_it() {
         "{reason}"
     );
 }
+
+/// A calibration holds for its own robot: `verify` of another robot's
+/// recording, or on a robot configured under another name, exits 2 and
+/// names both robots.
+#[test]
+fn another_robots_recording_or_configuration_is_refused_naming_both() {
+    let dir = temp_dir("verify-other-robot");
+    let calibration = calibration(&dir);
+    let made: Value =
+        serde_json::from_str(&std::fs::read_to_string(&calibration).unwrap()).unwrap();
+    assert_eq!(made["robot"]["name"], "octopus", "{}", made["robot"]);
+    assert!(made["robot"]["firmware"].is_string(), "{}", made["robot"]);
+
+    // Live, on a robot configured as another.
+    let config = sim_config(&dir, &[("name = \"octopus\"", "name = \"spider\"")]);
+    let (code, _, err) = groundcal(&[
+        "verify",
+        "--config",
+        config.to_str().unwrap(),
+        "--calibration",
+        calibration.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("\"octopus\"") && err.contains("\"spider\""),
+        "{err}"
+    );
+
+    // Offline, on another robot's recording (the shared sample, renamed).
+    let recording = dir.join("spider-12");
+    std::fs::create_dir_all(recording.join("kinect")).unwrap();
+    let sample = common::shared().join("data/sample-12");
+    for entry in std::fs::read_dir(sample.join("kinect")).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(
+            entry.path(),
+            recording.join("kinect").join(entry.file_name()),
+        )
+        .unwrap();
+    }
+    std::fs::copy(sample.join("poses.jsonl"), recording.join("poses.jsonl")).unwrap();
+    let session = std::fs::read_to_string(sample.join("session.json"))
+        .unwrap()
+        .replacen("\"robot\": \"octopus\"", "\"robot\": \"spider\"", 1);
+    std::fs::write(recording.join("session.json"), session).unwrap();
+    let config = sim_config(&dir, &[]);
+    let (code, _, err) = groundcal(&[
+        "verify",
+        "--config",
+        config.to_str().unwrap(),
+        "--calibration",
+        calibration.to_str().unwrap(),
+        "--recording",
+        recording.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("\"octopus\"") && err.contains("\"spider\"") && err.contains("spider-12"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -13,10 +13,15 @@ fuzz_target!(|data: &[u8]| {
     };
     // What parse promises about a file it returns.
     assert_eq!(file.format, "groundcal-tilts");
-    assert!(file.tilts.len() >= 2);
-    for t in &file.tilts {
-        assert!(t.tilt_deg.is_finite());
+    // Within the bound (`tilts::MAX_TILTS`), each tilt in the motor's range,
+    // 1° or more from the others, in a directory of its own.
+    assert!((2..=groundcal::tilts::MAX_TILTS).contains(&file.tilts.len()));
+    for (k, t) in file.tilts.iter().enumerate() {
+        assert!(t.tilt_deg.is_finite() && t.tilt_deg.abs() <= 27.0);
         assert!(!t.dir.is_empty() && !t.dir.contains('/') && t.dir != "..");
+        for u in &file.tilts[..k] {
+            assert!((u.tilt_deg - t.tilt_deg).abs() >= 1.0 && u.dir != t.dir);
+        }
     }
     // Written back out it reads back the same.
     let written = serde_json::to_string(&file).expect("a tilts file serialises");

@@ -36,6 +36,13 @@ pub struct PosesFile {
     pub truncated_tail: bool,
 }
 
+/// The most poses a recording may hold: the solve's own bound on
+/// observations (a calibration has tens; the paper's schedule 52).
+pub const MAX_POSES: usize = crate::recording::planes::MAX_OBSERVATIONS;
+/// The most depth frames or accelerometer readings one pose may name (a
+/// configuration captures at most 30 frames a pose, and reads 10).
+pub const MAX_FILES_PER_POSE: usize = 100;
+
 /// Parses `poses.jsonl`.
 ///
 /// A recorder writes a pose's line after its frames, so a recording cut off
@@ -72,6 +79,11 @@ pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
         if record.index == 0 {
             return Err(at("index must count from 1 (0 is the home stance)".into()));
         }
+        if poses.len() == MAX_POSES {
+            return Err(at(format!(
+                "more than {MAX_POSES} poses: a recording holds at most {MAX_POSES} (a calibration has tens)"
+            )));
+        }
         if let Some(previous) = poses.iter().find(|p| p.index == record.index) {
             return Err(at(format!(
                 "pose index {} appears twice (first on line {})",
@@ -88,6 +100,12 @@ pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
             ("depth frame", &record.depth_frames),
             ("accelerometer reading", &record.accelerometer),
         ] {
+            if names.len() > MAX_FILES_PER_POSE {
+                return Err(at(format!(
+                    "{} {what}s: a pose names at most {MAX_FILES_PER_POSE}",
+                    names.len()
+                )));
+            }
             for name in names {
                 if name.contains('/') || name.contains('\\') || name == ".." || name.is_empty() {
                     return Err(at(format!(
@@ -102,4 +120,38 @@ pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
         poses,
         truncated_tail,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(index: usize, frames: usize) -> String {
+        let frames: Vec<String> = (0..frames).map(|k| format!("\"d-{index}-{k}\"")).collect();
+        format!(
+            "{{\"index\": {index}, \"commanded\": {{\"alpha_deg\": 0, \"beta_deg\": 0, \"gamma_deg\": 0, \"px_mm\": 0, \"py_mm\": 600, \"pz_mm\": 0}}, \"feet_body_mm\": [[300,-600,-200],[0,-600,-300],[-300,-600,-200],[-300,-600,200],[0,-600,300],[300,-600,200]], \"depth_frames\": [{}]}}\n",
+            frames.join(", ")
+        )
+    }
+
+    #[test]
+    fn a_recording_with_more_poses_or_files_than_the_bounds_is_refused_with_the_line() {
+        let path = Path::new("rec/poses.jsonl");
+        let most: String = (1..=MAX_POSES).map(|i| line(i, 1)).collect();
+        assert_eq!(parse_poses(path, &most).unwrap().poses.len(), MAX_POSES);
+        let over = most + &line(MAX_POSES + 1, 1);
+        let e = parse_poses(path, &over).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("poses.jsonl:{}:", MAX_POSES + 1))
+                && e.contains("more than 2000 poses"),
+            "{e}"
+        );
+        let e = parse_poses(path, &line(1, MAX_FILES_PER_POSE + 1))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("101 depth frames") && e.contains("at most 100"),
+            "{e}"
+        );
+    }
 }

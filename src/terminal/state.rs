@@ -256,3 +256,42 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 pub(super) fn now() -> String {
     humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    /// Starting a session never waits for the previous session's thread:
+    /// a join there would block a thread of the async runtime (here the
+    /// previous thread cannot end until after the new one is kept).
+    #[test]
+    fn a_new_session_thread_is_kept_without_joining_the_previous_one() {
+        let dir = std::env::temp_dir().join(format!("groundcal-state-{}", std::process::id()));
+        let (config, schedule) = Config::embedded_sim();
+        let state = AppState::new(config, schedule, Selection::default(), "t".into(), &dir);
+        let (release, released) = mpsc::channel::<()>();
+        state
+            .replace_worker(|| {
+                std::thread::Builder::new().spawn(move || {
+                    let _ = released.recv();
+                })
+            })
+            .unwrap();
+        let (done, finished) = mpsc::channel();
+        let replacing = state.clone();
+        std::thread::spawn(move || {
+            let kept = replacing.replace_worker(|| std::thread::Builder::new().spawn(|| {}));
+            let _ = done.send(kept.is_ok());
+        });
+        let kept = finished.recv_timeout(Duration::from_secs(10));
+        let _ = release.send(());
+        assert_eq!(
+            kept,
+            Ok(true),
+            "the new session thread waited for the previous one"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

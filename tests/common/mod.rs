@@ -509,3 +509,20 @@ pub fn received_kinds(receipts: &Path) -> Vec<String> {
         .filter_map(|v| v["kind"].as_str().map(String::from))
         .collect()
 }
+
+/// Two accepted calibrations of the simulated robot (`calibrate --config
+/// config/sim.toml`) added to the store in `state_dir`, none active;
+/// returns their ids, oldest first.
+pub fn two_calibrations_in_store(state_dir: &Path) -> (String, String) {
+    let sim = root().join("config/sim.toml");
+    let store = groundcal::store::Store::new(state_dir);
+    let mut ids = Vec::new();
+    for created in ["2026-12-01T00:00:00Z", "2026-12-01T01:00:00Z"] {
+        let (code, out, err) =
+            groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
+        assert_eq!(code, 0, "{err}");
+        let result: serde_json::Value = serde_json::from_str(&out).unwrap();
+        ids.push(store.add(&result, created).unwrap());
+    }
+    (ids[0].clone(), ids[1].clone())
+}
