@@ -600,14 +600,23 @@ pub enum SimWorld {
     Uneven,
     /// A corridor with people: the floor a tenth of the view.
     Corridor,
+    /// Four boxes and a wall across the far end of the view.
+    Clutter,
+    /// Boxes 5–10 cm tall, their tops near the floor.
+    LowBoxes,
+    /// A wall meeting the floor in view.
+    WallMeetingFloor,
 }
 
 impl SimWorld {
-    const NAMES: [(&'static str, SimWorld); 4] = [
+    const NAMES: [(&'static str, SimWorld); 7] = [
         ("flat", SimWorld::Flat),
         ("boxes-and-wall", SimWorld::BoxesAndWall),
         ("uneven", SimWorld::Uneven),
         ("corridor", SimWorld::Corridor),
+        ("clutter", SimWorld::Clutter),
+        ("low-boxes", SimWorld::LowBoxes),
+        ("wall-meeting-floor", SimWorld::WallMeetingFloor),
     ];
 }
 
@@ -619,7 +628,10 @@ impl FromStr for SimWorld {
             .iter()
             .find(|(name, _)| *name == text)
             .map(|(_, world)| *world)
-            .ok_or_else(|| format!("\"{text}\" is not flat, boxes-and-wall, uneven or corridor"))
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::NAMES.iter().map(|(name, _)| *name).collect();
+                format!("\"{text}\" is not one of {}", names.join(", "))
+            })
     }
 }
 

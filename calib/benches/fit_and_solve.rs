@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use groundcal_calib::calibrate::{calibrate, CalibrationSettings};
-use groundcal_calib::disparity::Frame;
+use groundcal_calib::disparity::{EdgeGuard, Frame};
 use groundcal_calib::geometry::{sensor_from_optical, PoseDegMm, PoseParams};
 use groundcal_calib::plane::{
     fit_ground, search::find_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
@@ -98,6 +98,26 @@ fn ground_fit(c: &mut Criterion) {
             },
         );
     }
+    // The same without the edge guard (issue 22), to weigh what it costs.
+    let unguarded = PlaneFitSettings {
+        edge_guard_rows: 0,
+        ..Default::default()
+    };
+    c.bench_function(
+        "ground fit (disparity, no edge guard), one 640x480 raw frame (pixels to plane)",
+        |b| {
+            b.iter(|| {
+                fit_ground(
+                    &[black_box(&pixels)],
+                    &camera,
+                    &prior,
+                    &unguarded,
+                    &mut buffers,
+                )
+                .unwrap()
+            })
+        },
+    );
     // A pose as recorded: the sample's first pose has two frames, fused.
     let second = sample_pixels("d-1700000000.002000-3002000.pgm");
     let settings = PlaneFitSettings::default();
@@ -147,6 +167,10 @@ fn ground_fit(c: &mut Criterion) {
                 4.0 * found.noise,
                 0,
                 1,
+                Some(EdgeGuard {
+                    rows: 6,
+                    limit: 3.0 * found.noise,
+                }),
             )
         })
     });

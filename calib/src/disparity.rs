@@ -513,13 +513,35 @@ pub struct PixelGrid {
 }
 
 /// One pass over a frame: the pixels within `band` of `plane`, on every
-/// `rows.1`-th row from `rows.0`.
+/// `rows.1`-th row from `rows.0`, less those the guard leaves out.
 struct Pass<'a, T> {
     frame: &'a Frame<'a, T>,
     domain: &'a ValueDomain,
     plane: &'a PixelPlane,
     band: f64,
     rows: (usize, usize),
+    guard: Option<EdgeGuard>,
+}
+
+/// Leaves out the pixels where the ground meets something standing on it.
+///
+/// The foot of a wall or of a box's side lies on the ground, so the face's
+/// lowest rows of pixels are within any band around the ground's plane,
+/// always on the side of the sensor: kept, they pull the plane towards the
+/// sensor where the obstacles stand (a bias of a few tenths of a millimetre
+/// across a cluttered view, issue 22). Going up the image from such a pixel,
+/// the face leaves the band within a few rows, while the ground stays in it.
+/// So a pixel is kept only when the pixel `rows` rows above it is within
+/// `limit` of the plane too, or has no trusted value (a shadow, a dropout).
+/// On open ground this leaves out pixels whose neighbour is a noise outlier:
+/// a choice independent of their own noise, so it adds no bias.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeGuard {
+    /// How far above, in rows.
+    pub rows: usize,
+    /// How far from the plane the pixel above may be, in the frame's value
+    /// units.
+    pub limit: f64,
 }
 
 /// Lanes of the per-pixel loops: a fixed number, so that every build (SSE2,
@@ -548,26 +570,39 @@ fn lane_sum(lanes: &[f32; LANES]) -> f64 {
 /// `values` (with their column offsets `du`, `du2`): the pixels within `band`
 /// of `base + cu·du`. Written as independent lanes, which compilers turn into
 /// vector instructions of any width.
+///
+/// With `GUARDED`, a pixel counts only if its value in `above` (the row
+/// [`EdgeGuard::rows`] above, the same columns) lies within `guard.0` of
+/// `base_above + cu·du`, or outside the trusted values `guard.1..=guard.2`.
 #[inline(always)]
-fn row_sums<T: FitValue>(
+#[allow(clippy::too_many_arguments)]
+fn row_sums<T: FitValue, const GUARDED: bool>(
     values: &[T],
+    above: &[T],
     du: &[f32],
     du2: &[f32],
-    base: f32,
+    (base, base_above): (f32, f32),
     cu: f32,
     band: f32,
+    guard: (f32, f32, f32),
 ) -> RowSums {
     let mut acc = [[0f32; LANES]; 6];
     let n = values.len().min(du.len()).min(du2.len());
+    let n = if GUARDED { n.min(above.len()) } else { n };
     let full = n / LANES * LANES;
-    for ((v, d), d2) in values[..full]
-        .chunks_exact(LANES)
-        .zip(du[..full].chunks_exact(LANES))
-        .zip(du2[..full].chunks_exact(LANES))
-    {
+    let (limit, lo, hi) = guard;
+    // One chunk of lanes; `a`: the values above (ignored unless GUARDED).
+    let mut lanes = |v: &[T], a: &[T], d: &[f32], d2: &[f32]| {
         for l in 0..LANES {
             let r = v[l].to_f32() - (base + cu * d[l]);
-            let inside = r.abs() < band;
+            let mut inside = r.abs() < band;
+            if GUARDED {
+                // Branch-free (`|`, `&`), so that the lanes stay vectors.
+                let value_above = a[l].to_f32();
+                let r_above = value_above - (base_above + cu * d[l]);
+                let clear = (r_above.abs() < limit) | (value_above < lo) | (value_above > hi);
+                inside &= clear;
+            }
             let one = if inside { 1.0 } else { 0.0 };
             let kept = if inside { r } else { 0.0 };
             acc[0][l] += one;
@@ -577,11 +612,34 @@ fn row_sums<T: FitValue>(
             acc[4][l] += kept * d[l];
             acc[5][l] += kept * kept;
         }
+    };
+    let chunks = values[..full]
+        .chunks_exact(LANES)
+        .zip(du[..full].chunks_exact(LANES))
+        .zip(du2[..full].chunks_exact(LANES));
+    if GUARDED {
+        for (((v, d), d2), a) in chunks.zip(above[..full].chunks_exact(LANES)) {
+            lanes(v, a, d, d2);
+        }
+    } else {
+        for ((v, d), d2) in chunks {
+            lanes(v, v, d, d2);
+        }
     }
     let mut sums: RowSums = std::array::from_fn(|k| lane_sum(&acc[k]));
-    for ((v, &d), &d2) in values[full..n].iter().zip(&du[full..n]).zip(&du2[full..n]) {
+    for (k, ((v, &d), &d2)) in values[full..n]
+        .iter()
+        .zip(&du[full..n])
+        .zip(&du2[full..n])
+        .enumerate()
+    {
         let r = v.to_f32() - (base + cu * d);
-        if r.abs() < band {
+        let clear = !GUARDED || {
+            let value_above = above[full + k].to_f32();
+            let r_above = value_above - (base_above + cu * d);
+            r_above.abs() < limit || value_above < lo || value_above > hi
+        };
+        if r.abs() < band && clear {
             let (d, d2, r) = (f64::from(d), f64::from(d2), f64::from(r));
             sums[0] += 1.0;
             sums[1] += d;
@@ -660,6 +718,7 @@ impl PixelGrid {
     /// lost), rows added in f64 in order: the result depends on the input
     /// alone. Where the processor has AVX2, the same loop runs eight lanes
     /// at a time.
+    #[allow(clippy::too_many_arguments)]
     pub fn moments_within<T: FitValue>(
         &self,
         frame: &Frame<T>,
@@ -668,6 +727,7 @@ impl PixelGrid {
         band: f64,
         first_row: usize,
         row_step: usize,
+        guard: Option<EdgeGuard>,
     ) -> DisparityMoments {
         let pass = Pass {
             frame,
@@ -675,6 +735,7 @@ impl PixelGrid {
             plane,
             band,
             rows: (first_row, row_step),
+            guard,
         };
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
@@ -699,6 +760,7 @@ impl PixelGrid {
             plane,
             band,
             rows: (first_row, row_step),
+            guard,
         } = *pass;
         let width = frame.width.min(self.du.len());
         let mut total = DisparityMoments::default();
@@ -710,14 +772,32 @@ impl PixelGrid {
                 continue;
             }
             let values = &frame.values[row * frame.width + start..row * frame.width + end];
-            let sums = row_sums(
-                values,
-                &self.du[start..end],
-                &self.du2[start..end],
-                (plane.c0 + plane.cv * dv) as f32,
-                plane.cu as f32,
-                band as f32,
-            );
+            let base = (plane.c0 + plane.cv * dv) as f32;
+            let sums = match guard.filter(|g| g.rows > 0 && row >= g.rows) {
+                Some(g) => {
+                    let up = row - g.rows;
+                    row_sums::<T, true>(
+                        values,
+                        &frame.values[up * frame.width + start..up * frame.width + end],
+                        &self.du[start..end],
+                        &self.du2[start..end],
+                        (base, (plane.c0 + plane.cv * self.dv(up)) as f32),
+                        plane.cu as f32,
+                        band as f32,
+                        (g.limit as f32, domain.trusted.0, domain.trusted.1),
+                    )
+                }
+                None => row_sums::<T, false>(
+                    values,
+                    &[],
+                    &self.du[start..end],
+                    &self.du2[start..end],
+                    (base, base),
+                    plane.cu as f32,
+                    band as f32,
+                    (0.0, 0.0, 0.0),
+                ),
+            };
             total.add_row(dv, &sums);
         }
         total
@@ -839,7 +919,7 @@ mod tests {
             width: image.width,
             height: image.height,
         };
-        let m = grid.moments_within(&frame, &domain, &start, 0.1, 0, 1);
+        let m = grid.moments_within(&frame, &domain, &start, 0.1, 0, 1, None);
         assert_eq!(m.count, (i.width * i.height) as f64);
         let fit = m.solve(&start).unwrap();
         assert!((fit.plane.c0 - truth.c0).abs() < 1e-6, "{:?}", fit.plane);

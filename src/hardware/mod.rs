@@ -189,6 +189,9 @@ fn world(sim: &SimConfig) -> World {
         SimWorld::BoxesAndWall => World::boxes_and_wall(sim.seed),
         SimWorld::Uneven => World::uneven(sim.seed, 0.01),
         SimWorld::Corridor => World::corridor(sim.seed),
+        SimWorld::Clutter => World::clutter(sim.seed),
+        SimWorld::LowBoxes => World::low_boxes(sim.seed),
+        SimWorld::WallMeetingFloor => World::wall_meeting_floor(sim.seed),
     }
 }
 

@@ -37,8 +37,8 @@ use nalgebra::{Matrix4, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::disparity::{
-    truncated_variance_factor, DisparityMoments, FitValue, Frame, InverseDepthImage, PixelGrid,
-    ValueDomain,
+    truncated_variance_factor, DisparityMoments, EdgeGuard, FitValue, Frame, InverseDepthImage,
+    PixelGrid, ValueDomain,
 };
 use super::geometry::Plane;
 use super::sensor::{DepthCamera, PointCloud};
@@ -139,6 +139,9 @@ pub struct PlaneFitSettings {
     /// The search: a lower parallel plane replaces the best one when it holds
     /// at least this fraction of the pixels.
     pub min_lower_support: f64,
+    /// The search: a lower plane replaces the best one only when parallel
+    /// to it within this many degrees (box tops are level).
+    pub lower_parallel_deg: f64,
     /// The search's cells, pixels on a side.
     pub cell_size: usize,
     /// A cell is planar when its RMS is within this many times the frame's noise.
@@ -151,6 +154,11 @@ pub struct PlaneFitSettings {
     pub cell_slack_mm: f64,
     /// Rows of the first frame used by the first iterations (every n-th).
     pub coarse_row_step: usize,
+    /// Where the ground meets what stands on it ([`EdgeGuard`]): a pixel is
+    /// fitted only if the pixel this many rows above it is within
+    /// `edge_guard_sigmas` of the noise of the plane (or unread). 0: off.
+    pub edge_guard_rows: usize,
+    pub edge_guard_sigmas: f64,
     /// The paper's fit: points for its robust start, its start band in σ, and
     /// the stride of its first stage.
     pub paper_sample_size: usize,
@@ -168,12 +176,15 @@ impl Default for PlaneFitSettings {
             min_points: 500,
             min_ground_support: 0.01,
             min_lower_support: 0.015,
+            lower_parallel_deg: 5.0,
             cell_size: 24,
             planar_cell_sigmas: 3.0,
             agreement_sigmas: 4.0,
             cell_slack_deg: 5.0,
             cell_slack_mm: 50.0,
             coarse_row_step: 8,
+            edge_guard_rows: 6,
+            edge_guard_sigmas: 3.0,
             paper_sample_size: 3000,
             paper_threshold_sigmas: 3.0,
             paper_coarse_stride: 8,
@@ -377,6 +388,12 @@ fn fit_in_inverse_depth<T: FitValue>(
     let mut band = 2.0 * k * sigma;
     let widest = 4.0 * band;
     let mut iterations = 0;
+    let guard = |sigma: f64| {
+        (settings.edge_guard_rows > 0).then_some(EdgeGuard {
+            rows: settings.edge_guard_rows,
+            limit: settings.edge_guard_sigmas * sigma,
+        })
+    };
 
     // 1. One frame, every few rows, until the plane and the band settle.
     for _ in 0..settings.max_iterations.max(1) {
@@ -388,6 +405,7 @@ fn fit_in_inverse_depth<T: FitValue>(
             band,
             0,
             settings.coarse_row_step,
+            guard(sigma),
         );
         let (next_plane, rss) = m.solve_plane(&plane)?;
         // σ of the kept residuals, corrected for the truncation at ±band.
@@ -415,7 +433,7 @@ fn fit_in_inverse_depth<T: FitValue>(
         let row_step = if pass == 0 { 2 } else { 1 };
         let mut m = DisparityMoments::default();
         for frame in frames {
-            m.add(&grid.moments_within(frame, domain, &plane, band, 0, row_step));
+            m.add(&grid.moments_within(frame, domain, &plane, band, 0, row_step, guard(sigma)));
         }
         let correction = m.solve(&plane)?;
         let moved = correction.plane.largest_difference(&plane, intrinsics);

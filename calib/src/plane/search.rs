@@ -22,7 +22,10 @@
 //! 4. **The lowest supported plane wins.** The best-supported admitted
 //!    plane, unless a parallel plane lies lower with enough support: nothing
 //!    in view lies below the ground the robot stands on, while box tops and
-//!    tables lie above it.
+//!    tables lie above it. Parallel within a few degrees: a box top is as
+//!    level as the floor it stands on, while the cells that straddle the
+//!    line where a wall meets the floor agree on a phantom plane tilted
+//!    between the two, which passes below the floor near the sensor.
 //!
 //! Walls and people are not planes facing up and fail the prior at step 2;
 //! box tops lose at step 4. Nothing is random, so the result depends on the
@@ -323,7 +326,8 @@ pub fn find_ground<T: FitValue>(
         .iter()
         .filter(|s| {
             s.support >= settings.min_lower_support
-                && angle_between(&s.plane.normal, &best.plane.normal) < 15f64.to_radians()
+                && angle_between(&s.plane.normal, &best.plane.normal)
+                    < settings.lower_parallel_deg.to_radians()
                 && s.plane.d > best.plane.d + 0.03
         })
         .fold(best, |low, s| if s.plane.d > low.plane.d { s } else { low });

@@ -560,6 +560,87 @@ impl World {
         }
     }
 
+    /// Clutter: four boxes and a long wall across the whole view, seeded.
+    ///
+    /// The boxes are 0.10–0.35 m tall and 0.3–0.8 m across, 1.3–2.6 m ahead
+    /// of the body's origin and up to 0.8 m to either side; the wall, 2 m
+    /// high, stands 3.8 m ahead and spans 12 m, so that it meets the floor
+    /// across the far end of the view. The ground is a fifth to four fifths
+    /// of the valid pixels, depending on the pose.
+    pub fn clutter(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut boxes = Vec::new();
+        for k in 0..4 {
+            // Two on each side of the centre line, one near and one far.
+            let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let (near, far) = if k < 2 { (1.3, 1.9) } else { (1.9, 2.6) };
+            boxes.push(BoxObstacle {
+                centre_x: rng.gen_range(near..far),
+                centre_z: side * rng.gen_range(0.0..0.8),
+                half_x: rng.gen_range(0.15..0.4),
+                half_z: rng.gen_range(0.15..0.4),
+                height: rng.gen_range(0.10..0.35),
+                yaw: rng.gen_range(-0.6..0.6),
+            });
+        }
+        Self {
+            ground: Ground::Flat,
+            boxes,
+            walls: vec![Wall {
+                start: Vector2::new(3.8, -6.0),
+                end: Vector2::new(3.8, 6.0),
+                height: 2.0,
+            }],
+        }
+    }
+
+    /// Low boxes whose tops sit near the floor, seeded: six boxes 0.05–0.10 m
+    /// tall (two of them 0.05–0.06 m), 0.2–0.6 m across, 1.2–2.8 m ahead of
+    /// the body's origin and up to 1 m to either side. Their tops are
+    /// parallel to the ground and a few centimetres above it: the hardest
+    /// case for telling the ground from what stands on it.
+    pub fn low_boxes(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let boxes = (0..6)
+            .map(|k| BoxObstacle {
+                centre_x: rng.gen_range(1.2..2.8),
+                centre_z: rng.gen_range(-1.0..1.0),
+                half_x: rng.gen_range(0.1..0.3),
+                half_z: rng.gen_range(0.1..0.3),
+                height: if k < 2 {
+                    rng.gen_range(0.05..0.06)
+                } else {
+                    rng.gen_range(0.05..0.10)
+                },
+                yaw: rng.gen_range(-0.8..0.8),
+            })
+            .collect();
+        Self {
+            ground: Ground::Flat,
+            boxes,
+            walls: Vec::new(),
+        }
+    }
+
+    /// A wall that meets the floor in view, seeded: 2.6–3.2 m ahead of the
+    /// body's origin, turned by up to 20° from square, 12 m long and 1.5 m
+    /// high; nothing else.
+    pub fn wall_meeting_floor(seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let x = rng.gen_range(2.6..3.2);
+        let turn: f64 = rng.gen_range(-20f64..20.0).to_radians();
+        let (along_x, along_z) = (6.0 * turn.sin(), 6.0 * turn.cos());
+        Self {
+            ground: Ground::Flat,
+            boxes: Vec::new(),
+            walls: vec![Wall {
+                start: Vector2::new(x - along_x, -along_z),
+                end: Vector2::new(x + along_x, along_z),
+                height: 1.5,
+            }],
+        }
+    }
+
     /// A corridor full of people: the floor is about a tenth of the view.
     ///
     /// Two walls 2.5 m high run along the body's X, 0.95–1.05 m to either
