@@ -90,6 +90,9 @@ pub struct HistoryEntry {
     pub status: String,
     pub created: String,
     pub active: bool,
+    /// Rejected by an operator (`reject`), not by its checks.
+    #[serde(default)]
+    pub operator_rejected: bool,
 }
 
 /// The store in a state directory.
@@ -366,6 +369,7 @@ impl Store {
                     .unwrap_or("")
                     .to_string(),
                 active: active_id.as_deref() == Some(id),
+                operator_rejected: value.get("operator_rejection").is_some(),
             });
         }
         entries.sort_by(|a, b| b.id.cmp(&a.id));

@@ -298,7 +298,7 @@ fn replay_writes_a_self_contained_report() {
     assert_eq!(code, 0, "{stderr}");
     let html = std::fs::read_to_string(out.join("index.html")).unwrap();
     let _ = std::fs::remove_dir_all(&out);
-    assert!(html.contains("ACCEPTED"));
+    assert!(html.contains("Passed its checks"));
     // θ, e_d, Δd, a/b/c, d and the schedule's tilts.
     assert_eq!(html.matches("<svg").count(), 6);
     // What only a recording tells: its setup, nominal mount, commanded poses.

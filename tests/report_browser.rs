@@ -48,9 +48,9 @@ fn open_in_chromium(tag: &str, result: &ResultJson, provenance: &Provenance) -> 
     let views = seen["seen"].as_array().expect("views").clone();
     assert_eq!(views.len(), 2, "{seen}");
     let verdict = if result.accepted() {
-        "ACCEPTED"
+        "Passed its checks"
     } else {
-        "REJECTED"
+        "Failed its checks"
     };
     for view in &views {
         assert_eq!(view["verdict"], verdict, "{view}");

@@ -97,7 +97,7 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     );
     // The verdict says the checks passed, not that anything was accepted,
     // with the six values and their σ.
-    assert_eq!(text("verdict"), "Passed checks", "{seen}");
+    assert_eq!(text("verdict"), "Passed its checks", "{seen}");
     assert!(seen["points"].as_u64().unwrap() > 6, "{seen}");
     // Header, the six parameters and the depth scale.
     assert_eq!(seen["values"].as_array().unwrap().len(), 8, "{seen}");
@@ -122,7 +122,7 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
         "{seen}"
     );
     assert!(
-        text("rollbackQuestion").starts_with("Roll back to calibration"),
+        text("rollbackQuestion").starts_with("Roll back to the calibration of "),
         "{seen}"
     );
     let rollback = &seen["afterRollback"];
@@ -311,7 +311,8 @@ fn a_knocked_sensor_is_caught_at_start_and_on_check() {
         let text = |key: &str| seen[key].as_str().unwrap_or_default().to_string();
         assert!(
             text("banner").starts_with("The sensor has moved since it was calibrated: the ground says the sensor is pitched 0.")
-                && text("banner").contains("Calibrate again"),
+                && text("banner").contains("Meanwhile the robot still uses the active calibration")
+                && text("banner").contains("Check that the sensor's mount is tight"),
             "{seen}"
         );
         assert!(text("checkline").contains("the sensor has moved"), "{seen}");

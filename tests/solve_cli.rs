@@ -52,7 +52,9 @@ fn the_readable_table_shows_verdict_parameters_and_poses() {
     assert!(stdout.contains("  10  no "), "{stdout}");
     // The verdict and the six values come last: a long schedule's table
     // does not push them off the screen.
-    let verdict = stdout.find("status: REJECTED").expect("the verdict");
+    let verdict = stdout
+        .find("verdict: failed its checks")
+        .expect("the verdict");
     assert!(verdict > stdout.find("  10  no ").unwrap(), "{stdout}");
     let last: Vec<&str> = stdout.lines().rev().take(6).collect();
     for (line, name) in last

@@ -156,8 +156,25 @@ pub fn summarise(poses: &[PoseOutcome]) -> Summary {
     }
 }
 
-const ANGLE_NAMES: [&str; 3] = ["α", "β", "γ"];
-const POSITION_NAMES: [&str; 3] = ["p_x", "p_y", "p_z"];
+/// What to do about a σ too large, in words an operator can act on.
+const UNCERTAIN: &str = "calibrate again with the robot on open, flat ground and nothing moving in view; if it stays this uncertain, the schedule needs larger tilts (a maintainer's `groundcal plan`)";
+
+/// The parameters as the operator's page and the report name them.
+const ANGLE_NAMES: [&str; 3] = ["α (turn about up)", "β (pitch)", "γ (roll)"];
+const POSITION_NAMES: [&str; 3] = ["x (forward)", "y (up)", "z (right)"];
+
+/// `measured` and `limit` with the fewest decimals, at least `decimals`,
+/// that keep them apart: a gate of 0.008° and a θ of 0.0094° read "0.0094°,
+/// more than the 0.0080° allowed", never "0.01°, more than the 0.01°".
+fn apart(measured: f64, limit: f64, decimals: usize) -> (String, String) {
+    for d in decimals..=6 {
+        let (m, l) = (format!("{measured:.d$}"), format!("{limit:.d$}"));
+        if m != l {
+            return (m, l);
+        }
+    }
+    (format!("{measured}"), format!("{limit}"))
+}
 
 /// Whether a value is within an upper limit (NaN is not).
 fn at_most(value: f64, limit: f64) -> bool {
@@ -312,19 +329,17 @@ fn judge_checked(
             .to_string()
     };
     if let Some(check) = failed("theta_max_deg") {
+        let (measured, limit) = apart(check.measured, gates.theta_max_deg, 2);
         reasons.push(format!(
-            "the measured ground disagrees with the result by up to {:.2}° (pose {}), more than the {:.2}° allowed: the ground may not be flat, or the body pose is wrong",
-            check.measured,
+            "the measured ground disagrees with the result by up to {measured}° (pose {}), more than the {limit}° allowed: the ground may not be flat, or the body pose is wrong",
             worst(check),
-            gates.theta_max_deg
         ));
     }
     if let Some(check) = failed("e_d_max_mm") {
+        let (measured, limit) = apart(check.measured, gates.e_d_max_mm, 1);
         reasons.push(format!(
-            "the measured ground height disagrees with the result by up to {:.1} mm (pose {}), more than the {:.1} mm allowed: the ground may not be flat, or the body pose is wrong",
-            check.measured,
+            "the measured ground height disagrees with the result by up to {measured} mm (pose {}), more than the {limit} mm allowed: the ground may not be flat, or the body pose is wrong",
             worst(check),
-            gates.e_d_max_mm
         ));
     }
     // Unobservable directions are already named; do not repeat them as σ.
@@ -333,16 +348,18 @@ fn judge_checked(
             let s = sigma[k].to_degrees();
             // NaN (an unobservable direction) fails the gate too.
             if !at_most(s, gates.sigma_angle_max_deg) {
+                let (measured, limit) = apart(s, gates.sigma_angle_max_deg, 3);
                 reasons.push(format!(
-                    "the angle {} is uncertain (σ = {:.3}°, at most {:.3}° allowed): add poses with larger tilts or more frames per pose",
-                    ANGLE_NAMES[k], s, gates.sigma_angle_max_deg
+                    "the angle {} is uncertain (σ = {measured}°, at most {limit}° allowed): {UNCERTAIN}",
+                    ANGLE_NAMES[k]
                 ));
             }
             let s = sigma[3 + k] * 1e3;
             if !at_most(s, gates.sigma_position_max_mm) {
+                let (measured, limit) = apart(s, gates.sigma_position_max_mm, 2);
                 reasons.push(format!(
-                    "the position {} is uncertain (σ = {:.2} mm, at most {:.2} mm allowed): add poses with larger tilts or more frames per pose",
-                    POSITION_NAMES[k], s, gates.sigma_position_max_mm
+                    "the position {} is uncertain (σ = {measured} mm, at most {limit} mm allowed): {UNCERTAIN}",
+                    POSITION_NAMES[k]
                 ));
             }
         }
@@ -354,6 +371,14 @@ fn judge_checked(
 mod tests {
     use super::*;
     use crate::geometry::Plane;
+
+    #[test]
+    fn a_reason_shows_the_figures_at_the_precision_that_makes_it_true() {
+        assert_eq!(apart(0.0094, 0.008, 2), ("0.009".into(), "0.008".into()));
+        assert_eq!(apart(0.0126, 0.008, 2), ("0.013".into(), "0.008".into()));
+        assert_eq!(apart(1.26, 1.0, 2), ("1.26".into(), "1.00".into()));
+        assert_eq!(apart(5.04, 5.0, 1), ("5.04".into(), "5.00".into()));
+    }
     use nalgebra::Vector3;
 
     fn pose(index: u32, used: bool, theta_deg: f64, e_d_mm: f64) -> PoseOutcome {
@@ -428,9 +453,12 @@ mod tests {
         assert_eq!(by("theta_max_deg").at.as_deref(), Some("pose 2"));
         assert_eq!(by("e_d_max_mm").at.as_deref(), Some("pose 1"));
         assert!(by("theta_max_deg").passed && by("e_d_max_mm").passed);
-        assert_eq!(by("sigma_angle_max_deg").at.as_deref(), Some("β"));
+        assert_eq!(by("sigma_angle_max_deg").at.as_deref(), Some("β (pitch)"));
         assert!((by("sigma_angle_max_deg").measured - 0.05).abs() < 1e-12);
-        assert_eq!(by("sigma_position_max_mm").at.as_deref(), Some("p_x"));
+        assert_eq!(
+            by("sigma_position_max_mm").at.as_deref(),
+            Some("x (forward)")
+        );
         // Two poses used of six needed; two of three is under 70 %.
         assert!(!by("min_poses_used").passed && by("min_poses_used").at_least);
         assert_eq!(by("min_poses_used").limit, 6.0);

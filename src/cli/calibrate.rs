@@ -105,12 +105,33 @@ pub(super) fn show_progress(
                 Event::Solving => "back home; solving".into(),
                 Event::Finished { accepted } => format!(
                     "finished: {}",
-                    if *accepted { "accepted" } else { "rejected" }
+                    if *accepted {
+                        "passed its checks"
+                    } else {
+                        "failed its checks"
+                    }
                 ),
                 Event::Verified { consistent } => format!(
                     "back home; {}",
                     if *consistent { "consistent" } else { "drift" }
                 ),
+                // Said on lines of their own, above the bar: the bar redraws
+                // at most a few times a second, and these must be seen.
+                Event::Halting { .. } | Event::WalkingHome => {
+                    let words = if matches!(event, Event::Halting { .. }) {
+                        "halting the robot…"
+                    } else {
+                        "halted; walking home…"
+                    };
+                    match &bar {
+                        Some(bar) => {
+                            bar.suspend(|| eprintln!("groundcal {command}: {words}"));
+                            bar.set_message(words);
+                        }
+                        None => eprintln!("groundcal {command}: {words}"),
+                    }
+                    continue;
+                }
                 Event::Aborted { reason, .. } => {
                     aborted = Some(reason.clone());
                     continue;
@@ -122,8 +143,14 @@ pub(super) fn show_progress(
             }
         }
         // The bar gives way to the result; the last step stays on screen.
+        // Cut short, the bar stays where the run stopped: a full bar would
+        // claim that every pose was done.
         if let Some(bar) = bar {
-            bar.finish();
+            if aborted.is_some() {
+                bar.abandon();
+            } else {
+                bar.finish();
+            }
             eprintln!();
         }
         aborted
@@ -301,7 +328,13 @@ async fn calibrate_once(
                     } else {
                         ""
                     };
-                    eprintln!("groundcal calibrate: {prefix}{reason}");
+                    eprint!(
+                        "{}",
+                        super::for_terminal(
+                            &format!("groundcal calibrate: {prefix}{reason}\n"),
+                            true
+                        )
+                    );
                 }
                 None => eprintln!("groundcal calibrate: {e}"),
             }

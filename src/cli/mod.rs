@@ -61,7 +61,7 @@ pub fn finish(command: &str, result: &crate::output::ResultJson, json: bool) -> 
     let printed = if json {
         print_json(result)
     } else {
-        print!("{}", result.to_table());
+        print!("{}", for_terminal(&result.to_table(), false));
         Ok(())
     };
     if let Err(e) = printed {
@@ -72,6 +72,22 @@ pub fn finish(command: &str, result: &crate::output::ResultJson, json: bool) -> 
         ExitStatus::Success
     } else {
         ExitStatus::Rejected
+    }
+}
+
+/// Text for stdout (or stderr), its long lines broken between words at the
+/// terminal's width when it is a terminal; unchanged for a pipe or a file.
+pub fn for_terminal(text: &str, stderr: bool) -> String {
+    let term = if stderr {
+        console::Term::stderr()
+    } else {
+        console::Term::stdout()
+    };
+    match term.size_checked() {
+        Some((_, columns)) if term.is_term() => {
+            crate::output::wrap_words(text, usize::from(columns))
+        }
+        _ => text.to_string(),
     }
 }
 

@@ -73,10 +73,11 @@ pub fn write_report(
 
 /// The whole page.
 pub fn render_html(result: &ResultJson, provenance: &Provenance) -> String {
+    // The words the page and the terminal use for the same verdict.
     let verdict = if result.accepted() {
-        "ACCEPTED"
+        "Passed its checks"
     } else {
-        "REJECTED"
+        "Failed its checks"
     };
     let mut page = String::with_capacity(96 * 1024);
     let _ = write!(
@@ -1153,7 +1154,7 @@ h2 { font-size: 1.2rem; margin: 0 0 10px; }
 .verdict { color: #fff; }
 .verdict.accepted { background: var(--ok); }
 .verdict.rejected { background: var(--bad); }
-.verdict h1 { margin: 0 0 6px; font-size: clamp(2.4rem, 12vw, 4rem); letter-spacing: .05em; }
+.verdict h1 { margin: 0 0 6px; font-size: clamp(1.9rem, 9vw, 3.4rem); letter-spacing: .02em; }
 .verdict p { margin: 0 0 6px; font-size: 1.05rem; }
 .reasons { margin: 0; padding-left: 1.2em; }
 .reasons li { margin: 6px 0; overflow-wrap: anywhere; }
@@ -1268,7 +1269,7 @@ mod tests {
         let result = solved();
         assert!(!result.accepted());
         let html = render_html(&result, &provenance());
-        assert!(html.contains("<h1>REJECTED</h1>"));
+        assert!(html.contains("<h1>Failed its checks</h1>"));
         for reason in &result.reasons {
             assert!(html.contains(&escape(reason)), "missing reason {reason}");
         }
@@ -1286,8 +1287,8 @@ mod tests {
         result.status = crate::output::ResultStatus::Accepted;
         result.reasons.clear();
         let html = render_html(&result, &provenance());
-        assert!(html.contains("<h1>ACCEPTED</h1>"));
-        assert!(!html.contains("REJECTED"));
+        assert!(html.contains("<h1>Passed its checks</h1>"));
+        assert!(!html.contains("Failed its checks"));
         assert!(html.contains("passed every quality gate"));
         result.notes.push("the <floor> was wet".into());
         result.kinect_tilt_deg = Some(-5.0);
@@ -1332,7 +1333,7 @@ mod tests {
         let result = unsolved();
         assert!(result.robot_from_sensor.is_none() && result.summary.is_none());
         let html = render_html(&result, &provenance());
-        assert!(html.contains("<h1>REJECTED</h1>"));
+        assert!(html.contains("<h1>Failed its checks</h1>"));
         assert!(html.contains(&escape(&result.reasons[0])));
         assert!(html.contains("No parameters"));
         assert!(html.contains("No summary"));
@@ -1680,7 +1681,7 @@ mod tests {
         let path = write_report(&nested, &result, &provenance()).expect("writes");
         assert_eq!(path, nested.join("index.html"));
         let first = fs::read_to_string(&path).unwrap();
-        assert!(first.contains("REJECTED"));
+        assert!(first.contains("Failed its checks"));
         // Again over the old one; no temporary file is left behind.
         write_report(&nested, &result, &provenance()).expect("rewrites");
         let names: Vec<_> = fs::read_dir(&nested)

@@ -62,6 +62,11 @@ pub enum Event {
     Finished { accepted: bool },
     /// A check of the active calibration ended (`verify`).
     Verified { consistent: bool },
+    /// The session is stopping (an abort or a failure, `why`): the robot
+    /// is being halted.
+    Halting { why: String },
+    /// Halted; the robot is walking back to its home stance.
+    WalkingHome,
     /// The session was aborted; the robot was halted and sent home.
     Aborted {
         /// Why, and how the robot was left, in words.

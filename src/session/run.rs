@@ -733,7 +733,11 @@ const MAX_CORRUPT_FRAMES: usize = 3;
 /// half second for `plan.link_recovery`: its own watchdog has halted the body
 /// meanwhile, and once the link returns the body is sent home. Returns a
 /// description of how the robot was left.
-async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> (RobotLeft, String) {
+async fn stop_safely<C: BodyController>(
+    controller: &mut C,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+) -> (RobotLeft, String) {
     let deadline = tokio::time::Instant::now() + plan.link_recovery;
     let mut retries = 0u32;
     let halted = loop {
@@ -757,6 +761,7 @@ async fn stop_safely<C: BodyController>(controller: &mut C, plan: &Plan) -> (Rob
     } else {
         String::new()
     };
+    send(events, Event::WalkingHome);
     if let Err(e) = controller.home(millis(plan.motion)).await {
         return (
             RobotLeft::Halted,
@@ -841,7 +846,8 @@ async fn guarded<S: DepthSensor, C: BodyController>(
             Err(SessionError::Refused(reason))
         }
         Err(e) => {
-            let (robot_left, left) = stop_safely(controller, plan).await;
+            send(events, Event::Halting { why: e.cause() });
+            let (robot_left, left) = stop_safely(controller, plan, events).await;
             let _ = bounded(plan, "the LED", sensor.set_led(Led::Red)).await;
             for fit in pending {
                 fit.handle.abort();

@@ -56,6 +56,12 @@ pub enum EventJson {
     Verified {
         consistent: bool,
     },
+    /// The session is stopping: the robot is being halted.
+    Halting {
+        why: String,
+    },
+    /// Halted; walking back to the home stance.
+    WalkingHome,
     Aborted {
         reason: String,
         robot_left: RobotLeft,
@@ -164,6 +170,8 @@ impl From<&Event> for EventJson {
             Event::Verified { consistent } => EventJson::Verified {
                 consistent: *consistent,
             },
+            Event::Halting { why } => EventJson::Halting { why: why.clone() },
+            Event::WalkingHome => EventJson::WalkingHome,
             Event::Aborted { reason, robot_left } => EventJson::Aborted {
                 reason: reason.clone(),
                 robot_left: *robot_left,
@@ -455,6 +463,8 @@ impl Status {
                     robot_left: *robot_left,
                 });
             }
+            EventJson::Halting { .. } => self.robot = "halting".into(),
+            EventJson::WalkingHome => self.robot = "walking home".into(),
             EventJson::Aborting { by } => {
                 self.abort = Some(AbortState::Aborting { by: by.clone() });
             }
@@ -521,6 +531,8 @@ fn step_in_words(event: &EventJson) -> Option<String> {
         ),
         EventJson::Aborted { reason, .. } => format!("aborted: {reason}"),
         EventJson::Aborting { .. } => "aborting: halting the robot and sending it home".into(),
+        EventJson::Halting { why } => format!("stopping ({why}): halting the robot…"),
+        EventJson::WalkingHome => "halted; walking home…".into(),
         EventJson::Activated { .. } => return None,
         EventJson::Failed { error } => format!("stopped without a result: {error}"),
         EventJson::Checked { outcome, .. } if outcome == "failed" => {

@@ -141,7 +141,7 @@ $('confirm-yes').onclick = async () => {
   if (active) {
     model.active = active;
     const wasActive = model.status && model.status.active;
-    model.message = { text: (c.kind === 'accept' ? 'Accepted: ' : wasActive ? 'Rolled back: ' : 'Made active: ') + c.id + ' is now the active calibration.', kind: 'ok', activeId: c.id };
+    model.message = { text: (c.kind === 'accept' ? 'Accepted: ' : wasActive ? 'Rolled back: ' : 'Made active: ') + 'the calibration of ' + madeOn(c.id) + ' is now the active one.', kind: 'ok', activeId: c.id };
     loadStore();
   }
   render();
@@ -154,6 +154,44 @@ function duration(seconds) {
   if (s < 60) return s + ' s';
   return Math.floor(s / 60) + ' min ' + String(s % 60).padStart(2, '0') + ' s';
 }
+// When a calibration was made, in the device's own time, from the history
+// (its id is a time too, in UTC: the fallback).
+function madeOn(id) {
+  const h = model.history.find((e) => e.id === id);
+  if (h && h.created) return when(h.created);
+  const m = /^(\d{4})(\d\d)(\d\d)(\d\d)(\d\d)(\d\d)/.exec(id || '');
+  return m ? when(m[1] + '-' + m[2] + '-' + m[3] + 'T' + m[4] + ':' + m[5] + ':' + m[6] + 'Z') : (id || '?');
+}
+// Fills a list element with lines of text.
+function list(element, lines) {
+  element.innerHTML = '';
+  for (const line of lines) { const li = document.createElement('li'); li.textContent = line; element.appendChild(li); }
+}
+// What an operator can do about each failed check (by its gate), and
+// which calibration the robot uses meanwhile.
+const TODO = {
+  theta_max_deg: 'Make sure the robot stands on flat, firm ground, with nothing on the floor in front of it (boxes, cables, people), then press Calibrate again.',
+  e_d_max_mm: 'Make sure the robot stands on flat, firm ground, with nothing on the floor in front of it, and that no foot has slipped; then press Calibrate again.',
+  sigma_angle_max_deg: 'Press Calibrate again with nothing moving in view. If it fails the same way, ask a maintainer to check the schedule.',
+  sigma_position_max_mm: 'Press Calibrate again with nothing moving in view. If it fails the same way, ask a maintainer to check the schedule.',
+  min_poses_used: 'Many poses found no ground: clear the floor in front of the robot, check that the lens is clean and uncovered and that the Kinect points at the floor, then press Calibrate again.',
+  min_used_fraction: 'Many poses found no ground: clear the floor in front of the robot, check that the lens is clean and uncovered and that the Kinect points at the floor, then press Calibrate again.',
+  depth_scale_max_deviation: 'The depth reads far from the truth: ask a maintainer to check the sensor\'s depth settings.',
+  observable: 'The schedule cannot pin the sensor down: ask a maintainer to check it.',
+};
+function todoFor(result) {
+  const lines = [];
+  for (const c of result.gate_checks || []) {
+    const line = !c.passed && TODO[c.gate];
+    if (line && !lines.includes(line)) lines.push(line);
+  }
+  if ((result.reasons || []).some((r) => /motor/.test(r))) lines.push('The Kinect\'s tilt motor moved during the run: make sure nothing touches the sensor, then press Calibrate again.');
+  if (!lines.length) lines.push('Press Calibrate again; if it fails the same way, ask a maintainer.');
+  const active = model.status && model.status.active;
+  lines.push(active ? 'Meanwhile the robot uses the active calibration, of ' + madeOn(active.id) + '.' : 'Meanwhile the robot uses no calibration from groundcal.');
+  return lines;
+}
+
 // "about 2 min", "about 10 s": how long the robot will move.
 function about(seconds) {
   return seconds >= 90 ? 'about ' + Math.round(seconds / 60) + ' min' : 'about ' + Math.max(1, Math.round(seconds)) + ' s';
@@ -177,7 +215,7 @@ function changeInWords(mount, active) {
     const slot = { name, delta, unit };
     if (unit === '°') { if (!angle || Math.abs(delta) > Math.abs(angle.delta)) angle = slot; } else if (!shift || Math.abs(delta) > Math.abs(shift.delta)) shift = slot;
   }
-  return 'Against the active calibration (' + active.id + '): angles differ by up to ' + Math.abs(angle.delta).toFixed(3)
+  return 'Against the active calibration (of ' + madeOn(active.id) + '): angles differ by up to ' + Math.abs(angle.delta).toFixed(3)
     + '° (' + angle.name + '), positions by up to ' + Math.abs(shift.delta).toFixed(1) + ' mm (' + shift.name + ').';
 }
 
@@ -187,7 +225,13 @@ function changeInWords(mount, active) {
 function valuesTable(table, mount, sigma, active, predicted, scale) {
   table.innerHTML = '';
   const head = table.insertRow();
-  for (const h of ['', 'value', predicted ? '±σ (predicted)' : '±σ', active ? 'change' : '']) { const th = document.createElement('th'); th.textContent = h; head.appendChild(th); }
+  // Short headers, the longer words small beneath: at phone width every
+  // column must fit.
+  for (const [h, under] of [['', ''], ['value', ''], ['±σ', predicted ? '(predicted)' : ''], [active ? 'change' : '', '']]) {
+    const th = document.createElement('th'); th.textContent = h;
+    if (under) { const small = document.createElement('div'); small.className = 'small'; small.textContent = under; th.appendChild(small); }
+    head.appendChild(th);
+  }
   for (const [key, name, unit, words] of PARAMS) {
     const row = table.insertRow();
     const label = row.insertCell();
@@ -370,9 +414,14 @@ function render() {
   const ck = s && s.check && s.check.calibration_id === activeId ? s.check : null;
   const drift = ck && ck.outcome === 'drift';
   $('drift').hidden = !drift;
-  $('drift').textContent = drift ? 'The sensor has moved since it was calibrated: '
+  $('drift-text').textContent = drift ? 'The sensor has moved since it was calibrated: '
     + ck.reasons.map((r) => r.replace(' than the active calibration says', '')).join('; ')
-    + '. Calibrate again before the robot relies on its terrain map.' : '';
+    + '. Meanwhile the robot still uses the active calibration (' + madeOn(activeId) + '), which no longer matches the sensor.' : '';
+  redraw('drift-todo', drift ? 'drift' : '', () => list($('drift-todo'), drift ? [
+    'Check that the sensor\'s mount is tight and that nothing has knocked it.',
+    'Press Check again.',
+    'If it still says the sensor has moved, press Calibrate, and Accept the new calibration when it passes its checks.',
+  ] : []));
 
   // Progress.
   const checking = running && s.task === 'check';
@@ -436,9 +485,11 @@ function render() {
   if (s && r && (!running || checking)) {
     card.hidden = false;
     const passed = r.status === 'accepted';
-    verdict.textContent = passed ? 'Passed checks' : 'Failed checks';
+    verdict.textContent = passed ? 'Passed its checks' : 'Failed its checks';
     verdict.className = passed ? 'passed' : 'failed';
     for (const reason of r.reasons || []) say(reason);
+    redraw('todo', passed ? '' : JSON.stringify([s.result_id, activeId]), () => list($('todo'), passed ? [] : todoFor(r)));
+    $('todo-box').hidden = passed;
     const activeDoc = model.active && model.active.id === activeId ? model.active : null;
     const against = activeDoc && activeDoc.id !== s.result_id ? activeDoc : null;
     redraw('values', JSON.stringify([s.result_id, against && against.id]), () => {
@@ -456,11 +507,14 @@ function render() {
     } else {
       $('activeline').textContent = passed ? 'Not active yet: Accept makes it the calibration the robot uses.' : 'It failed its checks, so it cannot become active.';
     }
-    $('resultid').textContent = s.result_id ? 'calibration ' + s.result_id : '';
+    $('resultid').textContent = s.result_id ? 'calibration of ' + madeOn(s.result_id) : '';
+    $('resultid').dataset.id = s.result_id || '';
+    $('resultid').title = s.result_id || '';
     redraw('charts', 'result ' + s.result_id, () => charts(r.poses || [], s.of, false));
   } else if (s && !running && (s.interrupted || (s.error && !aborted))) {
     card.hidden = false;
     const cut = s.interrupted;
+    $('todo-box').hidden = true;
     verdict.textContent = cut ? 'Interrupted' : 'No result';
     verdict.className = cut ? 'interrupted' : 'failed';
     if (cut) {
@@ -486,7 +540,7 @@ function render() {
   const c = model.confirm;
   $('confirm').hidden = !c;
   if (c) {
-    $('confirm-text').textContent = (c.kind === 'accept' ? 'Make calibration ' + c.id + ' the active one?' : 'Roll back to calibration ' + c.id + '?')
+    $('confirm-text').textContent = (c.kind === 'accept' ? 'Make the calibration of ' + madeOn(c.id) + ' the active one?' : 'Roll back to the calibration of ' + madeOn(c.id) + '?')
       + ' The robot\'s other programs use the active calibration from their next start.';
     $('confirm').scrollIntoView({ block: 'nearest' });
   }
@@ -495,7 +549,9 @@ function render() {
   // The active calibration and the history. The status names the active one
   // (every device the same); its document is loaded when that changes.
   const a = model.active && model.active.id === activeId ? model.active : null;
-  $('active').textContent = a ? a.id + ', active since ' + when(a.activated) : 'None yet: the robot uses no calibration from groundcal.';
+  $('active').textContent = activeId ? 'The calibration of ' + madeOn(activeId) + ', active since ' + when(s.active.activated) : 'None yet: the robot uses no calibration from groundcal.';
+  $('active').dataset.id = activeId || '';
+  $('active').title = activeId || '';
   const line = $('checkline');
   line.className = ck ? ck.outcome : '';
   if (!ck) line.textContent = a ? 'Not checked since it became active or since the service started: Check compares it with the sensor now.' : '';
@@ -517,7 +573,7 @@ function render() {
     for (const h of model.history.slice(0, 20)) {
       const row = history.insertRow();
       row.insertCell().textContent = when(h.created);
-      row.insertCell().textContent = h.status === 'accepted' ? 'passed' : h.status === 'rejected' ? 'failed or rejected' : h.status;
+      row.insertCell().textContent = h.operator_rejected ? 'set aside by an operator' : h.status === 'accepted' ? 'passed its checks' : h.status === 'rejected' ? 'failed its checks' : h.status;
       const cell = row.insertCell();
       if (h.id === activeId) {
         const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active'; cell.appendChild(badge);

@@ -60,7 +60,7 @@ async function visit({ name, ...options }) {
 
     const verdictLocator = page.locator('#verdict h1');
     const verdict = (await verdictLocator.count()) ? (await verdictLocator.innerText()).trim() : '';
-    if (!['ACCEPTED', 'REJECTED'].includes(verdict)) {
+    if (!['Passed its checks', 'Failed its checks'].includes(verdict)) {
       problems.push(`${name}: no verdict shown (found "${verdict}")`);
     } else if (!(await verdictLocator.isVisible())) {
       problems.push(`${name}: the verdict is not visible`);

@@ -78,7 +78,7 @@ try {
   await page.click('#calibrate');
   await page.waitForSelector('#confirm-run:not([hidden])');
   await page.click('#confirm-run-yes');
-  await page.waitForFunction(() => document.getElementById('verdict').textContent === 'Passed checks'
+  await page.waitForFunction(() => document.getElementById('verdict').textContent === 'Passed its checks'
     && !document.getElementById('result').hidden, null, { timeout: 120_000 });
   seen.bannerBeforeAccept = !(await page.$eval('#drift', (e) => e.hidden));
   await page.click('#accept');

@@ -48,7 +48,7 @@ async function activate(page, id) {
 }
 // How long until `page` shows `id` as the active calibration everywhere.
 async function shownAfter(page, id, since) {
-  await page.waitForFunction((active) => document.getElementById('active').textContent.startsWith(active)
+  await page.waitForFunction((active) => document.getElementById('active').dataset.id === active
     && /Active/.test(document.querySelector(`#history tr[title="${active}"]`)?.textContent || '')
     && !document.querySelector(`#history button.rollback[data-id="${active}"]`), id, { timeout: 10_000, polling: 50 });
   return Date.now() - since;
@@ -61,8 +61,9 @@ try {
   const rolledBack = await activate(pad, second);
   seen.phoneAfterMs = await shownAfter(phone, second, rolledBack);
   seen.padShowsSecond = await shownAfter(pad, second, rolledBack);
-  seen.phoneActive = await phone.locator('#active').innerText();
-  seen.padActive = await pad.locator('#active').innerText();
+  seen.phoneActive = await phone.$eval('#active', (e) => e.dataset.id);
+  seen.padActive = await pad.$eval('#active', (e) => e.dataset.id);
+  seen.phoneActiveText = await phone.locator('#active').innerText();
   await phone.screenshot({ path: resolve(shotDir, 'serve-14-phone.png'), fullPage: true });
   await pad.screenshot({ path: resolve(shotDir, 'serve-14-pad.png'), fullPage: true });
 } catch (error) {

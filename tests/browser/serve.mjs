@@ -66,9 +66,9 @@ try {
   };
   // Waits for a calibration's verdict and returns its id.
   const verdict = async () => {
-    await page.waitForFunction(() => ['Passed checks', 'Failed checks'].includes(document.getElementById('verdict').textContent)
+    await page.waitForFunction(() => ['Passed its checks', 'Failed its checks'].includes(document.getElementById('verdict').textContent)
       && !document.getElementById('result').hidden, null, { timeout: 180_000 });
-    return (await text('resultid')).replace('calibration ', '');
+    return page.$eval('#resultid', (e) => e.dataset.id);
   };
   // Every POST the page sends (Cancel must send none).
   const posts = [];
@@ -150,11 +150,11 @@ try {
   const second = await verdict();
   seen.change = await text('change');
   await confirmed('#accept');
-  await page.waitForFunction((id) => document.getElementById('active').textContent.startsWith(id), second, { timeout: 30_000 });
+  await page.waitForFunction((id) => document.getElementById('active').dataset.id === id, second, { timeout: 30_000 });
   seen.rollbackQuestion = await confirmed(`button.rollback[data-id="${first}"]`);
-  await page.waitForFunction((id) => document.getElementById('active').textContent.startsWith(id)
+  await page.waitForFunction((id) => document.getElementById('active').dataset.id === id
     && /Active/.test(document.querySelector(`#history tr[title="${id}"]`)?.textContent || ''), first, { timeout: 30_000 });
-  seen.afterRollback = { active: await text('active'), first, second, history: await page.$$eval('#history tr', (rows) => rows.map((r) => r.innerText)) };
+  seen.afterRollback = { active: await page.$eval('#active', (e) => e.dataset.id), activeText: await text('active'), first, second, history: await page.$$eval('#history tr', (rows) => rows.map((r) => r.innerText)) };
   await shot(page, '8-rollback');
 
   // A third calibration, aborted: "aborting…" once the daemon has the
