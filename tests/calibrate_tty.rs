@@ -41,33 +41,15 @@ fn drawn_segments(raw: &str) -> Vec<String> {
 
 #[test]
 fn on_an_80_column_terminal_the_progress_never_wraps_and_the_verdict_comes_last() {
-    if Command::new("script").arg("--version").output().is_err() {
-        assert!(
-            std::env::var("CI").as_deref() != Ok("true"),
-            "util-linux `script` is needed for the pseudo-terminal (apt install bsdutils)"
-        );
-        eprintln!("calibrate_tty: skipped, no `script` here");
-        return;
-    }
     let command = format!(
-        "stty cols {COLUMNS} rows {ROWS}; exec '{}' calibrate --robot sim --sensor sim",
+        "exec '{}' calibrate --robot sim --sensor sim",
         env!("CARGO_BIN_EXE_groundcal")
     );
-    let output = Command::new("script")
-        .args([
-            "--quiet",
-            "--return",
-            "--flush",
-            "--command",
-            &command,
-            "/dev/null",
-        ])
-        .env("TERM", "xterm-256color")
-        .env_remove("NO_COLOR")
-        .output()
-        .expect("script runs");
-    let raw = String::from_utf8_lossy(&output.stdout).into_owned();
-    assert_eq!(output.status.code(), Some(0), "{raw}");
+    let Some((code, raw, contents)) = under_a_terminal(&command) else {
+        eprintln!("calibrate_tty: skipped, no `script` here");
+        return;
+    };
+    assert_eq!(code, 0, "{raw}");
 
     // The progress bar was drawn (a terminal gets the bar, not log lines).
     assert!(
@@ -84,18 +66,6 @@ fn on_an_80_column_terminal_the_progress_never_wraps_and_the_verdict_comes_last(
             "a line wider than {COLUMNS} columns: {segment:?}"
         );
     }
-
-    let mut terminal = vt100::Parser::new(ROWS, COLUMNS, 0);
-    terminal.process(output.stdout.as_slice());
-    let screen = terminal.screen();
-    for row in 0..ROWS {
-        assert!(
-            !screen.row_wrapped(row),
-            "row {row} wrapped:\n{}",
-            screen.contents()
-        );
-    }
-    let contents = screen.contents();
     let lines: Vec<&str> = contents.lines().filter(|l| !l.trim().is_empty()).collect();
     let last_six: Vec<&str> = lines.iter().rev().take(6).rev().copied().collect();
     for (line, name) in last_six

@@ -105,6 +105,18 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
         seen["values"][7].as_str().unwrap().starts_with("s"),
         "{seen}"
     );
+    // The checks it passed, each with its figure and limit.
+    let gates = seen["gates"].as_array().unwrap();
+    assert!(gates.len() >= 6, "{seen}");
+    assert!(
+        gates.iter().any(|g| g
+            .as_str()
+            .unwrap()
+            .starts_with("✓ ground angle θ, the worst pose: ")
+            && g.as_str().unwrap().contains("at most 1.000°")),
+        "{seen}"
+    );
+    assert!(text("gatesTitle").contains(" passed"), "{seen}");
     // Each σ with the one predicted before the robot moved.
     assert_eq!(seen["predicted"], 7, "{seen}");
     assert!(text("notActiveYet").starts_with("Not active yet"), "{seen}");

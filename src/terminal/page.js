@@ -270,6 +270,28 @@ function valuesTable(table, mount, sigma, active, predicted, scale) {
   }
 }
 
+// Each quality gate as it was checked, in words: what was measured (and
+// where), against the limit, passed or not.
+const GATE_WORDS = {
+  theta_max_deg: ['ground angle θ, the worst pose', '°', 3],
+  e_d_max_mm: ['ground height e_d, the worst pose', ' mm', 2],
+  sigma_angle_max_deg: ['uncertainty of the angles, the worst', '°', 4],
+  sigma_position_max_mm: ['uncertainty of the positions, the worst', ' mm', 3],
+  min_poses_used: ['poses used', '', 0],
+  min_used_fraction: ['share of the poses used', '%', 0],
+  observable: ['how well the schedule pins the sensor down', '', 3],
+  depth_scale_max_deviation: ['depth scale, off from 1 by', '%', 2],
+};
+function gateLines(result) {
+  return (result.gate_checks || []).map((c) => {
+    const [name, unit, digits] = GATE_WORDS[c.gate] || [c.gate, '', 3];
+    const scale = unit === '%' ? 100 : 1;
+    const value = (v) => (v * scale).toFixed(digits) + unit;
+    const where = c.at ? ' (' + c.at + ')' : '';
+    return (c.passed ? '✓ ' : '✗ ') + name + ': ' + value(c.measured) + where + ', ' + (c.at_least ? 'at least ' : 'at most ') + value(c.limit);
+  });
+}
+
 // A check's figures in words: "ground tilt θ 0.003° (allowed 0.017°), …".
 function checkFigures(report) {
   if (!report) return [];
@@ -488,6 +510,10 @@ function render() {
     verdict.textContent = passed ? 'Passed its checks' : 'Failed its checks';
     verdict.className = passed ? 'passed' : 'failed';
     for (const reason of r.reasons || []) say(reason);
+    const gates = gateLines(r);
+    $('gates-box').hidden = !gates.length;
+    $('gates-title').textContent = 'The checks: ' + gates.filter((g) => g.startsWith('✓')).length + ' of ' + gates.length + ' passed';
+    redraw('gates', JSON.stringify([s.result_id, gates]), () => list($('gates'), gates));
     redraw('todo', passed ? '' : JSON.stringify([s.result_id, activeId]), () => list($('todo'), passed ? [] : todoFor(r)));
     $('todo-box').hidden = passed;
     const activeDoc = model.active && model.active.id === activeId ? model.active : null;
@@ -515,6 +541,7 @@ function render() {
     card.hidden = false;
     const cut = s.interrupted;
     $('todo-box').hidden = true;
+    $('gates-box').hidden = true;
     verdict.textContent = cut ? 'Interrupted' : 'No result';
     verdict.className = cut ? 'interrupted' : 'failed';
     if (cut) {

@@ -131,6 +131,8 @@ try {
   seen.points = await page.$$eval('#theta circle', (n) => n.length);
   seen.values = await page.$$eval('#values tr', (rows) => rows.map((r) => r.innerText));
   seen.predicted = await page.$$eval('#values .predicted', (n) => n.length);
+  seen.gates = await page.$$eval('#gates li', (n) => n.map((e) => e.textContent));
+  seen.gatesTitle = await text('gates-title');
   seen.notActiveYet = await text('activeline');
   await shot(page, '3-verdict');
 
