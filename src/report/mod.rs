@@ -116,7 +116,8 @@ pub fn render_html(result: &ResultJson, provenance: &Provenance) -> String {
 }
 
 fn verdict_section(page: &mut String, result: &ResultJson, verdict: &str) {
-    let class = verdict.to_lowercase();
+    // Coloured by the status (green or red), whatever the words.
+    let class = result.status.as_str();
     let _ = writeln!(
         page,
         "<section class=\"verdict {class}\" id=\"verdict\"><h1>{verdict}</h1>"
@@ -1270,6 +1271,8 @@ mod tests {
         assert!(!result.accepted());
         let html = render_html(&result, &provenance());
         assert!(html.contains("<h1>Failed its checks</h1>"));
+        // White words on the verdict's own colour, never on white.
+        assert!(html.contains("<section class=\"verdict rejected\" id=\"verdict\">"));
         for reason in &result.reasons {
             assert!(html.contains(&escape(reason)), "missing reason {reason}");
         }
@@ -1288,6 +1291,7 @@ mod tests {
         result.reasons.clear();
         let html = render_html(&result, &provenance());
         assert!(html.contains("<h1>Passed its checks</h1>"));
+        assert!(html.contains("<section class=\"verdict accepted\" id=\"verdict\">"));
         assert!(!html.contains("Failed its checks"));
         assert!(html.contains("passed every quality gate"));
         result.notes.push("the <floor> was wet".into());

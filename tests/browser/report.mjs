@@ -64,6 +64,13 @@ async function visit({ name, ...options }) {
       problems.push(`${name}: no verdict shown (found "${verdict}")`);
     } else if (!(await verdictLocator.isVisible())) {
       problems.push(`${name}: the verdict is not visible`);
+    } else {
+      // Visible to the DOM is not readable: the words must not be the
+      // colour of what they stand on.
+      const [color, background] = await page.$eval('#verdict', (e) => [getComputedStyle(e).color, getComputedStyle(e).backgroundColor]);
+      if (color === background || background === 'rgb(255, 255, 255)' || background === 'rgba(0, 0, 0, 0)') {
+        problems.push(`${name}: the verdict's words (${color}) stand on ${background}`);
+      }
     }
 
     const svgs = await page.$$eval('svg', (nodes) =>
