@@ -157,7 +157,7 @@ pub fn summarise(poses: &[PoseOutcome]) -> Summary {
 }
 
 /// What to do about a σ too large, in words an operator can act on.
-const UNCERTAIN: &str = "calibrate again with the robot on open, flat ground and nothing moving in view; if it stays this uncertain, the schedule needs larger tilts (a maintainer's `groundcal plan`)";
+const UNCERTAIN: &str = "calibrate again with the robot on open, flat ground and nothing moving in view; if it stays this uncertain, the schedule needs larger tilts (a maintainer's groundcal plan)";
 
 /// The parameters as the operator's page and the report name them.
 const ANGLE_NAMES: [&str; 3] = ["α (turn about up)", "β (pitch)", "γ (roll)"];

@@ -74,9 +74,9 @@ async function fetchWithin(url, options, ms) {
 
 // What the page can say when a button's request did not get through: it
 // cannot know what the robot does, so it says what it knows.
-function notSent(what) {
+function notSent(what, timedOut) {
   const running = model.status && model.status.state === 'running';
-  return what + ' could not be sent: the robot\'s computer did not answer within ' + (REQUEST_MS / 1000) + ' s.'
+  return what + ' could not be sent: the robot\'s computer ' + (timedOut ? 'did not answer within ' + (REQUEST_MS / 1000) + ' s.' : 'refused the connection or cannot be reached.')
     + (running ? ' If groundcal has stopped, the robot\'s own watchdog halts the body within 1 s; if only this device\'s link is down, the run goes on. Use the robot\'s emergency stop if anyone is at risk.' : '');
 }
 
@@ -92,7 +92,7 @@ async function call(method, url, what) {
     try { body = await response.json(); } catch (e) { body = {}; }
   } catch (e) {
     model.sending = null;
-    model.message = { text: notSent(what), kind: 'error' };
+    model.message = { text: notSent(what, e && e.name === 'AbortError'), kind: 'error' };
     lose();
     return null;
   }
