@@ -5,8 +5,13 @@
 //! mean plane bias (fitted d − true d, and the normal's angle) and the
 //! mount's error against the truth.
 //!
-//! `GROUNDCAL_SCENES_TABLE=1 cargo test --release --test ground_fit_scenes
-//! -- --nocapture table` prints the table of docs/method.md.
+//! `cargo test --release --test ground_fit_scenes -- --ignored --nocapture
+//! table` prints the table of docs/method.md. For the experiments behind it,
+//! `run` also reads: `GROUNDCAL_SCENES` (scenes, comma-separated),
+//! `GROUNDCAL_SCENES_SEEDS`, `GROUNDCAL_SCENES_POSE` (one pose, no solve),
+//! `GROUNDCAL_SCENES_GUARD=ROWS,SIGMAS` and `GROUNDCAL_SCENES_LOWER=DEGREES`
+//! (the fit's settings: `0,3` and `15` are the fit before issue 22), and
+//! `GROUNDCAL_SCENES_ORACLE` (fit only the pixels that see the ground).
 
 use groundcal::calib::geometry::{ground_in_sensor, PoseDegMm, Transform};
 use groundcal::calib::observe::{NominalMount, ObserveSettings, PoseObserver};
@@ -141,9 +146,8 @@ fn run(world: &World, model: DepthModel, seed: u64) -> (Outcome, Outcome) {
             let Ok(fit) = fit_ground(&frames, &camera, &prior, &settings, &mut buffers) else {
                 continue;
             };
-            if std::env::var("GROUNDCAL_SCENES_TABLE").is_ok()
-                && (fit.plane.d - truth.d).abs() > 1e-3
-            {
+            // A pose whose ground is a centimetre off, said (on stderr).
+            if (fit.plane.d - truth.d).abs() > 1e-3 {
                 eprintln!(
                     "pose {} ({method:?}): d off by {:+.1} mm, normal by {:.3}°, {} inliers of {}",
                     i + 1,
@@ -203,10 +207,8 @@ fn models() -> [(&'static str, DepthModel); 2] {
 
 /// The table of docs/method.md: every scene, seeds 1–4, both models.
 #[test]
+#[ignore = "prints docs/method.md's table (minutes): run with --ignored"]
 fn table() {
-    if std::env::var("GROUNDCAL_SCENES_TABLE").is_err() {
-        return;
-    }
     let _ = tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .with_writer(std::io::stderr)

@@ -297,8 +297,8 @@ fn abort_gets_through(tag: &str, streams: usize, half_open: usize) {
         set_open_files_limit(me, wanted.min(hard), hard);
     }
     let dir = common::TempDir::new(tag);
-    // Real-time motion (the simulator's time scale 1 on the robot's side is
-    // not needed: 50× with 52 poses still runs for many seconds).
+    // The simulator at 50×: 52 poses still run for seconds, long enough to
+    // flood, ask and abort while the body moves.
     let (mut server, address, robot, receipts) =
         common::spawn_serve_towards_sim_robot(&dir.0, TOKEN, &[]);
     let pid = server.id();

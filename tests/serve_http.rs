@@ -333,7 +333,23 @@ async fn serve_simulation(
     tokio::sync::oneshot::Sender<()>,
     tokio::task::JoinHandle<std::io::Result<()>>,
 ) {
-    let (config, schedule) = Config::embedded_sim();
+    serve_simulation_at(dir, None).await
+}
+
+/// [`serve_simulation`] with the simulator this many times faster than
+/// real time (None: the built-in configuration's own).
+async fn serve_simulation_at(
+    dir: &std::path::Path,
+    time_scale: Option<f64>,
+) -> (
+    SocketAddr,
+    tokio::sync::oneshot::Sender<()>,
+    tokio::task::JoinHandle<std::io::Result<()>>,
+) {
+    let (mut config, schedule) = Config::embedded_sim();
+    if let (Some(sim), Some(scale)) = (&mut config.sim, time_scale) {
+        sim.time_scale = scale;
+    }
     let state = AppState::new(
         config,
         schedule,
@@ -467,24 +483,8 @@ async fn a_check_holds_the_active_calibration_until_it_ends() {
     groundcal::store::Store::new(&state_dir)
         .activate(&a, "2026-12-01T02:00:00Z")
         .unwrap();
-    let (mut config, schedule) = Config::embedded_sim();
-    // Slow enough that the check lasts a few seconds.
-    if let Some(sim) = &mut config.sim {
-        sim.time_scale = 1.0;
-    }
-    let state = AppState::new(
-        config,
-        schedule,
-        Selection::default(),
-        format!("{TOKEN}\n"),
-        &state_dir,
-    );
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(serve(listener, state, async move {
-        let _ = stopped.await;
-    }));
+    // Real time: the check lasts a few seconds.
+    let (addr, stop, server) = serve_simulation_at(&dir, Some(1.0)).await;
 
     let (code, body) = request(addr, "POST", "/api/check", Some(TOKEN)).await;
     assert_eq!(code, 202, "{body}");
