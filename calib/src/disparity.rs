@@ -566,6 +566,14 @@ fn lane_sum(lanes: &[f32; LANES]) -> f64 {
     f64::from((quarter[0] + quarter[2]) + (quarter[1] + quarter[3]))
 }
 
+/// The edge guard's test of the pixel above: within `limit` of the plane
+/// there (`expected`), or untrusted (outside `lo..=hi`). Branch-free (`|`),
+/// so that the lanes stay vectors.
+#[inline(always)]
+fn clear_above(value_above: f32, expected: f32, (limit, lo, hi): (f32, f32, f32)) -> bool {
+    ((value_above - expected).abs() < limit) | (value_above < lo) | (value_above > hi)
+}
+
 /// The per-pixel loop of [`PixelGrid::moments_within`] over one row's
 /// `values` (with their column offsets `du`, `du2`): the pixels within `band`
 /// of `base + cu·du`. Written as independent lanes, which compilers turn into
@@ -590,18 +598,13 @@ fn row_sums<T: FitValue, const GUARDED: bool>(
     let n = values.len().min(du.len()).min(du2.len());
     let n = if GUARDED { n.min(above.len()) } else { n };
     let full = n / LANES * LANES;
-    let (limit, lo, hi) = guard;
     // One chunk of lanes; `a`: the values above (ignored unless GUARDED).
     let mut lanes = |v: &[T], a: &[T], d: &[f32], d2: &[f32]| {
         for l in 0..LANES {
             let r = v[l].to_f32() - (base + cu * d[l]);
             let mut inside = r.abs() < band;
             if GUARDED {
-                // Branch-free (`|`, `&`), so that the lanes stay vectors.
-                let value_above = a[l].to_f32();
-                let r_above = value_above - (base_above + cu * d[l]);
-                let clear = (r_above.abs() < limit) | (value_above < lo) | (value_above > hi);
-                inside &= clear;
+                inside &= clear_above(a[l].to_f32(), base_above + cu * d[l], guard);
             }
             let one = if inside { 1.0 } else { 0.0 };
             let kept = if inside { r } else { 0.0 };
@@ -634,11 +637,7 @@ fn row_sums<T: FitValue, const GUARDED: bool>(
         .enumerate()
     {
         let r = v.to_f32() - (base + cu * d);
-        let clear = !GUARDED || {
-            let value_above = above[full + k].to_f32();
-            let r_above = value_above - (base_above + cu * d);
-            r_above.abs() < limit || value_above < lo || value_above > hi
-        };
+        let clear = !GUARDED || clear_above(above[full + k].to_f32(), base_above + cu * d, guard);
         if r.abs() < band && clear {
             let (d, d2, r) = (f64::from(d), f64::from(d2), f64::from(r));
             sums[0] += 1.0;

@@ -587,13 +587,11 @@ function render() {
   else line.textContent = 'Checked ' + when(ck.finished) + (ck.by ? ' (' + ck.by + ')' : '') + ': '
     + (drift ? 'the sensor has moved since it was calibrated.' : 'the sensor agrees with it.');
   redraw('checks', JSON.stringify(ck && ck.report ? [ck.finished, ck.report.checks] : null), () => {
-    const list = $('checks');
-    list.innerHTML = '';
     const report = ck && ck.report;
-    for (const text of checkFigures(report)) { const li = document.createElement('li'); li.textContent = text; list.appendChild(li); }
-    if (report && report.not_checked.length) { const li = document.createElement('li'); li.textContent = 'not seen from where it stood: ' + report.not_checked.join(', '); list.appendChild(li); }
+    const unseen = report && report.not_checked.length ? ['not seen from where it stood: ' + report.not_checked.join(', ')] : [];
+    list($('checks'), checkFigures(report).concat(unseen));
   });
-  redraw('history', JSON.stringify([model.history.slice(0, 20), !!a, lost || running]), () => {
+  redraw('history', JSON.stringify([model.history.slice(0, 20), activeId, lost || running]), () => {
     const history = $('history');
     history.innerHTML = '';
     if (!model.history.length) history.insertRow().insertCell().textContent = 'No calibrations yet.';
