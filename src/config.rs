@@ -313,6 +313,14 @@ pub struct ServeConfig {
     /// the machine's own name (and `NAME.local`), e.g. `["octopus"]`.
     #[serde(default)]
     pub allowed_hosts: Vec<String>,
+    /// How often the page's live picture is taken while no session runs,
+    /// milliseconds; 0: never (the sensor is opened only by a session).
+    #[serde(default = "default_preview_interval_ms")]
+    pub preview_interval_ms: u64,
+}
+
+fn default_preview_interval_ms() -> u64 {
+    1000
 }
 
 impl Config {
@@ -394,6 +402,15 @@ impl Config {
                 return Err(bad(
                     "robot.name",
                     "must be 1 to 64 printable characters, such as \"octopus\"".into(),
+                ));
+            }
+        }
+        if let Some(serve) = &self.serve {
+            let interval = serve.preview_interval_ms;
+            if interval != 0 && !(200..=60_000).contains(&interval) {
+                return Err(bad(
+                    "serve.preview_interval_ms",
+                    format!("{interval} must be 0 (no live picture) or 200 to 60000"),
                 ));
             }
         }

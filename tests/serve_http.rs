@@ -525,3 +525,80 @@ async fn a_check_holds_the_active_calibration_until_it_ends() {
     server.await.unwrap().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Waits until `GET /api/view` answers a picture that `wanted` accepts.
+async fn wait_view(addr: SocketAddr, wanted: impl Fn(&Value) -> bool) -> Value {
+    let start = Instant::now();
+    loop {
+        let (code, view) = request(addr, "GET", "/api/view", None).await;
+        assert_eq!(code, 200, "{view}");
+        if view["view"].is_object() && wanted(&view) {
+            return view;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no such picture came: {view}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// Ground cells and cells with a reading in a picture.
+fn ground_and_readings(view: &Value) -> (usize, usize) {
+    let count = |key: &str, f: fn(u64) -> bool| {
+        view["view"][key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|v| f(v.as_u64().unwrap()))
+            .count()
+    };
+    (count("ground", |g| g == 1), count("depth_cm", |d| d > 0))
+}
+
+/// The page's picture (issue 21): at rest the daemon shows what the camera
+/// sees with the ground coloured, without the robot; during a calibration
+/// the pictures are the session's own, pose by pose; afterwards the picture
+/// at rest comes back. The sensor is never held by both at once (a session
+/// that could not open it would fail).
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_picture_shows_the_ground_at_rest_and_at_each_pose() {
+    let dir = temp_dir("view");
+    let (addr, stop, server) = serve_simulation(&dir).await;
+
+    let at_rest = wait_view(addr, |v| v["pose"].is_null()).await;
+    let (ground, readings) = ground_and_readings(&at_rest);
+    assert_eq!(at_rest["view"]["width"], 80, "{at_rest}");
+    assert_eq!(at_rest["view"]["height"], 60, "{at_rest}");
+    assert!(
+        readings > 4000 && ground * 10 > readings * 9,
+        "at rest on the flat floor, {ground} of {readings} cells coloured"
+    );
+    assert!(at_rest["view"]["no_ground"].is_null(), "{at_rest}");
+    let seq = at_rest["seq"].as_u64().unwrap();
+    let later = wait_view(addr, |v| v["seq"].as_u64().unwrap() > seq).await;
+    assert!(later["age_ms"].as_u64().unwrap() < 2000, "{later}");
+
+    let (code, body) = request(addr, "POST", "/api/calibrations", Some(TOKEN)).await;
+    assert_eq!(code, 202, "{body}");
+    let during = wait_view(addr, |v| v["pose"].as_u64().is_some()).await;
+    let (ground, readings) = ground_and_readings(&during);
+    assert!(
+        ground * 10 > readings * 8,
+        "pose {}: {ground} of {readings} cells coloured",
+        during["pose"]
+    );
+    let status = wait_idle(addr).await;
+    assert!(status["result_id"].is_string(), "{status}");
+    let seq = during["seq"].as_u64().unwrap();
+    let (_, after) = request(addr, "GET", "/api/view", None).await;
+    assert!(
+        after["seq"].as_u64().unwrap() > seq,
+        "one picture per pose: {after}"
+    );
+    wait_view(addr, |v| v["pose"].is_null()).await;
+
+    let _ = stop.send(());
+    server.await.unwrap().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -8,7 +8,7 @@ use nalgebra::Vector3;
 
 use crate::body::{Feet, GroundFrame};
 use crate::geometry::{PoseDegMm, Transform};
-use crate::plane::{fit_ground, FitBuffers, GroundPrior, PlaneFitSettings};
+use crate::plane::{fit_ground, FitBuffers, GroundFit, GroundPrior, PlaneFitSettings};
 use crate::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::solve::Observation;
 use serde::{Deserialize, Serialize};
@@ -133,6 +133,28 @@ pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
     Ok(std::array::from_fn(|i| {
         Vector3::new(feet_mm[i][0], feet_mm[i][1], feet_mm[i][2]) / 1000.0
     }))
+}
+
+/// Where the ground should be in the sensor frame, at a body pose, from the
+/// nominal mount: its up direction and height, within the mount's
+/// tolerances. Without a mount, any plane facing the sensor from below its
+/// optical axis: up in the image, within 89°.
+pub fn ground_prior(nominal: Option<&NominalMount>, ground_from_robot: &Transform) -> GroundPrior {
+    match nominal {
+        Some(m) => {
+            let mount = m.pose().to_params();
+            let r = ground_from_robot.rotation.matrix();
+            let up_robot = Vector3::new(r[(1, 0)], r[(1, 1)], r[(1, 2)]);
+            let up_sensor = mount.rotation_matrix().transpose() * up_robot;
+            let height = up_robot.dot(&mount.translation) + ground_from_robot.translation.vector.y;
+            GroundPrior {
+                up: up_sensor,
+                up_tolerance: m.tolerance_deg.to_radians(),
+                height: Some((height, m.tolerance_mm / 1000.0)),
+            }
+        }
+        None => GroundPrior::up_only(Vector3::y(), 89f64.to_radians()),
+    }
 }
 
 /// Turns one pose's evidence, its feet and its frames, into one [`Observation`].
@@ -267,24 +289,7 @@ impl PoseObserver {
 
     /// Where the ground should be, in the sensor frame, at a body pose.
     pub fn prior(&self, ground_from_robot: &Transform) -> GroundPrior {
-        match &self.nominal {
-            Some(m) => {
-                let mount = m.pose().to_params();
-                let r = ground_from_robot.rotation.matrix();
-                let up_robot = Vector3::new(r[(1, 0)], r[(1, 1)], r[(1, 2)]);
-                let up_sensor = mount.rotation_matrix().transpose() * up_robot;
-                let height =
-                    up_robot.dot(&mount.translation) + ground_from_robot.translation.vector.y;
-                GroundPrior {
-                    up: up_sensor,
-                    up_tolerance: m.tolerance_deg.to_radians(),
-                    height: Some((height, m.tolerance_mm / 1000.0)),
-                }
-            }
-            // Without a mount, any plane facing the sensor from below its
-            // optical axis: up in the image, within 89°.
-            None => GroundPrior::up_only(Vector3::y(), 89f64.to_radians()),
-        }
+        ground_prior(self.nominal.as_ref(), ground_from_robot)
     }
 
     /// The observation of one pose from its body pose and its frames (raw
@@ -296,10 +301,23 @@ impl PoseObserver {
         frames: &[&[u16]],
         buffers: &mut FitBuffers,
     ) -> Result<Observation, String> {
+        self.observe_with_fit(index, body, frames, buffers)
+            .map(|(observation, _)| observation)
+    }
+
+    /// [`PoseObserver::observe`], with the ground fit behind the observation
+    /// (to show which pixels were taken for the ground).
+    pub fn observe_with_fit(
+        &self,
+        index: u32,
+        body: &BodyEstimate,
+        frames: &[&[u16]],
+        buffers: &mut FitBuffers,
+    ) -> Result<(Observation, GroundFit), String> {
         let prior = self.prior(&body.ground_from_robot);
         let fit = fit_ground(frames, &self.camera, &prior, &self.settings.plane, buffers)
             .map_err(|e| e.to_string())?;
-        Ok(Observation {
+        let observation = Observation {
             index,
             ground_from_robot: body.ground_from_robot,
             plane: fit.plane,
@@ -307,7 +325,8 @@ impl PoseObserver {
             inliers: Some(fit.inliers),
             set_aside: body.set_aside.clone(),
             note: body.note.clone(),
-        })
+        };
+        Ok((observation, fit))
     }
 }
 

@@ -232,6 +232,19 @@ impl DepthCamera {
         cursor - before
     }
 
+    /// The point one pixel's value reads as, in the sensor frame (metres);
+    /// `None` for no reading, one outside the trusted range, or a pixel
+    /// outside the image.
+    pub fn point_at(&self, u: usize, v: usize, value: u16) -> Option<nalgebra::Vector3<f64>> {
+        let (z, _) = *self.table.get(usize::from(value))?;
+        let right = *self.ray_right.get(u)?;
+        let up = *self.ray_up.get(v)?;
+        (z > 0.0).then(|| {
+            let z = f64::from(z);
+            nalgebra::Vector3::new(z, f64::from(up) * z, f64::from(right) * z)
+        })
+    }
+
     /// Converts an image into `cloud`, reusing its memory (the streaming path:
     /// no allocation once the buffers have grown to a frame's size).
     pub fn points_into(&self, pixels: &[u16], cloud: &mut PointCloud) -> usize {

@@ -70,6 +70,8 @@ pub(super) fn show_progress(
         let mut aborted = None;
         while let Some(event) = events.recv().await {
             let line = match &event {
+                // A picture for the page; the terminal says the fit's outcome.
+                Event::GroundSeen { .. } => continue,
                 Event::Started { poses, schedule } => {
                     if let Some(bar) = &bar {
                         bar.set_length(*poses as u64);

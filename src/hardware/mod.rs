@@ -232,10 +232,40 @@ pub async fn open(
         )))
     };
 
-    let sensor = match source {
+    let sensor = sensor_from(
+        config,
+        selection,
+        source,
+        sim.as_ref(),
+        robot == RobotAddress::Sim,
+    )?;
+    Ok((sensor, controller))
+}
+
+/// Opens the depth sensor alone, to look without moving: the simulated
+/// Kinect sees the simulated body standing at its home stance.
+pub fn open_sensor(config: &Config, selection: &Selection) -> Result<Sensor, HardwareError> {
+    let source = selection.sensor(config);
+    let sim = match source {
+        SensorSource::Sim => Some(sim_parts(config)?),
+        _ => None,
+    };
+    let robot_is_sim = selection.robot(config) == RobotAddress::Sim;
+    sensor_from(config, selection, source, sim.as_ref(), robot_is_sim)
+}
+
+/// The sensor of `source`; the simulated one sees the body of `sim`.
+fn sensor_from(
+    config: &Config,
+    selection: &Selection,
+    source: SensorSource,
+    sim: Option<&SimParts>,
+    robot_is_sim: bool,
+) -> Result<Sensor, HardwareError> {
+    Ok(match source {
         SensorSource::Sim => {
-            let parts = sim.as_ref().ok_or_else(no_sim_table)?;
-            if robot != RobotAddress::Sim {
+            let parts = sim.ok_or_else(no_sim_table)?;
+            if !robot_is_sim {
                 tracing::warn!("the simulated Kinect sees the simulated body, which a real lower computer does not move");
             }
             let mut kinect = SimKinectConfig {
@@ -277,6 +307,5 @@ pub async fn open(
             })?;
             Sensor::Playback(Box::new(PlaybackSensor::new(recording)))
         }
-    };
-    Ok((sensor, controller))
+    })
 }

@@ -71,6 +71,12 @@ impl PlaybackSensor {
         }
     }
 
+    /// The id of the recording's first pose, if it has any.
+    pub fn first_pose(&self) -> Option<u16> {
+        let first = self.recording.poses.first()?;
+        u16::try_from(first.index).ok()
+    }
+
     /// The recording served.
     pub fn recording(&self) -> &Recording {
         &self.recording

@@ -26,6 +26,7 @@ pub use run::{run, verify, SessionError, SessionOutcome, VerifyOutcome};
 pub use crate::verify::{GravityReading, VisitedPose};
 
 use crate::calib::geometry::PoseDegMm;
+use crate::ground_view::GroundView;
 
 /// What happens, for the operator's progress display.
 #[derive(Debug, Clone, PartialEq)]
@@ -51,6 +52,12 @@ pub enum Event {
         index: u16,
         of: usize,
         outcome: Result<PoseFit, String>,
+    },
+    /// What the camera saw at pose `index` (`None`: at rest, before a run),
+    /// with the ground the fit chose.
+    GroundSeen {
+        index: Option<u16>,
+        view: Box<GroundView>,
     },
     /// A provisional solve over the poses fitted so far, for the live chart
     /// of θ and e_d: each pose against the mount those poses give. It moves

@@ -20,6 +20,7 @@ use crate::calib::plane::FitBuffers;
 use crate::calib::solve::Observation;
 use crate::calib::verify::{ActiveMount, VerifyReport};
 use crate::depth_image::DepthImage;
+use crate::ground_view::GroundView;
 use crate::output::ResultJson;
 use crate::recording::dump::RawTiltState;
 use crate::recording::poses::PoseRecord;
@@ -230,17 +231,31 @@ impl PendingFit {
     }
 }
 
-/// Fits the ground of a pose from its frames (on a blocking worker).
+/// Fits the ground of a pose from its frames (on a blocking worker), and
+/// shows what the camera saw with the ground it chose.
 fn fit_pose(
     processor: Arc<PoseObserver>,
     index: u16,
     body: BodyEstimate,
     frames: Vec<DepthFrame>,
+    events: UnboundedSender<Event>,
 ) -> Result<Observation, String> {
     let raw: Vec<&[u16]> = frames.iter().map(|f| f.raw.as_slice()).collect();
-    processor
-        .observe(u32::from(index), &body, &raw, &mut FitBuffers::default())
-        .map_err(|e| format!("no ground found: {e}"))
+    let fitted = processor
+        .observe_with_fit(u32::from(index), &body, &raw, &mut FitBuffers::default())
+        .map_err(|e| format!("no ground found: {e}"));
+    if let Some(frame) = raw.first() {
+        let fit = fitted.as_ref().map(|(_, fit)| fit).map_err(String::as_str);
+        let view = GroundView::of(frame, processor.camera(), fit);
+        send(
+            &events,
+            Event::GroundSeen {
+                index: Some(index),
+                view: Box::new(view),
+            },
+        );
+    }
+    fitted.map(|(observation, _)| observation)
 }
 
 /// The fewest fitted poses a provisional solve is tried on: below that the
@@ -483,7 +498,10 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
             Ok(body) => {
                 ground_from_robot = Some(body.ground_from_robot);
                 let processor = Arc::clone(&processor);
-                tokio::task::spawn_blocking(move || fit_pose(processor, index, body, frames))
+                let events = events.clone();
+                tokio::task::spawn_blocking(move || {
+                    fit_pose(processor, index, body, frames, events)
+                })
             }
             Err(e) => {
                 let reason = format!("feet: {e}");

@@ -44,6 +44,11 @@ pub enum EventJson {
         plane: Option<[f64; 4]>,
         error: Option<String>,
     },
+    /// A new picture of what the camera sees is at `GET /api/view` (of
+    /// pose `index`, or at rest when none).
+    GroundSeen {
+        index: Option<u16>,
+    },
     /// θ and e_d per pose against the mount the poses so far give.
     Provisional {
         poses: Vec<ProvisionalPoseJson>,
@@ -96,6 +101,24 @@ pub enum EventJson {
         outcome: String,
         reasons: Vec<String>,
     },
+}
+
+/// `GET /api/view`: the latest picture of what the camera sees, and the
+/// ground the fit chose in it.
+#[derive(Debug, Clone, Serialize)]
+pub struct ViewJson {
+    /// Counts pictures since the service started: a page redraws a new one.
+    pub seq: u64,
+    /// How old the picture is, milliseconds (None: there is none yet).
+    pub age_ms: Option<u64>,
+    /// When it was taken (RFC 3339, UTC).
+    pub taken: Option<String>,
+    /// The schedule's pose it shows; None: the robot at rest.
+    pub pose: Option<u16>,
+    pub view: Option<std::sync::Arc<crate::ground_view::GroundView>>,
+    /// Why no new picture can be taken now (the sensor is missing, a
+    /// recording plays its frames once).
+    pub unavailable: Option<String>,
 }
 
 /// One pose of a provisional solve.
@@ -163,6 +186,7 @@ impl From<&Event> for EventJson {
                     })
                     .collect(),
             },
+            Event::GroundSeen { index, .. } => EventJson::GroundSeen { index: *index },
             Event::Solving => EventJson::Solving,
             Event::Finished { accepted } => EventJson::Finished {
                 accepted: *accepted,
@@ -477,6 +501,7 @@ impl Status {
             EventJson::Stored { .. }
             | EventJson::Failed { .. }
             | EventJson::Checked { .. }
+            | EventJson::GroundSeen { .. }
             | EventJson::Heartbeat => {}
             EventJson::Provisional { poses } => self.provisional = Some(poses.clone()),
         }
@@ -539,9 +564,10 @@ fn step_in_words(event: &EventJson) -> Option<String> {
             "the check could not be made (see below)".into()
         }
         EventJson::Checked { .. } => return None,
-        EventJson::Stored { .. } | EventJson::Provisional { .. } | EventJson::Heartbeat => {
-            return None
-        }
+        EventJson::Stored { .. }
+        | EventJson::Provisional { .. }
+        | EventJson::GroundSeen { .. }
+        | EventJson::Heartbeat => return None,
     })
 }
 

@@ -312,3 +312,8 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
         }
     }
 }
+
+/// `GET /api/view`: the latest picture of what the camera sees.
+pub async fn get_view(State(state): State<AppState>) -> Json<super::api::ViewJson> {
+    Json(state.view_json())
+}

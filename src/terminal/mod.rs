@@ -8,7 +8,8 @@
 //! - [`auth`]: the token, one layer for every write;
 //! - [`connections`]: few and short connections, so a flood cannot lock the operator out;
 //! - [`handlers`]: the endpoints;
-//! - [`worker`]: the session thread.
+//! - [`worker`]: the session thread;
+//! - [`preview`]: the live picture of what the camera sees while no session runs.
 //!
 //! The session runs on a thread of its own (with its own single-threaded
 //! runtime) so that the hardware never has to cross threads; the HTTP side
@@ -20,6 +21,7 @@ pub mod api;
 pub mod auth;
 pub mod connections;
 pub mod handlers;
+pub mod preview;
 pub mod state;
 pub mod worker;
 
@@ -85,6 +87,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/rollback/{id}", post(post_activate))
         .route("/api/active", get(get_active))
         .route("/api/check", post(post_check))
+        .route("/api/view", get(get_view))
         // Only the routes above: an unknown endpoint is a 404 to anyone.
         .route_layer(axum::middleware::from_fn_with_state(
             state.clone(),
@@ -178,6 +181,9 @@ pub async fn serve(
     notifier.ready(&format!("listening on {address}"));
     let beating = state.clone();
     let watchdog = crate::systemd::spawn_watchdog_feed(move || beating.last_beat());
+    // The live picture, unless the start-up check runs (it starts the
+    // picture when it ends).
+    state.start_preview();
     let app = router(state.clone());
     let connections = Arc::new(Connections::default());
     let (closing, closing_seen) = tokio::sync::watch::channel(false);
@@ -189,6 +195,8 @@ pub async fn serve(
         crate::systemd::Notifier::from_env().stopping();
         stopping.stop_session("the service is stopping").await;
         stopping.mark_stopping();
+        let preview = stopping.clone();
+        let _ = tokio::task::spawn_blocking(move || preview.stop_preview()).await;
     };
     let mut graceful = std::pin::pin!(graceful);
     loop {

@@ -9,6 +9,7 @@ use std::time::{Instant, SystemTime};
 use tokio::sync::{broadcast, oneshot, watch};
 
 use super::api::{ActiveRef, EventJson, Interrupted, MotionPlan, MotionPlans, RunState, Status};
+use super::preview::{PreviewThread, ViewSlot};
 use crate::config::Config;
 use crate::hardware::Selection;
 use crate::schedule::Schedule;
@@ -30,6 +31,10 @@ struct Shared {
     shutdown: watch::Sender<bool>,
     /// When the running session's loop last beat (None: no session).
     heartbeat: Mutex<Option<Instant>>,
+    /// The latest picture of what the camera sees.
+    view: Arc<Mutex<ViewSlot>>,
+    /// The thread taking pictures while no session runs.
+    preview: Mutex<Option<PreviewThread>>,
 }
 
 /// The daemon's state, shared by every request.
@@ -93,6 +98,8 @@ impl AppState {
             }),
             events,
             heartbeat: Mutex::new(None),
+            view: Arc::default(),
+            preview: Mutex::new(None),
             abort: Mutex::new(None),
             worker: Mutex::new(None),
             shutdown,
@@ -156,7 +163,10 @@ impl AppState {
         {
             let mut status = self.status_mut();
             status.apply(&event);
-            if !matches!(event, EventJson::Provisional { .. }) {
+            if !matches!(
+                event,
+                EventJson::Provisional { .. } | EventJson::GroundSeen { .. }
+            ) {
                 status.recent_events.push_back(event.clone());
             }
             while status.recent_events.len() > RECENT {
@@ -208,6 +218,53 @@ impl AppState {
             let _ = previous.join();
         }
         Ok(())
+    }
+
+    /// Starts the live picture at rest (unless `[serve]
+    /// preview_interval_ms` is 0, or it already runs).
+    pub fn start_preview(&self) {
+        let interval = self
+            .0
+            .config
+            .serve
+            .as_ref()
+            .map_or(0, |s| s.preview_interval_ms);
+        // Checked under the preview's lock: a session marks itself running
+        // before it stops the preview, so the two never hold the sensor at once.
+        let mut preview = lock(&self.0.preview);
+        let idle = self.status_mut().state == RunState::Idle;
+        if interval == 0 || preview.is_some() || !idle || self.is_stopping() {
+            return;
+        }
+        match PreviewThread::start(
+            self.0.config.clone(),
+            self.0.selection.clone(),
+            self.0.schedule.home,
+            std::time::Duration::from_millis(interval),
+            Arc::clone(&self.0.view),
+        ) {
+            Ok(thread) => *preview = Some(thread),
+            Err(e) => tracing::warn!("cannot start the live picture: {e}"),
+        }
+    }
+
+    /// Stops the live picture and waits until it has closed the sensor: a
+    /// session opens it next. Blocks: call it from a thread of its own.
+    pub(super) fn stop_preview(&self) {
+        let running = lock(&self.0.preview).take();
+        if let Some(thread) = running {
+            thread.stop();
+        }
+    }
+
+    /// Keeps a picture of what the camera sees (at pose `pose`, or at rest).
+    pub(super) fn keep_view(&self, pose: Option<u16>, view: crate::ground_view::GroundView) {
+        lock(&self.0.view).keep(pose, view);
+    }
+
+    /// The latest picture, as `GET /api/view` answers.
+    pub(super) fn view_json(&self) -> super::api::ViewJson {
+        lock(&self.0.view).json()
     }
 
     /// The session's loop beats: it is alive now.

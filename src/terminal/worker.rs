@@ -46,6 +46,8 @@ async fn abort_reason(abort: oneshot::Receiver<String>) -> String {
 
 /// The session thread: opens the hardware, runs the session, keeps the result.
 pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
+    // The live picture holds the sensor: it is closed before the session opens it.
+    state.stop_preview();
     let runtime = match session_runtime() {
         Ok(r) => r,
         Err(e) => return finish(&state, Err(e)),
@@ -92,16 +94,22 @@ pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
     finish(&state, result);
 }
 
-/// Publishes the session's events until it ends.
+/// Publishes the session's events until it ends; its pictures go to
+/// `GET /api/view`, and the stream only says that a new one is there.
 async fn forward(state: &AppState, mut events: tokio::sync::mpsc::UnboundedReceiver<Event>) {
     while let Some(e) = events.recv().await {
-        state.publish(EventJson::from(&e));
+        let json = EventJson::from(&e);
+        if let Event::GroundSeen { index, view } = e {
+            state.keep_view(index, *view);
+        }
+        state.publish(json);
     }
 }
 
 /// The check thread: the active calibration against the sensor now, as
 /// `groundcal verify` with the configuration's `[verify] poses`.
 pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
+    state.stop_preview();
     let runtime = match session_runtime() {
         Ok(r) => r,
         Err(e) => return finish_check(&state, Err(e)),
@@ -226,6 +234,7 @@ fn finish_check(state: &AppState, outcome: Result<(VerifyJson, String), String>)
         outcome: outcome_words.into(),
         reasons,
     });
+    state.start_preview();
 }
 
 fn finish(state: &AppState, result: Result<Value, String>) {
@@ -278,4 +287,5 @@ fn finish(state: &AppState, result: Result<Value, String>) {
             state.publish(EventJson::Failed { error });
         }
     }
+    state.start_preview();
 }

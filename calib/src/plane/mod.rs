@@ -211,6 +211,44 @@ pub struct GroundFit {
     /// Rejection iterations done.
     pub iterations: usize,
     pub method: GroundFitMethod,
+    /// The final rejection band: which pixels the fit took for the ground.
+    pub band: InlierBand,
+}
+
+/// The band around the plane within which a fit counted a reading as the
+/// ground, in the fit's own measure (the last rejection's).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum InlierBand {
+    /// Within this much inverse depth (1/m) of the plane along the pixel's
+    /// ray: the disparity fit's band.
+    InverseDepth(f64),
+    /// Within this many σ(z) of the plane ([`crate::sensor::depth_weight`]):
+    /// the paper's fit's band.
+    Sigmas(f64),
+}
+
+impl GroundFit {
+    /// Whether a reading (a point in the sensor frame, metres) lies in the
+    /// band the fit kept: the ground as the fit saw it, edges included
+    /// (the fit's edge guard also leaves out the rows just under an edge).
+    pub fn holds(&self, point: &Vector3<f64>) -> bool {
+        // The depth along the optical axis (x, conventions.md).
+        let z = point.x;
+        if z.is_nan() || z <= 0.0 || self.plane.d <= 0.0 {
+            return false;
+        }
+        let distance = self.plane.signed_distance(point);
+        match self.band {
+            // Along the ray p = z·r, the plane's inverse depth is −(n·r)/d,
+            // so the reading's 1/z misses it by (n·p + d)/(z·d).
+            InlierBand::InverseDepth(band) => (distance / (z * self.plane.d)).abs() <= band,
+            InlierBand::Sigmas(band) => {
+                let distance_mm = distance * 1e3;
+                distance_mm * distance_mm * f64::from(super::sensor::depth_weight(z as f32))
+                    < band * band
+            }
+        }
+    }
 }
 
 /// Why no ground was found.
@@ -473,6 +511,7 @@ fn fit_in_inverse_depth<T: FitValue>(
         rms_m: variance.sqrt() * domain.scale.abs() / (mean_w * mean_w).max(1e-12),
         iterations,
         method: GroundFitMethod::Disparity,
+        band: InlierBand::InverseDepth(band * domain.scale.abs()),
     })
 }
 

@@ -326,6 +326,7 @@ pub fn fit(
         rms_m: (m.distance_sq / m.count.max(1) as f64).sqrt(),
         iterations: coarse.iterations + fine.iterations,
         method: super::GroundFitMethod::Paper,
+        band: super::InlierBand::Sigmas(fine.band),
     })
 }
 
