@@ -286,6 +286,10 @@ pub struct GateCheckJson {
     /// Where the measured value comes from: "pose 7", "β", a direction.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub at: Option<String>,
+    /// The same, typed (`{"kind": "pose", "index": 7}`, …), for a page that
+    /// words it in its own language.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub place: Option<crate::calib::outcome::GatePlace>,
 }
 
 impl From<&GateCheck> for GateCheckJson {
@@ -297,6 +301,7 @@ impl From<&GateCheck> for GateCheckJson {
             at_least: c.at_least,
             passed: c.passed,
             at: c.at.clone(),
+            place: c.place,
         }
     }
 }
@@ -852,6 +857,10 @@ mod tests {
         assert_eq!(doc["gate_checks"][1]["gate"], "e_d_max_mm");
         assert_eq!(doc["gate_checks"][1]["passed"], false);
         assert_eq!(doc["gate_checks"][1]["at"], "pose 15");
+        assert_eq!(
+            doc["gate_checks"][1]["place"],
+            serde_json::json!({"kind": "pose", "index": 15})
+        );
 
         let mut old = doc.clone();
         let object = old.as_object_mut().unwrap();

@@ -54,7 +54,7 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     // Idle: no empty result or chart card.
     assert_eq!(
         seen["idleCards"],
-        serde_json::json!(["run", "active-card", "history-card"]),
+        serde_json::json!(["run", "view-card", "active-card", "history-card"]),
         "{seen}"
     );
     // Calibrate asks first, saying how long the robot moves and to keep
@@ -695,5 +695,47 @@ fn after_a_crash_nothing_moves_until_a_person_confirms() {
         "{stderr}"
     );
     common::stop_sim_robot(robot);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+/// What the camera sees, on the page (issue 21): with boxes and a wall in
+/// view, the picture is drawn as the daemon serves it, the floor coloured
+/// and the boxes not, at phone and pad size; and the page in Simplified
+/// Chinese at phone size, through a whole calibration.
+#[test]
+fn the_page_shows_what_the_camera_sees_and_speaks_chinese() {
+    if !common::browser_ready("serve_browser") {
+        return;
+    }
+    let dir = common::temp_dir("serve-view");
+    let (server, addr) = common::spawn_serve_with(
+        &dir,
+        TOKEN,
+        &[("world = \"flat\"", "world = \"clutter\"")],
+        &[],
+        &[],
+    );
+    let shots = common::root().join("target/test-screenshots");
+    fs::create_dir_all(&shots).expect("screenshot directory");
+    let url = format!("http://{addr}/");
+    let seen = common::run_browser_script(
+        "serve-view.mjs",
+        &[OsStr::new(&url), OsStr::new(TOKEN), shots.as_os_str()],
+    );
+    eprintln!("the picture and Chinese: {}", seen["seen"]);
+    let seen = &seen["seen"];
+    for device in ["phone", "pad"] {
+        assert_eq!(seen[device]["wrong"], 0, "{seen}");
+        assert!(seen[device]["green"].as_u64().unwrap() >= 500, "{seen}");
+        assert!(seen[device]["grey"].as_u64().unwrap() >= 300, "{seen}");
+    }
+    assert_eq!(seen["zh"]["missing"], serde_json::json!([]), "{seen}");
+    assert_eq!(seen["zh"]["calibrate"], "标定", "{seen}");
+    assert!(
+        seen["zhVerdict"].as_str().unwrap().contains("检查"),
+        "{seen}"
+    );
+    let (code, stderr) = common::terminate(server);
+    assert_eq!(code, 0, "{stderr}");
     let _ = fs::remove_dir_all(&dir);
 }

@@ -178,6 +178,25 @@ pub struct GateCheck {
     /// Where the measured value comes from, in words: the worst pose
     /// ("pose 7"), parameter ("β") or direction.
     pub at: Option<String>,
+    /// The same, typed, for a reader that words it in its own language.
+    pub place: Option<GatePlace>,
+}
+
+/// Where a gate's measured value comes from.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum GatePlace {
+    /// The worst pose, by its index.
+    Pose { index: u32 },
+    /// The worst parameter: 0–2 the angles α, β, γ, 3–5 the positions x, y, z.
+    Parameter { index: usize },
+    /// The poses used, of all.
+    PosesUsed { used: usize, total: usize },
+    /// The depth scale.
+    DepthScale,
+    /// The direction the schedule pins down least, in the robot frame: a
+    /// rotation's axis, or a direction of the position.
+    Direction { rotation: bool, axis: [f64; 3] },
 }
 
 impl Calibration {

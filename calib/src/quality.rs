@@ -5,8 +5,8 @@ use nalgebra::Vector6;
 use serde::{Deserialize, Serialize};
 
 use crate::outcome::{
-    position_words, rotation_words, Calibration, GateCheck, Observability, PoseOutcome, Solution,
-    Summary, Verdict,
+    position_words, rotation_words, Calibration, GateCheck, GatePlace, Observability, PoseOutcome,
+    Solution, Summary, Verdict,
 };
 
 /// Thresholds a calibration must meet to be accepted. Degrees and millimetres,
@@ -138,6 +138,7 @@ fn depth_scale_check(gates: &Gates, scale: &crate::outcome::DepthScale) -> Optio
             at_least: false,
             passed: at_most(deviation, gates.depth_scale_max_deviation),
             at: Some("depth scale".into()),
+            place: Some(GatePlace::DepthScale),
         }
     })
 }
@@ -198,7 +199,7 @@ pub fn check_gates(
             .iter()
             .filter(|p| p.used)
             .max_by(|a, b| key(a).total_cmp(&key(b)))
-            .map(|p| format!("pose {}", p.index))
+            .map(|p| p.index)
     };
     // The worst σ of three, NaN (unobservable) first.
     let worst_sigma = |offset: usize, scale: f64, names: [&str; 3]| {
@@ -210,39 +211,63 @@ pub fn check_gates(
                 _ => a.1.total_cmp(&b.1),
             })
             .unwrap_or((0, f64::NAN));
-        (s, Some(names[k].to_string()))
+        (
+            s,
+            Some(names[k].to_string()),
+            Some(GatePlace::Parameter { index: offset + k }),
+        )
     };
-    let max = |gate, limit, (measured, at): (f64, Option<String>)| GateCheck {
-        gate,
-        limit,
-        measured,
-        at_least: false,
-        passed: at_most(measured, limit),
-        at,
+    let at_pose = |index: Option<u32>| {
+        (
+            index.map(|i| format!("pose {i}")),
+            index.map(|index| GatePlace::Pose { index }),
+        )
     };
+    let max =
+        |gate, limit, (measured, at, place): (f64, Option<String>, Option<GatePlace>)| GateCheck {
+            gate,
+            limit,
+            measured,
+            at_least: false,
+            passed: at_most(measured, limit),
+            at,
+            place,
+        };
     let theta = summary.theta_max.to_degrees();
     let e_d = summary.e_d_max * 1e3;
     let fraction = summary.poses_used as f64 / summary.poses_total.max(1) as f64;
     let weakest_rotation = observability.rotation_singular_values[2];
     let weakest_translation = observability.translation_singular_values[2];
-    let (weakest, weakest_words) = if weakest_translation < weakest_rotation {
+    let (weakest, weakest_words, weakest_place) = if weakest_translation < weakest_rotation {
+        let axis = observability.translation_weakest_axis;
         (
             weakest_translation,
-            position_words(&observability.translation_weakest_axis),
+            position_words(&axis),
+            GatePlace::Direction {
+                rotation: false,
+                axis,
+            },
         )
     } else {
+        let axis = observability.rotation_weakest_axis;
         (
             weakest_rotation,
-            rotation_words(&observability.rotation_weakest_axis),
+            rotation_words(&axis),
+            GatePlace::Direction {
+                rotation: true,
+                axis,
+            },
         )
     };
     vec![
-        max(
-            "theta_max_deg",
-            gates.theta_max_deg,
-            (theta, worst_pose(|p| p.theta)),
-        ),
-        max("e_d_max_mm", gates.e_d_max_mm, (e_d, worst_pose(|p| p.e_d))),
+        max("theta_max_deg", gates.theta_max_deg, {
+            let (at, place) = at_pose(worst_pose(|p| p.theta));
+            (theta, at, place)
+        }),
+        max("e_d_max_mm", gates.e_d_max_mm, {
+            let (at, place) = at_pose(worst_pose(|p| p.e_d));
+            (e_d, at, place)
+        }),
         max(
             "sigma_angle_max_deg",
             gates.sigma_angle_max_deg,
@@ -260,6 +285,7 @@ pub fn check_gates(
             at_least: true,
             passed: summary.poses_used >= gates.min_poses_used,
             at: None,
+            place: None,
         },
         GateCheck {
             gate: "min_used_fraction",
@@ -271,6 +297,10 @@ pub fn check_gates(
                 "{} of {} poses",
                 summary.poses_used, summary.poses_total
             )),
+            place: Some(GatePlace::PosesUsed {
+                used: summary.poses_used,
+                total: summary.poses_total,
+            }),
         },
         GateCheck {
             gate: "observable",
@@ -279,6 +309,7 @@ pub fn check_gates(
             at_least: true,
             passed: observability.problems.is_empty(),
             at: Some(weakest_words),
+            place: Some(weakest_place),
         },
     ]
 }

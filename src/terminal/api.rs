@@ -7,6 +7,7 @@ use std::time::Instant;
 use serde::Serialize;
 use serde_json::Value;
 
+use crate::calib::geometry::PoseDegMm;
 use crate::calib::quality::Gates;
 use crate::schedule::body_pose_in_words;
 use crate::session::{Event, RobotLeft};
@@ -31,6 +32,8 @@ pub enum EventJson {
         of: usize,
         /// The commanded body pose in words ("rolled 20° right, …").
         motion: String,
+        /// The commanded body pose, for a page that says it in its own words.
+        commanded: PoseDegMm,
     },
     Capturing {
         index: u16,
@@ -119,6 +122,9 @@ pub struct ViewJson {
     /// Why no new picture can be taken now (the sensor is missing, a
     /// recording plays its frames once).
     pub unavailable: Option<String>,
+    /// Whether pictures are taken while no session runs (`[serve]
+    /// preview_interval_ms` is not 0).
+    pub live_at_rest: bool,
 }
 
 /// One pose of a provisional solve.
@@ -152,6 +158,7 @@ impl From<&Event> for EventJson {
                 index: *index,
                 of: *of,
                 motion: body_pose_in_words(commanded),
+                commanded: *commanded,
             },
             Event::Capturing { index, of } => EventJson::Capturing {
                 index: *index,
@@ -319,6 +326,46 @@ pub struct CheckStatus {
     pub report: Option<crate::verify::VerifyJson>,
 }
 
+/// What a session is doing, as the last event that changed it says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// The schedule passed its checks; connecting to the lower computer.
+    Started,
+    /// Connected; walking to the home stance.
+    Connected,
+    /// At the home stance; tilting the Kinect.
+    AtHome,
+    /// The Kinect is tilted; the first pose comes.
+    SensorReady,
+    /// Moving the body to pose `pose` (`commanded`).
+    Moving,
+    /// Holding still at pose `pose`, capturing the ground.
+    Capturing,
+    /// The ground of pose `pose` was found.
+    PoseFound,
+    /// Pose `pose` was set aside (the step says why).
+    PoseSetAside,
+    /// Back at home, solving.
+    Solving,
+    /// The calibration finished (its result says how).
+    Finished,
+    /// The check finished (its outcome says how).
+    Verified,
+    /// Abort reached the daemon: halting the robot and sending it home.
+    Aborting,
+    /// Stopping after a failure: halting the robot.
+    Halting,
+    /// Halted; walking home.
+    WalkingHome,
+    /// Aborted (see `abort`).
+    Aborted,
+    /// Stopped without a result (see `error`).
+    Failed,
+    /// The check could not be made (see `check`).
+    CheckFailed,
+}
+
 /// What `GET /api/status` shows.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Status {
@@ -338,6 +385,10 @@ pub struct Status {
     /// What the calibration is doing now, in an operator's words ("walking
     /// to pose 7 of 52: rolled 20° right, body at 615 mm").
     pub step: String,
+    /// The same, typed: the page words it in its own language.
+    pub phase: Option<Phase>,
+    /// The body pose the robot is moving to or holds (while running).
+    pub commanded: Option<PoseDegMm>,
     /// Seconds since the calibration started (while running).
     pub elapsed_s: Option<f64>,
     /// Seconds left, estimated from the poses' measured durations (once a
@@ -431,7 +482,10 @@ impl Status {
         let said_why = self.step.starts_with("aborted");
         match step_in_words(event) {
             Some(_) if said_why && matches!(event, EventJson::Failed { .. }) => {}
-            Some(step) => self.step = step,
+            Some(step) => {
+                self.step = step;
+                self.phase = phase_of(event);
+            }
             None => {}
         }
         if let Some(clock) = &mut self.clock {
@@ -456,9 +510,15 @@ impl Status {
             EventJson::SensorReady { tilt_deg } => {
                 self.robot = format!("Kinect tilted to {tilt_deg}°")
             }
-            EventJson::Moving { index, of, .. } => {
+            EventJson::Moving {
+                index,
+                of,
+                commanded,
+                ..
+            } => {
                 self.pose = Some(*index);
                 self.of = Some(*of);
+                self.commanded = Some(*commanded);
                 self.robot = "moving".into();
             }
             EventJson::Capturing { index, of } => {
@@ -508,6 +568,34 @@ impl Status {
     }
 }
 
+/// The phase an event that changes the step puts the session in.
+fn phase_of(event: &EventJson) -> Option<Phase> {
+    Some(match event {
+        EventJson::Started { .. } => Phase::Started,
+        EventJson::Connected { .. } => Phase::Connected,
+        EventJson::AtHome => Phase::AtHome,
+        EventJson::SensorReady { .. } => Phase::SensorReady,
+        EventJson::Moving { .. } => Phase::Moving,
+        EventJson::Capturing { .. } => Phase::Capturing,
+        EventJson::PoseDone { ok: true, .. } => Phase::PoseFound,
+        EventJson::PoseDone { ok: false, .. } => Phase::PoseSetAside,
+        EventJson::Solving => Phase::Solving,
+        EventJson::Finished { .. } => Phase::Finished,
+        EventJson::Verified { .. } => Phase::Verified,
+        EventJson::Aborting { .. } => Phase::Aborting,
+        EventJson::Halting { .. } => Phase::Halting,
+        EventJson::WalkingHome => Phase::WalkingHome,
+        EventJson::Aborted { .. } => Phase::Aborted,
+        EventJson::Failed { .. } => Phase::Failed,
+        EventJson::Checked { .. } => Phase::CheckFailed,
+        EventJson::Activated { .. }
+        | EventJson::Stored { .. }
+        | EventJson::Provisional { .. }
+        | EventJson::GroundSeen { .. }
+        | EventJson::Heartbeat => return None,
+    })
+}
+
 /// What an event says the calibration is doing, in an operator's words; None
 /// for an event that does not change the step.
 fn step_in_words(event: &EventJson) -> Option<String> {
@@ -520,7 +608,9 @@ fn step_in_words(event: &EventJson) -> Option<String> {
         EventJson::SensorReady { tilt_deg } => {
             format!("Kinect at {tilt_deg}°; starting the first pose")
         }
-        EventJson::Moving { index, of, motion } => {
+        EventJson::Moving {
+            index, of, motion, ..
+        } => {
             format!("pose {index} of {of}: moving the body ({motion})")
         }
         EventJson::Capturing { index, of } => {
@@ -590,10 +680,13 @@ mod tests {
             index,
             of: 10,
             motion: "body at 600 mm".into(),
+            commanded: PoseDegMm::from_values([0.0, 0.0, 0.0, 0.0, 600.0, 0.0]),
         };
         status.apply_at(&moving(1), at(5));
         assert_eq!(status.at(at(6)).remaining_s, None, "no pose done yet");
         assert!(status.step.starts_with("pose 1 of 10: moving the body"));
+        assert_eq!(status.phase, Some(Phase::Moving));
+        assert_eq!(status.commanded.map(|c| c.py_mm), Some(600.0));
         for index in 1..=4u16 {
             let done = EventJson::PoseDone {
                 index,

@@ -38,12 +38,20 @@ fn store_error(e: StoreError) -> ApiError {
 }
 
 /// Who sent a request, for the status and the store: the page's own name for
-/// itself (if any) and the address.
+/// itself (if any; percent-encoded UTF-8, as a header carries only ASCII)
+/// and the address.
 fn client_name(headers: &HeaderMap, addr: SocketAddr) -> String {
     headers
         .get("x-groundcal-client")
         .and_then(|v| v.to_str().ok())
-        .map(|s| s.trim().chars().take(64).collect::<String>())
+        .map(|s| percent_encoding::percent_decode_str(s).decode_utf8_lossy())
+        .map(|s| {
+            s.trim()
+                .chars()
+                .filter(|c| !c.is_control())
+                .take(64)
+                .collect::<String>()
+        })
         .filter(|s| !s.is_empty())
         .map(|s| format!("{s} ({})", addr.ip()))
         .unwrap_or_else(|| addr.to_string())

@@ -46,6 +46,8 @@ pub const PAGE: &str = include_str!("page.html");
 pub const PAGE_CSS: &str = include_str!("page.css");
 /// The page's script.
 pub const PAGE_JS: &str = include_str!("page.js");
+/// The page's words in every language it speaks.
+pub const PAGE_WORDS_JS: &str = include_str!("page-words.js");
 
 /// What a page of this daemon may load and do: its own style, script and
 /// API, nothing inline, nothing from elsewhere, and it may not be framed
@@ -74,6 +76,15 @@ pub fn router(state: AppState) -> Router {
                 (
                     [(header::CONTENT_TYPE, "text/javascript; charset=utf-8")],
                     PAGE_JS,
+                )
+            }),
+        )
+        .route(
+            "/page-words.js",
+            get(|| async {
+                (
+                    [(header::CONTENT_TYPE, "text/javascript; charset=utf-8")],
+                    PAGE_WORDS_JS,
                 )
             }),
         )

@@ -9,6 +9,47 @@
 'use strict';
 const $ = (id) => document.getElementById(id);
 
+// ---- the language ----------------------------------------------------------
+
+// The browser's language unless the operator chose one on this device; the
+// words come from WORDS (page-words.js).
+function chooseLanguage() {
+  const saved = localStorage.getItem('groundcal-language');
+  if (saved && WORDS[saved]) return saved;
+  for (const l of navigator.languages || [navigator.language || 'en']) {
+    const base = String(l).toLowerCase().split('-')[0];
+    if (WORDS[base]) return base;
+  }
+  return 'en';
+}
+let language = chooseLanguage();
+// A word of the catalogue; a function word is called with `args`.
+function t(key, ...args) {
+  const w = key in WORDS[language] ? WORDS[language][key] : WORDS.en[key];
+  return typeof w === 'function' ? w(...args) : w;
+}
+// The page's fixed words: elements marked data-w (text), data-w-title and
+// data-w-placeholder.
+function applyLanguage() {
+  document.documentElement.lang = language === 'zh' ? 'zh-CN' : 'en';
+  for (const e of document.querySelectorAll('[data-w]')) e.textContent = t(e.dataset.w);
+  for (const e of document.querySelectorAll('[data-w-title]')) e.title = t(e.dataset.wTitle);
+  for (const e of document.querySelectorAll('[data-w-placeholder]')) e.placeholder = t(e.dataset.wPlaceholder);
+  const select = $('language');
+  select.innerHTML = '';
+  for (const [code, words] of Object.entries(WORDS)) {
+    const option = document.createElement('option');
+    option.value = code; option.textContent = words.languageName; option.selected = code === language;
+    select.appendChild(option);
+  }
+  drawn.clear();
+}
+// Text that came from the robot's computer as English words, marked so.
+function english(element, text) {
+  element.textContent = text;
+  element.lang = 'en';
+}
+
 const model = {
   status: null, // the last GET /api/status
   contact: 'connecting', // 'connecting' | 'ok' | 'lost'
@@ -29,14 +70,17 @@ const model = {
 const SILENCE_MS = 2200;
 const REQUEST_MS = 3000;
 
+// The six values: key and unit (their names are words of the catalogue).
 const PARAMS = [
-  ['alpha_deg', 'α', '°', 'rotation about the vertical'],
-  ['beta_deg', 'β', '°', 'pitch'],
-  ['gamma_deg', 'γ', '°', 'roll'],
-  ['px_mm', 'x', ' mm', 'forward'],
-  ['py_mm', 'y', ' mm', 'up'],
-  ['pz_mm', 'z', ' mm', 'right'],
+  ['alpha_deg', '°'],
+  ['beta_deg', '°'],
+  ['gamma_deg', '°'],
+  ['px_mm', ' mm'],
+  ['py_mm', ' mm'],
+  ['pz_mm', ' mm'],
 ];
+const paramName = (key) => t('params')[key][0];
+const paramWords = (key) => t('params')[key][1];
 
 // ---- the token and the calls that need it --------------------------------
 
@@ -50,14 +94,12 @@ function explain(response, body) {
   const token = tokenField.value.trim();
   if (response.status === 401) {
     $('token-card').open = true;
-    return token
-      ? 'The token is not right. Copy it again from the robot\'s token file.'
-      : 'Type the token first (below): it is in the robot\'s token file.';
+    return token ? t('tokenWrong') : t('tokenFirst');
   }
   if (response.status === 403 || response.status === 421) {
-    return 'The robot refused this page: open it at the robot\'s own address.';
+    return t('refused');
   }
-  return (body && body.error) || ('the robot answered ' + response.status);
+  return (body && body.error) || t('answered', response.status);
 }
 
 // A request that gives up after `ms`: a daemon that stopped, or a link that
@@ -76,13 +118,12 @@ async function fetchWithin(url, options, ms) {
 // cannot know what the robot does, so it says what it knows.
 function notSent(what, timedOut) {
   const running = model.status && model.status.state === 'running';
-  return what + ' could not be sent: the robot\'s computer ' + (timedOut ? 'did not answer within ' + (REQUEST_MS / 1000) + ' s.' : 'refused the connection or cannot be reached.')
-    + (running ? ' If groundcal has stopped, the robot\'s own watchdog halts the body within 1 s; if only this device\'s link is down, the run goes on. Use the robot\'s emergency stop if anyone is at risk.' : '');
+  return t('notSent', what, timedOut, running, REQUEST_MS / 1000);
 }
 
 // `what` names the button in the words shown when it fails ("Abort").
 async function call(method, url, what) {
-  const headers = { 'Authorization': 'Bearer ' + tokenField.value.trim(), 'X-Groundcal-Client': 'terminal page' };
+  const headers = { 'Authorization': 'Bearer ' + tokenField.value.trim(), 'X-Groundcal-Client': encodeURIComponent(t('clientName')) };
   let response;
   let body = {};
   model.sending = what;
@@ -116,15 +157,15 @@ $('confirm-run-yes').onclick = async () => {
   model.confirmRun = null;
   if (!kind) return;
   const started = kind === 'calibration'
-    ? await call('POST', '/api/calibrations', 'Calibrate')
-    : await call('POST', '/api/check', 'Check');
+    ? await call('POST', '/api/calibrations', t('calibrate'))
+    : await call('POST', '/api/check', t('check'));
   if (started) refresh();
 };
 // Abort is never pretended: the page says "aborting…" only once the daemon
 // has it (the status's `abort`), and says so when it could not be sent.
 $('abort').onclick = async () => {
   model.confirmRun = null;
-  await call('POST', '/api/calibrations/current/abort', 'Abort');
+  await call('POST', '/api/calibrations/current/abort', t('abort'));
   refresh();
 };
 $('accept').onclick = () => {
@@ -137,11 +178,11 @@ $('confirm-yes').onclick = async () => {
   if (!c) return;
   model.confirm = null;
   const url = c.kind === 'accept' ? '/api/calibrations/' + c.id + '/accept' : '/api/rollback/' + c.id;
-  const active = await call('POST', url, c.kind === 'accept' ? 'Accept' : 'Roll back');
+  const active = await call('POST', url, c.kind === 'accept' ? t('accept') : t('rollBack'));
   if (active) {
     model.active = active;
     const wasActive = model.status && model.status.active;
-    model.message = { text: (c.kind === 'accept' ? 'Accepted: ' : wasActive ? 'Rolled back: ' : 'Made active: ') + 'the calibration of ' + madeOn(c.id) + ' is now the active one.', kind: 'ok', activeId: c.id };
+    model.message = { text: t(c.kind === 'accept' ? 'accepted' : wasActive ? 'rolledBack' : 'madeActive', madeOn(c.id)), kind: 'ok', activeId: c.id };
     loadStore();
   }
   render();
@@ -151,8 +192,8 @@ $('confirm-yes').onclick = async () => {
 
 function duration(seconds) {
   const s = Math.max(0, Math.round(seconds));
-  if (s < 60) return s + ' s';
-  return Math.floor(s / 60) + ' min ' + String(s % 60).padStart(2, '0') + ' s';
+  if (s < 60) return t('seconds', s);
+  return t('minutesSeconds', Math.floor(s / 60), s % 60);
 }
 // When a calibration was made, in the device's own time, from the history
 // (its id is a time too, in UTC: the fallback).
@@ -170,35 +211,37 @@ function list(element, lines) {
 // What an operator can do about each failed check (by its gate), and
 // which calibration the robot uses meanwhile.
 const TODO = {
-  theta_max_deg: 'Make sure the robot stands on flat, firm ground, with nothing on the floor in front of it (boxes, cables, people), then press Calibrate again.',
-  e_d_max_mm: 'Make sure the robot stands on flat, firm ground, with nothing on the floor in front of it, and that no foot has slipped; then press Calibrate again.',
-  sigma_angle_max_deg: 'Press Calibrate again with nothing moving in view. If it fails the same way, ask a maintainer to check the schedule.',
-  sigma_position_max_mm: 'Press Calibrate again with nothing moving in view. If it fails the same way, ask a maintainer to check the schedule.',
-  min_poses_used: 'Many poses found no ground: clear the floor in front of the robot, check that the lens is clean and uncovered and that the Kinect points at the floor, then press Calibrate again.',
-  min_used_fraction: 'Many poses found no ground: clear the floor in front of the robot, check that the lens is clean and uncovered and that the Kinect points at the floor, then press Calibrate again.',
-  depth_scale_max_deviation: 'The depth reads far from the truth: ask a maintainer to check the sensor\'s depth settings.',
-  observable: 'The schedule cannot pin the sensor down: ask a maintainer to check it.',
+  theta_max_deg: 'todoGround',
+  e_d_max_mm: 'todoFeet',
+  sigma_angle_max_deg: 'todoStill',
+  sigma_position_max_mm: 'todoStill',
+  min_poses_used: 'todoNoGround',
+  min_used_fraction: 'todoNoGround',
+  depth_scale_max_deviation: 'todoScale',
+  observable: 'todoSchedule',
 };
 function todoFor(result) {
   const lines = [];
   for (const c of result.gate_checks || []) {
-    const line = !c.passed && TODO[c.gate];
+    const line = !c.passed && TODO[c.gate] && t(TODO[c.gate]);
     if (line && !lines.includes(line)) lines.push(line);
   }
-  if ((result.reasons || []).some((r) => /motor/.test(r))) lines.push('The Kinect\'s tilt motor moved during the run: make sure nothing touches the sensor, then press Calibrate again.');
-  if (!lines.length) lines.push('Press Calibrate again; if it fails the same way, ask a maintainer.');
+  if ((result.reasons || []).some((r) => /motor/.test(r))) lines.push(t('todoMotor'));
+  if (!lines.length) lines.push(t('todoAgain'));
   const active = model.status && model.status.active;
-  lines.push(active ? 'Meanwhile the robot uses the active calibration, of ' + madeOn(active.id) + '.' : 'Meanwhile the robot uses no calibration from groundcal.');
+  lines.push(active ? t('meanwhileActive', madeOn(active.id)) : t('meanwhileNone'));
   return lines;
 }
 
 // "about 2 min", "about 10 s": how long the robot will move.
 function about(seconds) {
-  return seconds >= 90 ? 'about ' + Math.round(seconds / 60) + ' min' : 'about ' + Math.max(1, Math.round(seconds)) + ' s';
+  return seconds >= 90 ? t('aboutMinutes', Math.round(seconds / 60)) : t('aboutSeconds', Math.max(1, Math.round(seconds)));
 }
+// A time in the device's own time zone, in the page's language.
 function when(rfc3339) {
-  const t = new Date(rfc3339);
-  return isNaN(t) ? (rfc3339 || '?') : t.toLocaleString([], { dateStyle: 'medium', timeStyle: 'medium' });
+  const time = new Date(rfc3339);
+  const locale = language === 'zh' ? 'zh-CN' : [];
+  return isNaN(time) ? (rfc3339 || '?') : time.toLocaleString(locale, { dateStyle: 'medium', timeStyle: 'medium' });
 }
 function fixed(value, unit) { return value.toFixed(unit === '°' ? 3 : 1); }
 // A σ with two significant digits: 0.0022°, 0.049 mm.
@@ -210,13 +253,12 @@ function changeInWords(mount, active) {
   if (!active || !active.robot_from_sensor) return '';
   let angle = null;
   let shift = null;
-  for (const [key, name, unit] of PARAMS) {
+  for (const [key, unit] of PARAMS) {
     const delta = mount[key] - active.robot_from_sensor[key];
-    const slot = { name, delta, unit };
+    const slot = { name: paramName(key), delta, unit };
     if (unit === '°') { if (!angle || Math.abs(delta) > Math.abs(angle.delta)) angle = slot; } else if (!shift || Math.abs(delta) > Math.abs(shift.delta)) shift = slot;
   }
-  return 'Against the active calibration (of ' + madeOn(active.id) + '): angles differ by up to ' + Math.abs(angle.delta).toFixed(3)
-    + '° (' + angle.name + '), positions by up to ' + Math.abs(shift.delta).toFixed(1) + ' mm (' + shift.name + ').';
+  return t('changeAgainst', madeOn(active.id), Math.abs(angle.delta).toFixed(3), angle.name, Math.abs(shift.delta).toFixed(1), shift.name);
 }
 
 // predicted: the σ `plan` predicted before the robot moved (shown under
@@ -227,16 +269,16 @@ function valuesTable(table, mount, sigma, active, predicted, scale) {
   const head = table.insertRow();
   // Short headers, the longer words small beneath: at phone width every
   // column must fit.
-  for (const [h, under] of [['', ''], ['value', ''], ['±σ', predicted ? '(predicted)' : ''], [active ? 'change' : '', '']]) {
+  for (const [h, under] of [['', ''], [t('colValue'), ''], ['±σ', predicted ? t('colPredicted') : ''], [active ? t('colChange') : '', '']]) {
     const th = document.createElement('th'); th.textContent = h;
     if (under) { const small = document.createElement('div'); small.className = 'small'; small.textContent = under; th.appendChild(small); }
     head.appendChild(th);
   }
-  for (const [key, name, unit, words] of PARAMS) {
+  for (const [key, unit] of PARAMS) {
     const row = table.insertRow();
     const label = row.insertCell();
-    const small = document.createElement('span'); small.className = 'small'; small.textContent = ' ' + words;
-    label.append(name, small);
+    const small = document.createElement('span'); small.className = 'small'; small.textContent = ' ' + paramWords(key);
+    label.append(paramName(key), small);
     row.insertCell().textContent = fixed(mount[key], unit) + unit;
     const sigmaCell = row.insertCell();
     sigmaCell.textContent = sigma ? sig(sigma[key]) + unit : '';
@@ -254,7 +296,7 @@ function valuesTable(table, mount, sigma, active, predicted, scale) {
     const row = table.insertRow();
     const label = row.insertCell();
     const small = document.createElement('span'); small.className = 'small';
-    small.textContent = scale.estimated ? ' depth reads × this' : ' given, not estimated';
+    small.textContent = scale.estimated ? t('scaleEstimated') : t('scaleGiven');
     label.append('s', small);
     row.insertCell().textContent = scale.value.toFixed(4);
     const sigmaCell = row.insertCell();
@@ -272,23 +314,40 @@ function valuesTable(table, mount, sigma, active, predicted, scale) {
 
 // Each quality gate as it was checked, in words: what was measured (and
 // where), against the limit, passed or not.
-const GATE_WORDS = {
-  theta_max_deg: ['ground angle θ, the worst pose', '°', 3],
-  e_d_max_mm: ['ground height e_d, the worst pose', ' mm', 2],
-  sigma_angle_max_deg: ['uncertainty of the angles, the worst', '°', 4],
-  sigma_position_max_mm: ['uncertainty of the positions, the worst', ' mm', 3],
-  min_poses_used: ['poses used', '', 0],
-  min_used_fraction: ['share of the poses used', '%', 0],
-  observable: ['how well the schedule pins the sensor down', '', 3],
-  depth_scale_max_deviation: ['depth scale, off from 1 by', '%', 2],
+// Each gate's unit and digits (its name is a word of the catalogue).
+const GATE_UNITS = {
+  theta_max_deg: ['°', 3],
+  e_d_max_mm: [' mm', 2],
+  sigma_angle_max_deg: ['°', 4],
+  sigma_position_max_mm: [' mm', 3],
+  min_poses_used: ['', 0],
+  min_used_fraction: ['%', 0],
+  observable: ['', 3],
+  depth_scale_max_deviation: ['%', 2],
 };
+// Where a gate's value comes from (the check's typed `place`), in words.
+const AXES = ['forward', 'up', 'right'];
+function placeInWords(place) {
+  if (!place) return '';
+  let words = '';
+  if (place.kind === 'pose') words = t('poseN', place.index);
+  else if (place.kind === 'parameter') { const key = PARAMS[place.index][0]; words = paramName(key) + ', ' + paramWords(key); }
+  else if (place.kind === 'poses_used') words = t('posesUsedOf', place.used, place.total);
+  else if (place.kind === 'direction') {
+    const a = place.axis.map(Math.abs);
+    const k = a.indexOf(Math.max(...a));
+    words = t(place.rotation ? 'weakRotation' : 'weakPosition', t('axes')[AXES[k]]);
+  }
+  return words ? ' (' + words + ')' : '';
+}
 function gateLines(result) {
   return (result.gate_checks || []).map((c) => {
-    const [name, unit, digits] = GATE_WORDS[c.gate] || [c.gate, '', 3];
+    const [unit, digits] = GATE_UNITS[c.gate] || ['', 3];
+    const name = t('gates')[c.gate] || c.gate;
     const scale = unit === '%' ? 100 : 1;
     const value = (v) => (v * scale).toFixed(digits) + unit;
-    const where = c.at ? ' (' + c.at + ')' : '';
-    return (c.passed ? '✓ ' : '✗ ') + name + ': ' + value(c.measured) + where + ', ' + (c.at_least ? 'at least ' : 'at most ') + value(c.limit);
+    const where = placeInWords(c.place);
+    return (c.passed ? '✓ ' : '✗ ') + name + ': ' + value(c.measured) + where + ', ' + (c.at_least ? t('atLeast') : t('atMost')) + value(c.limit);
   });
 }
 
@@ -298,7 +357,7 @@ function checkFigures(report) {
   return report.checks.map((c) => {
     const unit = c.unit === 'deg' ? '°' : ' mm';
     const digits = c.unit === 'deg' ? 3 : 2;
-    return c.name + ' ' + c.measured.toFixed(digits) + unit + ' (allowed ' + c.threshold.toFixed(digits) + unit + ')' + (c.passed ? '' : ' — too far');
+    return t('checkFigure', t('checkNames')[c.name] || c.name, c.measured.toFixed(digits) + unit, c.threshold.toFixed(digits) + unit, c.passed);
   });
 }
 
@@ -342,14 +401,14 @@ function chart(svg, points, count, gate, unit) {
   for (const i of [...new Set([1, Math.round((count + 1) / 2), count])]) {
     svgEl(svg, 'text', { x: x(i), y: bottom + 12, 'text-anchor': 'middle' }, String(i));
   }
-  svgEl(svg, 'text', { x: right, y: bottom + 22, 'text-anchor': 'end' }, 'pose');
+  svgEl(svg, 'text', { x: right, y: bottom + 22, 'text-anchor': 'end' }, t('pose'));
   svgEl(svg, 'line', { x1: left, x2: left, y1: top, y2: bottom, stroke: '#888' });
   svgEl(svg, 'line', { x1: left, x2: right, y1: bottom, y2: bottom, stroke: '#888' });
   if (gate <= yTop) {
     svgEl(svg, 'line', { class: 'gate', x1: left, x2: right, y1: y(gate), y2: y(gate), stroke: '#c62828', 'stroke-dasharray': '4 3' });
-    svgEl(svg, 'text', { x: right - 2, y: y(gate) - 3, 'text-anchor': 'end', fill: '#c62828' }, 'gate ' + gate + unit);
+    svgEl(svg, 'text', { x: right - 2, y: y(gate) - 3, 'text-anchor': 'end', fill: '#c62828' }, t('gate', gate + unit));
   } else {
-    svgEl(svg, 'text', { x: right - 2, y: top + 8, 'text-anchor': 'end', fill: '#c62828' }, 'gate ' + gate + unit + ' is above this scale');
+    svgEl(svg, 'text', { x: right - 2, y: top + 8, 'text-anchor': 'end', fill: '#c62828' }, t('gateAbove', gate + unit));
   }
   const used = pts.filter((p) => p.used);
   if (used.length > 1) {
@@ -369,19 +428,19 @@ function charts(poses, count, provisional) {
   count = Math.max(count || 1, ...poses.map((p) => p.index));
   chart($('theta'), poses.map((p) => ({ index: p.index, value: p.theta_deg, used: p.used })), count, gates.theta_max_deg, '°');
   chart($('ed'), poses.map((p) => ({ index: p.index, value: p.e_d_mm, used: p.used })), count, gates.e_d_max_mm, ' mm');
-  $('charts-title').textContent = provisional ? 'Fit per pose, so far' : 'Fit per pose';
+  $('charts-title').textContent = provisional ? t('fitPerPoseSoFar') : t('fitPerPose');
   const fitted = poses.filter((p) => typeof p.theta_deg === 'number').length;
   // No empty charts: without a run or a result there is nothing to draw.
   $('charts').hidden = !provisional && !fitted;
   $('charts-note').textContent = provisional
-    ? (fitted ? 'Each pose against the mount the poses so far give; it settles as poses arrive. Red rings: set aside.'
-      : 'The charts start once six poses have a ground' + (model.status && model.status.pose ? ' (pose ' + model.status.pose + ' now).' : '.'))
-    : (fitted ? 'Each pose against the result. Red rings: set aside.' : '');
+    ? (fitted ? t('chartsSoFar') : t('chartsWaiting', model.status && model.status.pose))
+    : (fitted ? t('chartsResult') : '');
   const aside = $('aside');
   aside.innerHTML = '';
   for (const p of poses.filter((q) => !q.used)) {
     const li = document.createElement('li');
-    li.textContent = 'pose ' + p.index + ' set aside: ' + (p.reason || 'an outlier against the others');
+    li.textContent = t('setAside', p.index, p.reason || t('anOutlier'));
+    if (p.reason) li.lang = 'en';
     aside.appendChild(li);
   }
 }
@@ -397,15 +456,29 @@ function redraw(id, key, draw) {
   draw();
 }
 
-// How an aborted run left the robot, in words (the status's `robot_left`).
-const LEFT = {
-  home: 'at home',
-  halted: 'halted, not at home',
-  unknown: 'stopped: where the robot stands is not known',
-  not_moved: 'stopped before moving',
-};
+// The commanded body pose in words: "rolled 20° right, body at 615 mm".
+function bodyPoseInWords(p) {
+  const n = (v) => String(Math.round(Math.abs(v) * 10) / 10);
+  const parts = [];
+  if (Math.abs(p.gamma_deg) >= 0.05) parts.push(t('rolled', n(p.gamma_deg), p.gamma_deg > 0));
+  if (Math.abs(p.beta_deg) >= 0.05) parts.push(t('pitched', n(p.beta_deg), p.beta_deg > 0));
+  if (Math.abs(p.alpha_deg) >= 0.05) parts.push(t('turned', n(p.alpha_deg), p.alpha_deg > 0));
+  if (Math.abs(p.px_mm) >= 0.05) parts.push(t('shiftedForward', n(p.px_mm), p.px_mm > 0));
+  if (Math.abs(p.pz_mm) >= 0.05) parts.push(t('shiftedSide', n(p.pz_mm), p.pz_mm > 0));
+  parts.push(t('bodyAt', String(Math.round(p.py_mm * 10) / 10)));
+  return parts.join(t('listJoin'));
+}
+
+// What the session does now, from the status's typed phase.
+function phaseInWords(s) {
+  if (!s.phase) return s.state === 'running' ? t('opening') : '';
+  const words = t('phases')[s.phase] || s.phase;
+  if (s.phase === 'moving' && s.commanded) return words + ' (' + bodyPoseInWords(s.commanded) + ')';
+  return words;
+}
 
 function render() {
+  renderView();
   const s = model.status;
   const lost = model.contact === 'lost';
   const running = !!s && s.state === 'running';
@@ -414,21 +487,19 @@ function render() {
   const aborted = s && !running && abort && abort.state === 'aborted' ? abort : null;
   const activeId = s && s.active ? s.active.id : null;
 
-  $('contact').textContent = model.contact === 'ok' ? 'connected' : (lost ? 'no contact' : 'connecting…');
+  $('contact').textContent = model.contact === 'ok' ? t('connected') : (lost ? t('noContact') : t('connecting'));
   const banner = $('lost');
   banner.hidden = !lost;
   if (lost) {
     const seconds = Math.round((Date.now() - (model.heardAt || model.lostSince)) / 1000);
-    banner.textContent = 'No contact with the robot\'s computer for ' + seconds + ' s: this page shows the last state it heard, which may be out of date.'
-      + (running ? ' A run was going on: if groundcal has stopped, the robot\'s own watchdog halts the body within 1 s; if only this device\'s link is down, the run goes on.' : '')
-      + ' Reconnecting…';
+    banner.textContent = t('lostBanner', seconds, running);
   }
 
   // What matters for safety stands out: a robot that may not have stopped,
   // or that did not reach home.
   const unsafe = aborted && (aborted.robot_left === 'unknown' || aborted.robot_left === 'halted') ? aborted.reason : null;
   $('safety').hidden = !unsafe;
-  $('safety').textContent = unsafe ? (aborted.robot_left === 'unknown' ? 'The robot may not have stopped: ' : 'The robot halted but is not at home: ') + unsafe + '. Check it before anything else.' : '';
+  $('safety').textContent = unsafe ? t(aborted.robot_left === 'unknown' ? 'mayNotHaveStopped' : 'notAtHome', unsafe) : '';
 
   // A sensor that moved since its calibration: the terrain map is wrong. The
   // check speaks only for the calibration it checked: after a new one is made
@@ -436,58 +507,53 @@ function render() {
   const ck = s && s.check && s.check.calibration_id === activeId ? s.check : null;
   const drift = ck && ck.outcome === 'drift';
   $('drift').hidden = !drift;
-  $('drift-text').textContent = drift ? 'The sensor has moved since it was calibrated: '
-    + ck.reasons.map((r) => r.replace(' than the active calibration says', '')).join('; ')
-    + '. Meanwhile the robot still uses the active calibration (' + madeOn(activeId) + '), which no longer matches the sensor.' : '';
-  redraw('drift-todo', drift ? 'drift' : '', () => list($('drift-todo'), drift ? [
-    'Check that the sensor\'s mount is tight and that nothing has knocked it.',
-    'Press Check again.',
-    'If it still says the sensor has moved, press Calibrate, and Accept the new calibration when it passes its checks.',
-  ] : []));
+  $('drift-text').textContent = drift ? t('driftText', madeOn(activeId)) : '';
+  redraw('drift-todo', drift ? 'drift' : '', () => list($('drift-todo'), drift ? t('driftTodo') : []));
 
   // Progress.
   const checking = running && s.task === 'check';
-  let title = 'connecting…';
+  let title = t('connecting');
   if (s) {
-    if (running) title = aborting ? 'aborting…' : checking ? 'checking the sensor' : (s.pose ? 'pose ' + s.pose + ' of ' + s.of : 'starting');
-    else title = aborted ? LEFT[aborted.robot_left] || 'stopped' : (s.result ? 'finished' : 'idle');
+    if (running) title = aborting ? t('aborting') : checking ? t('checkingSensor') : (s.pose ? t('poseOf', s.pose, s.of) : t('starting'));
+    else title = aborted ? t('left')[aborted.robot_left] || t('stopped') : (s.result ? t('finished') : t('idle'));
   }
-  if (model.sending === 'Abort' && !aborting) title = 'sending Abort…';
+  if (model.sending === t('abort') && !aborting) title = t('sendingAbort');
   $('progress').textContent = title;
   $('bar').hidden = !running || aborting;
   if (running) $('bar-fill').style.width = (s.of ? 100 * Math.max(0, (s.pose || 1) - 1) / s.of : 0) + '%';
-  // The step without the "pose i of N" the title already says.
-  const step = ((s && s.step) || '').replace(/^pose \d+ of \d+: /, '');
-  let stepText = step + (running && s.by ? ' — started by ' + s.by : '');
-  if (!s || step === title) stepText = '';
-  if (aborting) stepText = 'halting the robot and sending it home (Abort by ' + abort.by + ')';
+  // The step (the title already says which pose).
+  const step = s ? phaseInWords(s) : '';
+  let stepText = step + (running && s.by ? t('startedBy', s.by) : '');
+  if (!s || step === title || !step) stepText = '';
+  if (aborting) stepText = t('haltingForAbort', abort.by);
   // Without contact the page knows only what it last heard, and no clock
   // runs on from it.
-  if (lost && stepText) stepText = 'last heard: ' + stepText;
+  if (lost && stepText) stepText = t('lastHeard', stepText);
   $('step').textContent = stepText;
   if (running && !aborting && !lost && typeof s.elapsed_s === 'number') {
     const elapsed = s.elapsed_s + (Date.now() - model.statusAt) / 1000;
-    $('times').textContent = duration(elapsed) + ' so far · '
-      + (typeof s.remaining_s === 'number' ? 'about ' + duration(Math.max(0, s.remaining_s - (Date.now() - model.statusAt) / 1000)) + ' left' : 'time left: after the first pose');
+    $('times').textContent = t('soFar', duration(elapsed)) + ' · '
+      + (typeof s.remaining_s === 'number' ? t('left_', duration(Math.max(0, s.remaining_s - (Date.now() - model.statusAt) / 1000))) : t('afterFirstPose'));
   } else {
     $('times').textContent = '';
   }
-  $('hardware').textContent = s && !running && s.hardware ? 'Hardware at the service\'s start: ' + s.hardware : '';
+  $('hardware').textContent = s && !running && s.hardware ? t('hardwareAtStart', s.hardware) : '';
+  $('hardware').lang = 'en';
   $('calibrate').disabled = lost || !s || running || !!model.sending;
   $('check').disabled = lost || !s || running || !activeId || !!model.sending;
   // Abort stays pressable while the last known state is running, even with
   // no contact: pressing it then says that it could not be sent.
-  $('abort').disabled = !running || aborting || model.sending === 'Abort';
+  $('abort').disabled = !running || aborting || model.sending === t('abort');
   const plans = s && s.motion;
   const cr = model.confirmRun;
   $('confirm-run').hidden = !cr || running || lost;
   if (cr && plans) {
     const plan = plans[cr];
     $('confirm-run-text').textContent = (cr === 'calibration'
-      ? 'Start a calibration? The robot will move its body through ' + plan.poses + ' poses for ' + about(plan.about_s) + '.'
-      : 'Check the active calibration? The robot will walk to its home stance' + (plan.poses > 1 ? ' and tilt its body ' + (plan.poses - 1) + ' times' : '') + ', for ' + about(plan.about_s) + '.')
-      + ' Keep everyone clear of the robot and its legs until it is back at home.';
-    $('confirm-run-yes').textContent = cr === 'calibration' ? 'Yes, calibrate' : 'Yes, check';
+      ? t('confirmCalibrate', plan.poses, about(plan.about_s))
+      : t('confirmCheck', plan.poses > 1 ? plan.poses - 1 : 0, about(plan.about_s)))
+      + t('keepClear');
+    $('confirm-run-yes').textContent = cr === 'calibration' ? t('yesCalibrate') : t('yesCheck');
   }
   // A message about the active calibration goes once another is active
   // (another device changed it).
@@ -502,19 +568,24 @@ function render() {
   const verdict = $('verdict');
   const reasons = $('reasons');
   reasons.innerHTML = '';
-  const say = (text) => { const li = document.createElement('li'); li.textContent = text; reasons.appendChild(li); };
+  // `fromRobot`: English words that came from the robot's computer.
+  const say = (text, fromRobot) => {
+    const li = document.createElement('li');
+    if (fromRobot) english(li, text + t('inEnglish')); else li.textContent = text;
+    reasons.appendChild(li);
+  };
   let activeHere = false;
   if (s && r && (!running || checking)) {
     card.hidden = false;
     const passed = r.status === 'accepted';
-    verdict.textContent = passed ? 'Passed its checks' : 'Failed its checks';
+    verdict.textContent = passed ? t('passedChecks') : t('failedChecks');
     verdict.className = passed ? 'passed' : 'failed';
-    for (const reason of r.reasons || []) say(reason);
+    for (const reason of r.reasons || []) say(reason, true);
     const gates = gateLines(r);
     $('gates-box').hidden = !gates.length;
-    $('gates-title').textContent = 'The checks: ' + gates.filter((g) => g.startsWith('✓')).length + ' of ' + gates.length + ' passed';
+    $('gates-title').textContent = t('checksPassed', gates.filter((g) => g.startsWith('✓')).length, gates.length);
     redraw('gates', JSON.stringify([s.result_id, gates]), () => list($('gates'), gates));
-    redraw('todo', passed ? '' : JSON.stringify([s.result_id, activeId]), () => list($('todo'), passed ? [] : todoFor(r)));
+    redraw('todo', passed ? '' : JSON.stringify([s.result_id, activeId, language]), () => list($('todo'), passed ? [] : todoFor(r)));
     $('todo-box').hidden = passed;
     const activeDoc = model.active && model.active.id === activeId ? model.active : null;
     const against = activeDoc && activeDoc.id !== s.result_id ? activeDoc : null;
@@ -528,12 +599,12 @@ function render() {
     $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, activeDoc) : '';
     $('activeline').innerHTML = '';
     if (activeHere) {
-      const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active';
-      $('activeline').append(badge, ' since ' + when(s.active.activated));
+      const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = t('active');
+      $('activeline').append(badge, t('since', when(s.active.activated)));
     } else {
-      $('activeline').textContent = passed ? 'Not active yet: Accept makes it the calibration the robot uses.' : 'It failed its checks, so it cannot become active.';
+      $('activeline').textContent = passed ? t('notActiveYet') : t('cannotBecomeActive');
     }
-    $('resultid').textContent = s.result_id ? 'calibration of ' + madeOn(s.result_id) : '';
+    $('resultid').textContent = s.result_id ? t('calibrationOf', madeOn(s.result_id)) : '';
     $('resultid').dataset.id = s.result_id || '';
     $('resultid').title = s.result_id || '';
     redraw('charts', 'result ' + s.result_id, () => charts(r.poses || [], s.of, false));
@@ -542,16 +613,14 @@ function render() {
     const cut = s.interrupted;
     $('todo-box').hidden = true;
     $('gates-box').hidden = true;
-    verdict.textContent = cut ? 'Interrupted' : 'No result';
+    verdict.textContent = cut ? t('interrupted') : t('noResult');
     verdict.className = cut ? 'interrupted' : 'failed';
     if (cut) {
-      say('The calibration started by ' + cut.by + ' on ' + when(cut.started) + ' was cut off: the service stopped before it finished.');
-      say('The robot\'s own watchdog halts the body within 1 s once groundcal falls silent, so it stands where the run was cut off. Check that it stands safely and that nobody is near it.');
-      say(s.startup_check === 'held_for_a_person'
-        ? 'Nothing moves until someone asks: the check at start was held. Press Check (the robot walks home first) or Calibrate when the robot is clear.'
-        : 'Nothing moves until someone presses Calibrate or Check.');
+      say(t('cutOff', cut.by, when(cut.started)));
+      say(t('cutOffWatchdog'));
+      say(s.startup_check === 'held_for_a_person' ? t('heldForPerson') : t('nothingMoves'));
     } else {
-      say(s.error);
+      say(s.error, true);
     }
     redraw('values', 'none', () => { $('values').innerHTML = ''; });
     $('change').textContent = ''; $('activeline').textContent = ''; $('resultid').textContent = '';
@@ -567,8 +636,7 @@ function render() {
   const c = model.confirm;
   $('confirm').hidden = !c;
   if (c) {
-    $('confirm-text').textContent = (c.kind === 'accept' ? 'Make the calibration of ' + madeOn(c.id) + ' the active one?' : 'Roll back to the calibration of ' + madeOn(c.id) + '?')
-      + ' The robot\'s other programs use the active calibration from their next start.';
+    $('confirm-text').textContent = t(c.kind === 'accept' ? 'confirmAccept' : 'confirmRollback', madeOn(c.id)) + t('otherPrograms');
     $('confirm').scrollIntoView({ block: 'nearest' });
   }
   $('confirm-yes').disabled = lost;
@@ -576,35 +644,34 @@ function render() {
   // The active calibration and the history. The status names the active one
   // (every device the same); its document is loaded when that changes.
   const a = model.active && model.active.id === activeId ? model.active : null;
-  $('active').textContent = activeId ? 'The calibration of ' + madeOn(activeId) + ', active since ' + when(s.active.activated) : 'None yet: the robot uses no calibration from groundcal.';
+  $('active').textContent = activeId ? t('activeLine', madeOn(activeId), when(s.active.activated)) : t('noneYet');
   $('active').dataset.id = activeId || '';
   $('active').title = activeId || '';
   const line = $('checkline');
   line.className = ck ? ck.outcome : '';
-  if (!ck) line.textContent = a ? 'Not checked since it became active or since the service started: Check compares it with the sensor now.' : '';
-  else if (ck.outcome === 'running') line.textContent = 'Checking it against the sensor now…';
-  else if (ck.outcome === 'failed') line.textContent = 'The last check (' + when(ck.started) + ') could not be made: ' + (ck.error || 'no reason given');
-  else line.textContent = 'Checked ' + when(ck.finished) + (ck.by ? ' (' + ck.by + ')' : '') + ': '
-    + (drift ? 'the sensor has moved since it was calibrated.' : 'the sensor agrees with it.');
+  if (!ck) line.textContent = a ? t('notChecked') : '';
+  else if (ck.outcome === 'running') line.textContent = t('checkingNow');
+  else if (ck.outcome === 'failed') line.textContent = t('checkFailed', when(ck.started), ck.error || t('noReason'));
+  else line.textContent = t('checkedAt', when(ck.finished), ck.by, drift);
   redraw('checks', JSON.stringify(ck && ck.report ? [ck.finished, ck.report.checks] : null), () => {
     const report = ck && ck.report;
-    const unseen = report && report.not_checked.length ? ['not seen from where it stood: ' + report.not_checked.join(', ')] : [];
+    const unseen = report && report.not_checked.length ? [t('notSeen', report.not_checked.join(', '))] : [];
     list($('checks'), checkFigures(report).concat(unseen));
   });
   redraw('history', JSON.stringify([model.history.slice(0, 20), activeId, lost || running]), () => {
     const history = $('history');
     history.innerHTML = '';
-    if (!model.history.length) history.insertRow().insertCell().textContent = 'No calibrations yet.';
+    if (!model.history.length) history.insertRow().insertCell().textContent = t('noCalibrations');
     for (const h of model.history.slice(0, 20)) {
       const row = history.insertRow();
       row.insertCell().textContent = when(h.created);
-      row.insertCell().textContent = h.operator_rejected ? 'set aside by an operator' : h.status === 'accepted' ? 'passed its checks' : h.status === 'rejected' ? 'failed its checks' : h.status;
+      row.insertCell().textContent = h.operator_rejected ? t('setAsideByOperator') : h.status === 'accepted' ? t('passedChecks') : h.status === 'rejected' ? t('failedChecks') : h.status;
       const cell = row.insertCell();
       if (h.id === activeId) {
-        const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = 'Active'; cell.appendChild(badge);
+        const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = t('active'); cell.appendChild(badge);
       } else if (h.status === 'accepted') {
         const b = document.createElement('button');
-        b.className = 'small rollback'; b.textContent = a ? 'Roll back to this' : 'Make active';
+        b.className = 'small rollback'; b.textContent = a ? t('rollBackToThis') : t('makeActive');
         b.dataset.id = h.id; b.disabled = lost || running;
         b.onclick = () => { model.confirm = { kind: 'rollback', id: h.id }; render(); };
         cell.appendChild(b);
@@ -612,6 +679,68 @@ function render() {
       row.title = h.id;
     }
   });
+}
+
+// ---- what the camera sees ----------------------------------------------------
+
+// The latest GET /api/view, and when it was read (its age runs on from then).
+const view = { data: null, readAt: 0, loading: false };
+async function loadView() {
+  if (view.loading) return;
+  view.loading = true;
+  try {
+    const r = await fetchWithin('/api/view', {}, 2000);
+    if (r.ok) { view.data = await r.json(); view.readAt = Date.now(); }
+  } catch (e) {
+    // Contact is judged by the status polls and the heartbeat.
+  } finally { view.loading = false; }
+  renderView();
+}
+// One canvas pixel per cell: grey by depth (lighter when nearer), green
+// where the fit took the reading for the ground, black without a reading.
+function drawView(v) {
+  const canvas = $('view');
+  canvas.width = v.width; canvas.height = v.height;
+  const context = canvas.getContext('2d');
+  const image = context.createImageData(v.width, v.height);
+  for (let i = 0; i < v.width * v.height; i++) {
+    const cm = v.depth_cm[i];
+    const g = cm ? 60 + 170 * Math.max(0, Math.min(1, (500 - cm) / 450)) : 0;
+    const rgb = !cm ? [0, 0, 0] : v.ground[i] ? [40 + 0.2 * g, 110 + 0.5 * g, 50 + 0.2 * g] : [g, g, g];
+    image.data.set([rgb[0], rgb[1], rgb[2], 255], 4 * i);
+  }
+  context.putImageData(image, 0, 0);
+}
+function renderView() {
+  const d = view.data;
+  const v = d && d.view;
+  const lost = model.contact === 'lost';
+  if (v) redraw('view', d.seq, () => drawView(v));
+  $('view').classList.toggle('stale', lost || !v);
+  let whenText = t('viewNone');
+  if (v) {
+    const age = duration(((d.age_ms || 0) + (Date.now() - view.readAt)) / 1000);
+    whenText = d.pose ? t('viewAtPose', d.pose, age) : t('viewAtRest', age);
+  } else if (d && !d.live_at_rest) {
+    whenText = t('viewOff');
+  }
+  $('view-when').textContent = whenText;
+  const note = $('view-note');
+  let warn = true;
+  let text = '';
+  if (lost && v) text = t('viewStale');
+  else if (d && d.unavailable) text = t('viewUnavailable') + ' ' + d.unavailable;
+  else if (v) {
+    const readings = v.depth_cm.filter((c) => c > 0).length;
+    const ground = v.ground.filter((g) => g === 1).length;
+    if (readings < 0.1 * v.width * v.height) text = t('viewFewReadings');
+    else if (v.no_ground) text = t('viewNoGround');
+    else if (ground < 0.3 * readings) text = t('viewLittleGround');
+    else { text = t('viewGroundShare', Math.round(100 * ground / readings)); warn = false; }
+  }
+  note.textContent = text;
+  note.className = warn && text ? 'warn' : '';
+  note.lang = d && d.unavailable && !lost ? 'en' : '';
 }
 
 // ---- contact with the daemon ----------------------------------------------
@@ -691,6 +820,7 @@ function listen() {
     let e; try { e = JSON.parse(m.data); } catch (x) { return; }
     heard();
     if (e.type === 'heartbeat') return;
+    if (e.type === 'ground_seen') { loadView(); return; }
     if (e.type === 'provisional' && model.status) {
       model.status.provisional = e.poses;
       render();
@@ -701,9 +831,18 @@ function listen() {
   };
 }
 
+$('language').onchange = () => {
+  language = $('language').value;
+  localStorage.setItem('groundcal-language', language);
+  applyLanguage();
+  render();
+  renderView();
+};
+applyLanguage();
 listen();
 refresh();
-setInterval(() => { refresh(); }, 1000);
+loadView();
+setInterval(() => { refresh(); loadView(); }, 1000);
 // Silence: no heartbeat, no event and no status for SILENCE_MS.
 setInterval(() => {
   if (model.contact === 'ok' && Date.now() - model.heardAt > SILENCE_MS) lose();

@@ -60,9 +60,11 @@ impl ViewSlot {
         self.unavailable = Some(why);
     }
 
-    /// What `GET /api/view` answers.
-    pub fn json(&self) -> ViewJson {
+    /// What `GET /api/view` answers (`live_at_rest`: whether pictures are
+    /// taken while no session runs).
+    pub fn json(&self, live_at_rest: bool) -> ViewJson {
         ViewJson {
+            live_at_rest,
             seq: self.seq,
             age_ms: self
                 .latest

@@ -264,7 +264,13 @@ impl AppState {
 
     /// The latest picture, as `GET /api/view` answers.
     pub(super) fn view_json(&self) -> super::api::ViewJson {
-        lock(&self.0.view).json()
+        let live_at_rest = self
+            .0
+            .config
+            .serve
+            .as_ref()
+            .is_some_and(|s| s.preview_interval_ms > 0);
+        lock(&self.0.view).json(live_at_rest)
     }
 
     /// The session's loop beats: it is alive now.
