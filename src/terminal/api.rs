@@ -387,6 +387,9 @@ pub struct Status {
     pub step: String,
     /// The same, typed: the page words it in its own language.
     pub phase: Option<Phase>,
+    /// What the phase's event said in words of its own (English): why a
+    /// pose was set aside, why the session stopped or was aborted.
+    pub detail: Option<String>,
     /// The body pose the robot is moving to or holds (while running).
     pub commanded: Option<PoseDegMm>,
     /// Seconds since the calibration started (while running).
@@ -485,6 +488,13 @@ impl Status {
             Some(step) => {
                 self.step = step;
                 self.phase = phase_of(event);
+                self.detail = match event {
+                    EventJson::PoseDone { error, .. } => error.clone(),
+                    EventJson::Aborted { reason, .. } => Some(reason.clone()),
+                    EventJson::Failed { error } => Some(error.clone()),
+                    EventJson::Halting { why } => Some(why.clone()),
+                    _ => None,
+                };
             }
             None => {}
         }

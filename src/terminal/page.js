@@ -507,7 +507,11 @@ function render() {
   const ck = s && s.check && s.check.calibration_id === activeId ? s.check : null;
   const drift = ck && ck.outcome === 'drift';
   $('drift').hidden = !drift;
-  $('drift-text').textContent = drift ? t('driftText', madeOn(activeId)) : '';
+  // Why, in the daemon's words in English, else from the check's figures.
+  const driftWhy = !drift ? '' : language === 'en'
+    ? ck.reasons.map((r) => r.replace(' than the active calibration says', '')).join('; ')
+    : checkFigures(ck.report).filter((line, k) => !ck.report.checks[k].passed).join('；') || ck.reasons.join('; ');
+  $('drift-text').textContent = drift ? t('driftText', madeOn(activeId), driftWhy) : '';
   redraw('drift-todo', drift ? 'drift' : '', () => list($('drift-todo'), drift ? t('driftTodo') : []));
 
   // Progress.
@@ -521,8 +525,14 @@ function render() {
   $('progress').textContent = title;
   $('bar').hidden = !running || aborting;
   if (running) $('bar-fill').style.width = (s.of ? 100 * Math.max(0, (s.pose || 1) - 1) / s.of : 0) + '%';
-  // The step (the title already says which pose).
-  const step = s ? phaseInWords(s) : '';
+  // The step (the title already says which pose), and what its event said
+  // in words of its own: in English after the step, in another language
+  // on a line of its own, marked as English.
+  let step = s ? phaseInWords(s) : '';
+  const detail = s && s.detail && !lost ? s.detail : '';
+  if (detail && language === 'en') step += ': ' + detail;
+  $('step-detail').hidden = !detail || language === 'en';
+  $('step-detail').textContent = detail ? detail + t('inEnglish') : '';
   let stepText = step + (running && s.by ? t('startedBy', s.by) : '');
   if (!s || step === title || !step) stepText = '';
   if (aborting) stepText = t('haltingForAbort', abort.by);
