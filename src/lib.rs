@@ -39,7 +39,6 @@ pub mod depth_image;
 pub mod design;
 pub mod export;
 pub mod files;
-pub mod ground_view;
 pub mod hardware;
 pub mod output;
 pub mod recording;

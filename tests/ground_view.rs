@@ -5,10 +5,10 @@
 //! but the floor; a pixel that reads the same there sees the floor.
 
 use groundcal::calib::geometry::{PoseDegMm, Transform};
+use groundcal::calib::ground_view::{GroundView, CELL_PIXELS};
 use groundcal::calib::observe::{ground_prior, NominalMount};
 use groundcal::calib::plane::{fit_ground, FitBuffers, PlaneFitSettings};
 use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange};
-use groundcal::ground_view::{GroundView, CELL_PIXELS};
 use groundcal::schedule::Schedule;
 use groundcal_hal::sim::kinect::{DepthRenderer, SimKinectConfig};
 use groundcal_hal::sim::world::World;

@@ -10,6 +10,7 @@ use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use groundcal_calib::calibrate::{calibrate, CalibrationSettings};
 use groundcal_calib::disparity::{EdgeGuard, Frame};
 use groundcal_calib::geometry::{sensor_from_optical, PoseDegMm, PoseParams};
+use groundcal_calib::ground_view::GroundView;
 use groundcal_calib::plane::{
     fit_ground, search::find_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
 };
@@ -114,6 +115,20 @@ fn ground_fit(c: &mut Criterion) {
             },
         );
     }
+    // The page's picture of the same frame: 80 × 60 cells, each tested
+    // against the fit's band (what a picture costs beyond its fit).
+    let fit = fit_ground(
+        &[&pixels],
+        &camera,
+        &prior,
+        &PlaneFitSettings::default(),
+        &mut buffers,
+    )
+    .unwrap();
+    c.bench_function(
+        "the page's picture (80x60 cells) of one frame, given its fit",
+        |b| b.iter(|| GroundView::of(black_box(&pixels), &camera, Ok(&fit))),
+    );
     // A pose as recorded: the sample's first pose has two frames, fused.
     let second = sample_pixels("d-1700000000.002000-3002000.pgm");
     let settings = PlaneFitSettings::default();

@@ -13,6 +13,7 @@
 //! - [`sensor`]: a depth camera, pixels to points with weights;
 //! - [`disparity`]: frames in inverse depth, planes of the image, moment sums;
 //! - [`plane`]: the ground in one pose's frames (paper 4.1);
+//! - [`ground_view`]: a coarse picture of a frame with the ground the fit chose, for the page;
 //! - [`body`]: the ground frame and the body pose from the feet (paper 4.2);
 //! - [`observe`]: one pose's evidence (feet and frames) to one observation;
 //! - [`outcome`]: what a calibration found, shared by the solve and the verdict;
@@ -34,6 +35,7 @@ pub mod calibrate;
 pub mod depth;
 pub mod disparity;
 pub mod geometry;
+pub mod ground_view;
 pub mod observe;
 pub mod outcome;
 pub mod plan;

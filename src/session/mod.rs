@@ -26,7 +26,7 @@ pub use run::{run, verify, SessionError, SessionOutcome, VerifyOutcome};
 pub use crate::verify::{GravityReading, VisitedPose};
 
 use crate::calib::geometry::PoseDegMm;
-use crate::ground_view::GroundView;
+use crate::calib::ground_view::GroundView;
 
 /// What happens, for the operator's progress display.
 #[derive(Debug, Clone, PartialEq)]

@@ -15,12 +15,12 @@ use tokio::time::Instant;
 
 use super::{Event, GravityReading, Plan, PoseFit, ProvisionalPose, RobotLeft, VisitedPose};
 use crate::calib::geometry::Transform;
+use crate::calib::ground_view::GroundView;
 use crate::calib::observe::{BodyEstimate, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::solve::Observation;
 use crate::calib::verify::{ActiveMount, VerifyReport};
 use crate::depth_image::DepthImage;
-use crate::ground_view::GroundView;
 use crate::output::ResultJson;
 use crate::recording::dump::RawTiltState;
 use crate::recording::poses::PoseRecord;

@@ -118,7 +118,7 @@ pub struct ViewJson {
     pub taken: Option<String>,
     /// The schedule's pose it shows; None: the robot at rest.
     pub pose: Option<u16>,
-    pub view: Option<std::sync::Arc<crate::ground_view::GroundView>>,
+    pub view: Option<std::sync::Arc<crate::calib::ground_view::GroundView>>,
     /// Why no new picture can be taken now (the sensor is missing, a
     /// recording plays its frames once).
     pub unavailable: Option<String>,

@@ -12,11 +12,11 @@ use tokio::sync::watch;
 
 use super::api::ViewJson;
 use crate::calib::geometry::PoseDegMm;
+use crate::calib::ground_view::GroundView;
 use crate::calib::observe::ground_prior;
 use crate::calib::plane::{fit_ground, FitBuffers, PlaneFitSettings};
 use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthRange};
 use crate::config::Config;
-use crate::ground_view::GroundView;
 use crate::hardware::{self, Selection, Sensor};
 use groundcal_hal::DepthSensor;
 

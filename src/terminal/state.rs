@@ -258,7 +258,7 @@ impl AppState {
     }
 
     /// Keeps a picture of what the camera sees (at pose `pose`, or at rest).
-    pub(super) fn keep_view(&self, pose: Option<u16>, view: crate::ground_view::GroundView) {
+    pub(super) fn keep_view(&self, pose: Option<u16>, view: crate::calib::ground_view::GroundView) {
         lock(&self.0.view).keep(pose, view);
     }
 

@@ -10,8 +10,8 @@
 
 use serde::Serialize;
 
-use crate::calib::plane::GroundFit;
-use crate::calib::sensor::DepthCamera;
+use crate::plane::GroundFit;
+use crate::sensor::DepthCamera;
 
 /// Pixels along each side of a cell: a 640 × 480 frame becomes 80 × 60.
 pub const CELL_PIXELS: usize = 8;
