@@ -10,8 +10,11 @@
 //!
 //! `active.json` is `{"format": "groundcal-active", "version": 1, "id": ...,
 //! "activated": RFC 3339, "kinect_tilt_deg": ..., "robot_from_sensor": {...},
-//! "sigma": {...}, "status": "accepted", "provenance": {...}}` with the keys of
-//! the result document (cli.md). Readers take `robot_from_sensor` and check
+//! "sigma": {...}, "status": "accepted", "summary", "depth_scale",
+//! "correlations", "created", "robot"}` with the keys of the result document
+//! (cli.md): [`ActiveDocument`]. A history entry is the result document with
+//! its `id`, `created` and an operator's rejection: [`StoredResult`]. Both
+//! are serde types, read and written as such. Readers take `robot_from_sensor` and check
 //! `kinect_tilt_deg` against the Kinect's tilt: a calibration holds for one
 //! tilt. Every write goes to a temporary file of its own that is fsynced,
 //! renamed over the old one, and the directory fsynced: a reader sees the old
@@ -30,7 +33,8 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 
 use serde::{Deserialize, Serialize};
-use serde_json::Value;
+
+use crate::output::{MountJson, ResultJson, ResultStatus, RobotJson, SigmaJson, SummaryJson};
 
 /// Why the store could not do something.
 #[derive(Debug, thiserror::Error)]
@@ -81,6 +85,70 @@ static WRITERS: Mutex<()> = Mutex::new(());
 struct WriteTurn {
     _file: File,
     _turn: MutexGuard<'static, ()>,
+}
+
+/// A result kept in the history (`history/<id>.json`): the result document
+/// (cli.md) with its id, when it was made, and an operator's rejection.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StoredResult {
+    pub id: String,
+    /// When it was made (RFC 3339).
+    pub created: String,
+    /// Set aside by an operator (`reject`), with its status before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operator_rejection: Option<OperatorRejection>,
+    #[serde(flatten)]
+    pub result: ResultJson,
+}
+
+/// An operator's rejection of a result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperatorRejection {
+    pub at: String,
+    pub by: String,
+    pub status_before: ResultStatus,
+}
+
+/// `active.json`: the calibration the robot's other programs read. The keys
+/// of the result document that say where the sensor is and how sure that
+/// is, with the store's id and when it was made active.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ActiveDocument {
+    /// `groundcal-active`.
+    pub format: String,
+    /// 1.
+    pub version: u32,
+    pub id: String,
+    /// When it was made active (RFC 3339).
+    pub activated: String,
+    /// Always `accepted`: nothing else becomes active.
+    pub status: ResultStatus,
+    pub robot_from_sensor: MountJson,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<SigmaJson>,
+    /// The Kinect's motor tilt the calibration holds for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kinect_tilt_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub summary: Option<SummaryJson>,
+    /// The depth scale found (1 when it was not estimated).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_scale: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correlations: Option<[[f64; 6]; 6]>,
+    /// When the calibration was made (RFC 3339).
+    #[serde(default)]
+    pub created: String,
+    /// The robot it was made for.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot: Option<RobotJson>,
+}
+
+/// `running.json`: who started the calibration in progress, and when.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct RunningMarker {
+    by: String,
+    started: String,
 }
 
 /// One entry of the history.
@@ -184,11 +252,14 @@ impl Store {
 
     /// Marks a calibration as running: who started it and when.
     pub fn mark_running(&self, by: &str, started: &str) -> Result<(), StoreError> {
-        let bytes = serde_json::to_vec(&serde_json::json!({ "by": by, "started": started }))
-            .map_err(|e| StoreError::Invalid {
-                path: self.running_path(),
-                message: e.to_string(),
-            })?;
+        let marker = RunningMarker {
+            by: by.to_string(),
+            started: started.to_string(),
+        };
+        let bytes = serde_json::to_vec(&marker).map_err(|e| StoreError::Invalid {
+            path: self.running_path(),
+            message: e.to_string(),
+        })?;
         crate::files::write_atomically(&self.running_path(), &bytes)?;
         Ok(())
     }
@@ -203,19 +274,16 @@ impl Store {
     pub fn take_interrupted(&self) -> Option<(String, String)> {
         let text = fs::read_to_string(self.running_path()).ok()?;
         self.clear_running();
-        let value: Value = serde_json::from_str(&text).unwrap_or(Value::Null);
-        let field = |key: &str| {
-            value
-                .get(key)
-                .and_then(Value::as_str)
-                .unwrap_or("?")
-                .to_string()
-        };
-        Some((field("by"), field("started")))
+        // A marker cut short still says that a run was cut off.
+        let marker = serde_json::from_str(&text).unwrap_or_else(|_| RunningMarker {
+            by: "?".into(),
+            started: "?".into(),
+        });
+        Some((marker.by, marker.started))
     }
 
     /// Keeps a result in the history and returns its id.
-    pub fn add(&self, result: &Value, created: &str) -> Result<String, StoreError> {
+    pub fn add(&self, result: &ResultJson, created: &str) -> Result<String, StoreError> {
         let _turn = self.turn()?;
         let stamp: String = created.chars().filter(|c| c.is_ascii_digit()).collect();
         let mut n = 1;
@@ -226,11 +294,12 @@ impl Store {
             }
             n += 1;
         };
-        let mut entry = result.clone();
-        if let Value::Object(map) = &mut entry {
-            map.insert("id".into(), Value::String(id.clone()));
-            map.insert("created".into(), Value::String(created.to_string()));
-        }
+        let entry = StoredResult {
+            id: id.clone(),
+            created: created.to_string(),
+            operator_rejection: None,
+            result: result.clone(),
+        };
         let bytes = serde_json::to_vec_pretty(&entry).map_err(|e| StoreError::Invalid {
             path: self.history_dir(),
             message: e.to_string(),
@@ -240,7 +309,7 @@ impl Store {
     }
 
     /// A result of the history.
-    pub fn get(&self, id: &str) -> Result<Value, StoreError> {
+    pub fn get(&self, id: &str) -> Result<StoredResult, StoreError> {
         let path = self.entry_path(id)?;
         let text = fs::read_to_string(&path).map_err(|_| StoreError::NotFound(id.to_string()))?;
         serde_json::from_str(&text).map_err(|e| StoreError::Invalid {
@@ -250,7 +319,7 @@ impl Store {
     }
 
     /// The active calibration, if any.
-    pub fn active(&self) -> Result<Option<Value>, StoreError> {
+    pub fn active(&self) -> Result<Option<ActiveDocument>, StoreError> {
         let path = self.active_path();
         match fs::read_to_string(&path) {
             Ok(text) => serde_json::from_str(&text)
@@ -270,32 +339,29 @@ impl Store {
 
     /// Makes a result of the history the active calibration (accept, or roll
     /// back to an earlier one). Rejected results never become active.
-    pub fn activate(&self, id: &str, now: &str) -> Result<Value, StoreError> {
+    pub fn activate(&self, id: &str, now: &str) -> Result<ActiveDocument, StoreError> {
         let _turn = self.turn()?;
         let entry = self.get(id)?;
-        if entry.get("status").and_then(Value::as_str) != Some("accepted") {
-            return Err(StoreError::Rejected(id.to_string()));
-        }
-        let mut active = serde_json::json!({
-            "format": "groundcal-active",
-            "version": 1,
-            "id": id,
-            "activated": now,
-            "status": "accepted",
-        });
-        for key in [
-            "robot_from_sensor",
-            "sigma",
-            "kinect_tilt_deg",
-            "summary",
-            "created",
-            "provenance",
-            "robot",
-        ] {
-            if let Some(v) = entry.get(key) {
-                active[key] = v.clone();
-            }
-        }
+        let result = entry.result;
+        let mount = match (result.status, result.robot_from_sensor) {
+            (ResultStatus::Accepted, Some(mount)) => mount,
+            _ => return Err(StoreError::Rejected(id.to_string())),
+        };
+        let active = ActiveDocument {
+            format: "groundcal-active".into(),
+            version: 1,
+            id: id.to_string(),
+            activated: now.to_string(),
+            status: ResultStatus::Accepted,
+            robot_from_sensor: mount,
+            sigma: result.sigma,
+            kinect_tilt_deg: result.kinect_tilt_deg,
+            summary: result.summary,
+            depth_scale: result.depth_scale,
+            correlations: result.correlations,
+            created: entry.created,
+            robot: result.robot,
+        };
         let bytes = serde_json::to_vec_pretty(&active).map_err(|e| StoreError::Invalid {
             path: self.active_path(),
             message: e.to_string(),
@@ -307,26 +373,18 @@ impl Store {
     /// Marks a result of the history as rejected by the operator (`by`), with
     /// its status before; nothing is deleted. The active calibration cannot be
     /// rejected: roll back to another first.
-    pub fn reject(&self, id: &str, now: &str, by: &str) -> Result<Value, StoreError> {
+    pub fn reject(&self, id: &str, now: &str, by: &str) -> Result<StoredResult, StoreError> {
         let _turn = self.turn()?;
         let mut entry = self.get(id)?;
-        let active = self.active()?;
-        if active
-            .as_ref()
-            .and_then(|a| a.get("id"))
-            .and_then(Value::as_str)
-            == Some(id)
-        {
+        if self.active()?.is_some_and(|a| a.id == id) {
             return Err(StoreError::Active(id.to_string()));
         }
-        if let Value::Object(map) = &mut entry {
-            let previous = map.get("status").cloned().unwrap_or(Value::Null);
-            map.insert("status".into(), Value::String("rejected".into()));
-            map.insert(
-                "operator_rejection".into(),
-                serde_json::json!({ "at": now, "by": by, "status_before": previous }),
-            );
-        }
+        entry.operator_rejection = Some(OperatorRejection {
+            at: now.to_string(),
+            by: by.to_string(),
+            status_before: entry.result.status,
+        });
+        entry.result.status = ResultStatus::Rejected;
         let path = self.entry_path(id)?;
         let bytes = serde_json::to_vec_pretty(&entry).map_err(|e| StoreError::Invalid {
             path: path.clone(),
@@ -339,9 +397,7 @@ impl Store {
     /// The history, newest first.
     pub fn history(&self) -> Result<Vec<HistoryEntry>, StoreError> {
         let dir = self.history_dir();
-        let active_id = self
-            .active()?
-            .and_then(|a| a.get("id").and_then(Value::as_str).map(String::from));
+        let active_id = self.active()?.map(|a| a.id);
         let mut entries = Vec::new();
         let Some(listing) = list(&dir)? else {
             return Ok(entries);
@@ -355,21 +411,13 @@ impl Store {
             if name.starts_with('.') {
                 continue;
             }
-            let Ok(value) = self.get(id) else { continue };
+            let Ok(stored) = self.get(id) else { continue };
             entries.push(HistoryEntry {
                 id: id.to_string(),
-                status: value
-                    .get("status")
-                    .and_then(Value::as_str)
-                    .unwrap_or("unknown")
-                    .to_string(),
-                created: value
-                    .get("created")
-                    .and_then(Value::as_str)
-                    .unwrap_or("")
-                    .to_string(),
+                status: stored.result.status.as_str().to_string(),
+                created: stored.created,
                 active: active_id.as_deref() == Some(id),
-                operator_rejected: value.get("operator_rejection").is_some(),
+                operator_rejected: stored.operator_rejection.is_some(),
             });
         }
         entries.sort_by(|a, b| b.id.cmp(&a.id));
@@ -380,6 +428,18 @@ impl Store {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A result document with this status and α.
+    fn result(status: &str, alpha_deg: f64) -> ResultJson {
+        let pose = crate::calib::geometry::PoseDegMm::from_values([
+            alpha_deg, -33.0, 0.0, 500.0, 370.0, 0.0,
+        ]);
+        ResultJson::parse(serde_json::json!({
+            "status": status,
+            "robot_from_sensor": MountJson::from_params(&pose.to_params()),
+        }))
+        .unwrap()
+    }
 
     fn temp_store(tag: &str) -> (Store, PathBuf) {
         let dir =
@@ -392,38 +452,29 @@ mod tests {
     fn accept_roll_back_and_refuse_rejected() {
         let (store, dir) = temp_store("cycle");
         let a = store
-            .add(
-                &serde_json::json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 1.0}}),
-                "2026-11-23T20:00:00Z",
-            )
+            .add(&result("accepted", 1.0), "2026-11-23T20:00:00Z")
             .unwrap();
         let b = store
-            .add(
-                &serde_json::json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 2.0}}),
-                "2026-11-23T21:00:00Z",
-            )
+            .add(&result("accepted", 2.0), "2026-11-23T21:00:00Z")
             .unwrap();
         let r = store
-            .add(
-                &serde_json::json!({"status": "rejected"}),
-                "2026-11-23T22:00:00Z",
-            )
+            .add(&result("rejected", 3.0), "2026-11-23T22:00:00Z")
             .unwrap();
         assert!(store.active().unwrap().is_none());
         store.activate(&b, "now").unwrap();
         assert_eq!(
-            store.active().unwrap().unwrap()["robot_from_sensor"]["alpha_deg"],
+            store.active().unwrap().unwrap().robot_from_sensor.alpha_deg,
             2.0
         );
         store.activate(&a, "later").unwrap();
-        assert_eq!(store.active().unwrap().unwrap()["id"], a.as_str());
+        assert_eq!(store.active().unwrap().unwrap().id, a);
         assert!(matches!(
             store.activate(&r, "x"),
             Err(StoreError::Rejected(_))
         ));
         assert_eq!(
-            store.active().unwrap().unwrap()["id"],
-            a.as_str(),
+            store.active().unwrap().unwrap().id,
+            a,
             "a refused activation leaves the active one"
         );
         let history = store.history().unwrap();

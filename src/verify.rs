@@ -131,7 +131,10 @@ pub fn load_calibration(
 /// The store's active calibration, if one is.
 pub fn calibration_in_store(store: &Store) -> Result<Option<Calibration>, String> {
     match store.active().map_err(|e| e.to_string())? {
-        Some(document) => {
+        Some(active) => {
+            // The active document carries the result's keys: read as one.
+            let document = serde_json::to_value(&active)
+                .map_err(|e| format!("cannot read the active calibration: {e}"))?;
             calibration_of(document, store.active_path().display().to_string()).map(Some)
         }
         None => Ok(None),

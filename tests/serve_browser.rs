@@ -270,7 +270,8 @@ fn a_knocked_sensor_is_caught_at_start_and_on_check() {
     let (code, out, err) =
         common::groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
     assert_eq!(code, 0, "{err}");
-    let result: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let result = groundcal::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
+        .expect("a result document");
     let store = groundcal::store::Store::new(&dir.join("state.sim"));
     let id = store.add(&result, "2026-12-01T00:00:00Z").unwrap();
     store.activate(&id, "2026-12-01T00:00:01Z").unwrap();

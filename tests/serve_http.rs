@@ -262,9 +262,15 @@ async fn calibrate_accept_and_activate_over_http() {
     );
 
     // Reject marks a history entry without deleting it, and it can no longer be made active.
-    let mut extra =
-        serde_json::json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 9.0}});
-    extra["poses"] = Value::Array(vec![]);
+    let extra = groundcal::output::ResultJson::parse(serde_json::json!({
+        "status": "accepted",
+        "robot_from_sensor": groundcal::output::MountJson::from_params(
+            &groundcal::calib::geometry::PoseDegMm::from_values([9.0, -33.0, 0.0, 500.0, 370.0, 0.0])
+                .to_params(),
+        ),
+        "poses": [],
+    }))
+    .unwrap();
     let other = groundcal::store::Store::new(&state_dir)
         .add(&extra, "2000-01-01T00:00:00Z")
         .unwrap();

@@ -26,21 +26,23 @@ fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// An accepted result with this α.
+fn accepted(alpha_deg: f64) -> groundcal::output::ResultJson {
+    groundcal::output::ResultJson::parse(json!({
+        "status": "accepted",
+        "robot_from_sensor": groundcal::output::MountJson::from_params(
+            &groundcal::calib::geometry::PoseDegMm::from_values([alpha_deg, -33.0, 0.0, 500.0, 370.0, 0.0])
+                .to_params(),
+        ),
+    }))
+    .unwrap()
+}
+
 /// A store with two accepted calibrations, and their ids.
 fn store_with_two(dir: &Path) -> (Store, String, String) {
     let store = Store::new(dir);
-    let a = store
-        .add(
-            &json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 1.0}}),
-            "2026-12-01T10:00:00Z",
-        )
-        .unwrap();
-    let b = store
-        .add(
-            &json!({"status": "accepted", "robot_from_sensor": {"alpha_deg": 2.0}}),
-            "2026-12-01T11:00:00Z",
-        )
-        .unwrap();
+    let a = store.add(&accepted(1.0), "2026-12-01T10:00:00Z").unwrap();
+    let b = store.add(&accepted(2.0), "2026-12-01T11:00:00Z").unwrap();
     (store, a, b)
 }
 
@@ -109,7 +111,7 @@ fn writer_process() {
     while changes == 0 || n < changes {
         let id = parts[1 + n % 2];
         let stored = store.activate(id, "by another process").unwrap();
-        assert_eq!(stored["id"], id);
+        assert_eq!(stored.id, id);
         n += 1;
     }
 }
@@ -150,8 +152,8 @@ fn simultaneous_accepts_and_rollbacks_never_corrupt_the_active_calibration() {
                 for _ in 0..pairs {
                     barrier.wait();
                     let stored = store.activate(&id, "now").map_err(|e| e.to_string())?;
-                    if stored["id"] != id.as_str() {
-                        return Err(format!("asked for {id}, the reply names {}", stored["id"]));
+                    if stored.id != id {
+                        return Err(format!("asked for {id}, the reply names {}", stored.id));
                     }
                 }
                 Ok(())
@@ -198,7 +200,7 @@ fn a_kill_while_saving_leaves_the_old_or_the_new_file_and_a_start_cleans_up() {
     let removed = store.remove_stale_temporaries().unwrap();
     assert_eq!(temporaries(&dir), 0);
     store.activate(&b, "after the kills").unwrap();
-    assert_eq!(store.active().unwrap().unwrap()["id"], b.as_str());
+    assert_eq!(store.active().unwrap().unwrap().id, b);
     println!("{kills} kills while saving: every read complete; {removed} temporaries removed at the start (at most {left} at once)");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -5,12 +5,12 @@ use std::collections::VecDeque;
 use std::time::Instant;
 
 use serde::Serialize;
-use serde_json::Value;
 
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::quality::Gates;
 use crate::schedule::body_pose_in_words;
 use crate::session::{Event, RobotLeft};
+use crate::store::{ActiveDocument, HistoryEntry, StoredResult};
 
 /// A serializable mirror of [`Event`] for the API.
 #[derive(Debug, Clone, Serialize)]
@@ -239,16 +239,18 @@ pub struct ActiveRef {
 
 impl ActiveRef {
     /// The id and time of an `active.json` document.
-    pub fn of(active: &Value) -> Option<ActiveRef> {
-        Some(ActiveRef {
-            id: active.get("id")?.as_str()?.to_string(),
-            activated: active
-                .get("activated")
-                .and_then(Value::as_str)
-                .unwrap_or_default()
-                .to_string(),
-        })
+    pub fn of(active: &ActiveDocument) -> ActiveRef {
+        ActiveRef {
+            id: active.id.clone(),
+            activated: active.activated.clone(),
+        }
     }
+}
+
+/// `GET /api/calibrations`: the history, newest first.
+#[derive(Debug, Clone, Serialize)]
+pub struct History {
+    pub calibrations: Vec<HistoryEntry>,
 }
 
 /// An abort, asked for or done.
@@ -401,8 +403,8 @@ pub struct Status {
     /// e_d's as lines).
     pub gates: Option<Gates>,
     pub recent_events: VecDeque<EventJson>,
-    /// The current or last result, with its store id.
-    pub result: Option<Value>,
+    /// The current or last result, as the store keeps it (with its id).
+    pub result: Option<StoredResult>,
     pub result_id: Option<String>,
     /// Why the last session produced no result.
     pub error: Option<String>,

@@ -9,14 +9,14 @@ use axum::http::{HeaderMap, StatusCode};
 use axum::response::sse::{Event as SseEvent, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde_json::{json, Value};
+use serde_json::json;
 use tokio::sync::oneshot;
 use tokio_stream::StreamExt;
 
-use super::api::{ActiveRef, CheckStatus, EventJson, RunClock, RunState, Status, Task};
+use super::api::{CheckStatus, EventJson, History, RunClock, RunState, Status, Task};
 use super::state::{now, AppState};
 use super::worker;
-use crate::store::StoreError;
+use crate::store::{ActiveDocument, StoreError, StoredResult};
 
 /// An error answer: a status and a sentence, as `{"error": "..."}`.
 pub struct ApiError(pub StatusCode, pub String);
@@ -87,19 +87,19 @@ pub async fn get_events(
 /// How often the event stream says the daemon is alive.
 pub const HEARTBEAT: std::time::Duration = std::time::Duration::from_secs(1);
 
-pub async fn get_history(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
-    let history = state.store().history().map_err(store_error)?;
-    Ok(Json(json!({ "calibrations": history })))
+pub async fn get_history(State(state): State<AppState>) -> Result<Json<History>, ApiError> {
+    let calibrations = state.store().history().map_err(store_error)?;
+    Ok(Json(History { calibrations }))
 }
 
 pub async fn get_calibration(
     State(state): State<AppState>,
     UrlPath(id): UrlPath<String>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<StoredResult>, ApiError> {
     state.store().get(&id).map(Json).map_err(store_error)
 }
 
-pub async fn get_active(State(state): State<AppState>) -> Result<Json<Value>, ApiError> {
+pub async fn get_active(State(state): State<AppState>) -> Result<Json<ActiveDocument>, ApiError> {
     match state.store().active().map_err(store_error)? {
         Some(a) => Ok(Json(a)),
         None => Err(ApiError(
@@ -118,7 +118,7 @@ pub async fn post_activate(
     headers: HeaderMap,
     ConnectInfo(addr): ConnectInfo<SocketAddr>,
     UrlPath(id): UrlPath<String>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<ActiveDocument>, ApiError> {
     let by = client_name(&headers, addr);
     let store = state.store().clone();
     let activated = {
@@ -142,13 +142,11 @@ pub async fn post_activate(
         drop(status);
         activated
     };
-    if let Some(active) = ActiveRef::of(&activated) {
-        state.publish(EventJson::Activated {
-            id: active.id,
-            activated: active.activated,
-            by,
-        });
-    }
+    state.publish(EventJson::Activated {
+        id: activated.id.clone(),
+        activated: activated.activated.clone(),
+        by,
+    });
     Ok(Json(activated))
 }
 
@@ -157,7 +155,7 @@ pub async fn post_reject(
     headers: HeaderMap,
     ConnectInfo(addr): ConnectInfo<SocketAddr>,
     UrlPath(id): UrlPath<String>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<StoredResult>, ApiError> {
     state
         .store()
         .reject(&id, &now(), &client_name(&headers, addr))

@@ -72,7 +72,7 @@ impl AppState {
             Interrupted { by, started }
         });
         let active = match store.active() {
-            Ok(active) => active.as_ref().and_then(ActiveRef::of),
+            Ok(active) => active.as_ref().map(ActiveRef::of),
             Err(e) => {
                 tracing::warn!("cannot read the active calibration: {e}");
                 None

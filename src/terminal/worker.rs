@@ -3,13 +3,14 @@
 //! the hardware never crosses threads), forwards its events, and keeps the
 //! result in the store (or the check's outcome in the status and the journal).
 
-use serde_json::Value;
 use tokio::sync::oneshot;
 
 use super::api::{CheckStatus, EventJson, RunState};
 use super::state::{now, AppState};
 use crate::hardware;
+use crate::output::ResultJson;
 use crate::session::{self, Event};
+use crate::store::StoredResult;
 use crate::verify::{calibration_in_store, check_schedule, VerifyJson};
 
 /// The session's own runtime, on this thread.
@@ -88,10 +89,7 @@ pub fn run_session(state: AppState, abort: oneshot::Receiver<String>) {
         beating(&state, work).await
     });
     state.clear_heartbeat();
-    let result = outcome.and_then(|o| {
-        serde_json::to_value(&o.result).map_err(|e| format!("cannot encode the result: {e}"))
-    });
-    finish(&state, result);
+    finish(&state, outcome.map(|o| o.result));
 }
 
 /// Publishes the session's events until it ends; its pictures go to
@@ -237,27 +235,25 @@ fn finish_check(state: &AppState, outcome: Result<(VerifyJson, String), String>)
     state.start_preview();
 }
 
-fn finish(state: &AppState, result: Result<Value, String>) {
+fn finish(state: &AppState, result: Result<ResultJson, String>) {
     state.store().clear_running();
     state.take_abort();
     // The provisional charts end with the session: the result replaces them.
     state.status_mut().provisional = None;
     match result {
-        Ok(value) => {
-            let status_text = value
-                .get("status")
-                .and_then(Value::as_str)
-                .unwrap_or("unknown")
-                .to_string();
-            match state.store().add(&value, &now()) {
+        Ok(result) => {
+            let status_text = result.status.as_str().to_string();
+            let created = now();
+            match state.store().add(&result, &created) {
                 Ok(id) => {
-                    let mut stored = value;
-                    if let Value::Object(m) = &mut stored {
-                        m.insert("id".into(), Value::String(id.clone()));
-                    }
                     {
                         let mut status = state.status_mut();
-                        status.result = Some(stored);
+                        status.result = Some(StoredResult {
+                            id: id.clone(),
+                            created,
+                            operator_rejection: None,
+                            result,
+                        });
                         status.result_id = Some(id.clone());
                         status.state = RunState::Idle;
                     }
@@ -269,8 +265,14 @@ fn finish(state: &AppState, result: Result<Value, String>) {
                 Err(e) => {
                     let error = format!("the result could not be kept: {e}");
                     {
+                        // Shown, but with no id: it cannot be accepted.
                         let mut status = state.status_mut();
-                        status.result = Some(value);
+                        status.result = Some(StoredResult {
+                            id: String::new(),
+                            created,
+                            operator_rejection: None,
+                            result,
+                        });
                         status.error = Some(error.clone());
                         status.state = RunState::Idle;
                     }

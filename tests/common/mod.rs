@@ -521,7 +521,8 @@ pub fn two_calibrations_in_store(state_dir: &Path) -> (String, String) {
         let (code, out, err) =
             groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
         assert_eq!(code, 0, "{err}");
-        let result: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let result = groundcal::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
+            .expect("a result document");
         ids.push(store.add(&result, created).unwrap());
     }
     (ids[0].clone(), ids[1].clone())
