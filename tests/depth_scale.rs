@@ -106,6 +106,55 @@ fn the_scale_is_recovered_live_and_from_the_recording() {
     }
 }
 
+/// A real robot's case (issue 23): nobody has measured its noise, so its
+/// configuration has no [calibration.noise], and the solve's floors (0.05°,
+/// 0.5 mm) are about ten times the noise the residuals show. The noise is
+/// then taken from the residuals, and a depth that reads 1 % long (or
+/// 0.5 % short) is found by default, live and in `replay` with no
+/// configuration at all; before, the scale stayed 1 and the mount was 12 mm
+/// off.
+#[test]
+fn without_a_measured_noise_the_scale_is_still_estimated() {
+    let dir = temp_dir("depth-scale-no-noise");
+    for scale in [1.01, 0.995] {
+        let case = dir.join(format!("scale-{scale}"));
+        let config = scaled_config(&case, scale, &[]);
+        // The configuration as a real robot's: no noise table.
+        let text = std::fs::read_to_string(&config).unwrap();
+        let (before, rest) = text.split_once("[calibration.noise]").unwrap();
+        let after = &rest[rest.find("[calibration.gates]").unwrap()..];
+        std::fs::write(&config, format!("{before}{after}")).unwrap();
+        let record = case.join("rec");
+        let (code, live) = run_json(&[
+            "calibrate",
+            "--config",
+            config.to_str().unwrap(),
+            "--record",
+            record.to_str().unwrap(),
+            "--json",
+        ]);
+        let (code_replay, replayed) = run_json(&["replay", record.to_str().unwrap(), "--json"]);
+        for (how, code, result) in [("live", code, &live), ("replay", code_replay, &replayed)] {
+            assert_eq!(code, 0, "{scale} {how}: {result:#}");
+            assert_eq!(
+                result["depth_scale_estimated"], true,
+                "{scale} {how}: {result:#}"
+            );
+            let found = result["depth_scale"].as_f64().unwrap();
+            assert!(
+                (found / scale - 1.0).abs() < 0.001,
+                "{scale} {how}: found {found}"
+            );
+            let (angle, position) = mount_errors(result);
+            eprintln!("{scale} {how}: scale {found:.5}, mount {angle:.4}° {position:.2} mm");
+            assert!(
+                angle < 0.01 && position < 0.5,
+                "{scale} {how}: {angle}° {position} mm"
+            );
+        }
+    }
+}
+
 /// The paper's tilts at one body height: `plan` says the scale will not be
 /// estimated, the calibration takes 1 and says why; a known scale given
 /// with --depth-scale is used as given.

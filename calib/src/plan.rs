@@ -152,6 +152,7 @@ pub fn predict_schedule_with(
         .collect();
     let settings = SolveSettings {
         depth_scale,
+        noise_from_residuals: false,
         ..noise.solve_settings()
     };
     let solution = solve(&observations, &settings)?;

@@ -98,6 +98,10 @@ pub struct SolveSettings {
     pub min_spread: f64,
     /// Whether the depth scale is estimated with the mount, or taken as known.
     pub depth_scale: DepthScaleSetting,
+    /// Whether the noise level comes from the residuals when there are
+    /// enough of them ([`MIN_EVIDENCE_DOF`]), or is the assumed one (the
+    /// floors) at least: a prediction before moving has no residuals.
+    pub noise_from_residuals: bool,
 }
 
 /// The Kinect's depth scale `s` (its depth reads `s` × the truth, so every
@@ -141,6 +145,7 @@ impl Default for SolveSettings {
             outlier_offset_floor: 0.015,
             max_outlier_fraction: 0.3,
             min_spread: 1.0f64.to_radians().sin(),
+            noise_from_residuals: true,
             depth_scale: DepthScaleSetting::default(),
         }
     }
@@ -522,7 +527,7 @@ pub fn solve(
                 fallen.depth_scale = DepthScale::fixed(
                     fallback,
                     format!(
-                        "not estimated: these poses pin it down only to ±{:.2}% (one σ, at the noise assumed per pose), too loosely to correct the depth (±{:.2}% would); more poses, larger height changes or a measured [calibration.noise] would, and so would giving a known scale",
+                        "not estimated: these poses pin it down only to ±{:.2}% (one σ, at the noise the residuals show, or the assumed noise when there are too few of them), too loosely to correct the depth (±{:.2}% would); more poses or larger height changes would, and so would giving a known scale",
                         sigma * 100.0,
                         MAX_SCALE_SIGMA * 100.0
                     ),
@@ -693,20 +698,29 @@ fn solve_six(
     let weight_normals: f64 = problem.robust.iter().map(|w| w.0).sum();
     let weight_offsets: f64 = problem.robust.iter().map(|w| w.1).sum();
     let with_fit_covariance = used.iter().all(|o| o.plane_covariance.is_some());
-    let factor = |chi2: f64, dof: f64| {
+    // The noise is what the residuals show (χ²/dof), once there are enough
+    // of them to say: the assumed noise (the floors, or a configured
+    // [calibration.noise]) then sets only the relative weights, so a real
+    // robot's calibration is as sure as its evidence, not as its guess. The
+    // plane fits' own covariance stays a lower bound: the poses cannot be
+    // less noisy than their pixels. With fewer residuals than that, the
+    // assumed noise is a floor: a short schedule cannot vouch for itself.
+    let (floor_normals, floor_offsets) = fit_share_of_assumed(&used, settings);
+    let factor = |chi2: f64, dof: f64, fit_share: f64| {
         if dof <= 0.0 {
             1.0
-        } else if with_fit_covariance {
-            // The fit's covariance is a lower bound on the noise: never claim better.
-            (chi2 / dof).max(1.0)
-        } else {
+        } else if !with_fit_covariance {
             // Without it the floors only set the relative weights: the level is estimated.
             (chi2 / dof).max(1e-12)
+        } else if settings.noise_from_residuals && dof >= MIN_EVIDENCE_DOF {
+            (chi2 / dof).max(fit_share)
+        } else {
+            (chi2 / dof).max(1.0)
         }
     };
     let variance_factors = (
-        factor(chi2_normals, 2.0 * weight_normals - 3.0),
-        factor(chi2_offsets, weight_offsets - 3.0),
+        factor(chi2_normals, 2.0 * weight_normals - 3.0, floor_normals),
+        factor(chi2_offsets, weight_offsets - 3.0, floor_offsets),
     );
 
     let jacobian = problem.jacobian_matrix();
@@ -734,6 +748,32 @@ fn solve_six(
         iterations: evaluations,
         depth_scale: DepthScale::fixed(1.0, "given".into()),
     })
+}
+
+/// Residual degrees of freedom a block needs before its noise is taken from
+/// its residuals alone: the variance is then known to about ±30 % (√(2/20)),
+/// its σ to ±16 %. 12 poses give the normals 21, 23 poses the offsets 20.
+pub const MIN_EVIDENCE_DOF: f64 = 20.0;
+
+/// What share of the assumed variance of each block (normals, offsets) the
+/// plane fits' own covariance is, on average over the poses: the least the
+/// residuals' variance factor may be.
+fn fit_share_of_assumed(used: &[&Observation], settings: &SolveSettings) -> (f64, f64) {
+    let floor_n = settings.normal_sigma_floor.powi(2);
+    let floor_d = settings.offset_sigma_floor.powi(2);
+    let (mut normals, mut offsets) = (0.0, 0.0);
+    for obs in used {
+        let Some(c) = obs.plane_covariance else {
+            return (1.0, 1.0);
+        };
+        let w = Weights::of(obs, settings);
+        let fit_t = w.tangent.transpose() * c.fixed_view::<3, 3>(0, 0) * w.tangent;
+        let fit_n = fit_t.trace() / 2.0;
+        normals += fit_n / (fit_n + floor_n);
+        offsets += c[(3, 3)] / (c[(3, 3)] + floor_d);
+    }
+    let n = used.len().max(1) as f64;
+    (normals / n, offsets / n)
 }
 
 /// Levenberg-Marquardt from the closed form, inside iteratively reweighted

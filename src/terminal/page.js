@@ -781,6 +781,11 @@ async function refresh() {
     const r = await fetchWithin('/api/status', {}, 2000);
     if (!r.ok) { lose(); return false; }
     const s = await r.json();
+    // A poll answered after a newer provisional event must not take the
+    // live chart back: within a run it only grows.
+    const before = model.status;
+    if (before && s.state === 'running' && before.started === s.started && before.provisional
+      && (!s.provisional || s.provisional.length < before.provisional.length)) s.provisional = before.provisional;
     const activeBefore = model.status && model.status.active ? model.status.active.id : null;
     model.status = s;
     model.statusAt = Date.now();
