@@ -30,6 +30,21 @@ fn run_json(args: &[&str]) -> (i32, Value) {
     (code, json)
 }
 
+/// `calibrate` with `config`, recording into `record`, then `replay` of the
+/// recording with no configuration: (how, exit status, result) of each.
+fn calibrate_and_replay(config: &Path, record: &Path) -> [(&'static str, i32, Value); 2] {
+    let (code, live) = run_json(&[
+        "calibrate",
+        "--config",
+        config.to_str().unwrap(),
+        "--record",
+        record.to_str().unwrap(),
+        "--json",
+    ]);
+    let (code_replay, replayed) = run_json(&["replay", record.to_str().unwrap(), "--json"]);
+    [("live", code, live), ("replay", code_replay, replayed)]
+}
+
 /// The largest angle and position errors against the truth.
 fn mount_errors(result: &Value) -> (f64, f64) {
     let mount = &result["robot_from_sensor"];
@@ -46,17 +61,10 @@ fn the_scale_is_recovered_live_and_from_the_recording() {
     for scale in [1.01, 0.995, 1.0] {
         let case = dir.join(format!("scale-{scale}"));
         let config = scaled_config(&case, scale, &[]);
-        let record = case.join("rec");
-        let (code, live) = run_json(&[
-            "calibrate",
-            "--config",
-            config.to_str().unwrap(),
-            "--record",
-            record.to_str().unwrap(),
-            "--json",
-        ]);
-        let (code_replay, replayed) = run_json(&["replay", record.to_str().unwrap(), "--json"]);
-        for (how, code, result) in [("live", code, &live), ("replay", code_replay, &replayed)] {
+        let runs = calibrate_and_replay(&config, &case.join("rec"));
+        let live = runs[0].2.clone();
+        for (how, code, result) in &runs {
+            let (how, code) = (*how, *code);
             assert_eq!(code, 0, "{scale} {how}: {result:#}");
             assert_eq!(result["depth_scale_estimated"], true, "{scale} {how}");
             let found = result["depth_scale"].as_f64().unwrap();
@@ -124,17 +132,9 @@ fn without_a_measured_noise_the_scale_is_still_estimated() {
         let (before, rest) = text.split_once("[calibration.noise]").unwrap();
         let after = &rest[rest.find("[calibration.gates]").unwrap()..];
         std::fs::write(&config, format!("{before}{after}")).unwrap();
-        let record = case.join("rec");
-        let (code, live) = run_json(&[
-            "calibrate",
-            "--config",
-            config.to_str().unwrap(),
-            "--record",
-            record.to_str().unwrap(),
-            "--json",
-        ]);
-        let (code_replay, replayed) = run_json(&["replay", record.to_str().unwrap(), "--json"]);
-        for (how, code, result) in [("live", code, &live), ("replay", code_replay, &replayed)] {
+        let runs = calibrate_and_replay(&config, &case.join("rec"));
+        for (how, code, result) in &runs {
+            let (how, code) = (*how, *code);
             assert_eq!(code, 0, "{scale} {how}: {result:#}");
             assert_eq!(
                 result["depth_scale_estimated"], true,

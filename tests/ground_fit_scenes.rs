@@ -13,17 +13,15 @@
 //! (the fit's settings: `0,3` and `15` are the fit before issue 22), and
 //! `GROUNDCAL_SCENES_ORACLE` (fit only the pixels that see the ground).
 
+mod common;
+
 use groundcal::calib::geometry::{ground_in_sensor, PoseDegMm, Transform};
 use groundcal::calib::observe::{NominalMount, ObserveSettings, PoseObserver};
 use groundcal::calib::plane::{fit_ground, FitBuffers, GroundFitMethod, PlaneFitSettings};
-use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange};
+use groundcal::calib::sensor::DepthModel;
 use groundcal::calib::solve::{solve, DepthScaleSetting, Observation, SolveSettings};
-use groundcal::schedule::Schedule;
-use groundcal_hal::sim::kinect::{DepthRenderer, SimKinectConfig};
 use groundcal_hal::sim::world::World;
 
-/// config/sim.toml's true mount.
-const TRUE_MOUNT: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
 /// What the operator knows before calibrating (config/sim.toml).
 const NOMINAL_MOUNT: [f64; 6] = [0.0, -35.0, 0.0, 520.0, 360.0, 0.0];
 
@@ -63,21 +61,9 @@ pub struct Outcome {
 /// Renders the 52 poses of `world` and fits each with both methods; returns
 /// (disparity, paper).
 fn run(world: &World, model: DepthModel, seed: u64) -> (Outcome, Outcome) {
-    let schedule = Schedule::read(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/schedules/octopus-52.toml"),
-    )
-    .expect("the shipped schedule");
-    let config = SimKinectConfig {
-        depth_model: model,
-        seed,
-        ..Default::default()
-    };
-    let renderer = DepthRenderer::new(&config).unwrap();
-    let camera = DepthCamera::new(
-        DepthEncoding::Raw11(model),
-        config.intrinsics,
-        DepthRange::default(),
-    );
+    let schedule = common::octopus_52();
+    let (renderer, camera) = common::sim_renderer(model, seed);
+    let intrinsics = *camera.intrinsics();
     let home_feet_mm = [
         [692.8, -600.0, 400.0],
         [0.0, -600.0, 800.0],
@@ -88,13 +74,13 @@ fn run(world: &World, model: DepthModel, seed: u64) -> (Outcome, Outcome) {
     ];
     let observer = PoseObserver::new(
         model,
-        config.intrinsics,
+        intrinsics,
         &home_feet_mm,
         Some(NominalMount::from_values(NOMINAL_MOUNT)),
         ObserveSettings::default(),
     )
     .unwrap();
-    let mount = pose(TRUE_MOUNT);
+    let mount = pose(common::SIM_MOUNT);
     let mut buffers = FitBuffers::default();
     let methods = [GroundFitMethod::Disparity, GroundFitMethod::Paper];
     let mut observations: [Vec<Observation>; 2] = [Vec::new(), Vec::new()];

@@ -4,17 +4,16 @@
 //! per pixel: the same frame rendered (same noise) in a world with nothing
 //! but the floor; a pixel that reads the same there sees the floor.
 
+mod common;
+
 use groundcal::calib::geometry::{PoseDegMm, Transform};
 use groundcal::calib::ground_view::{GroundView, CELL_PIXELS};
 use groundcal::calib::observe::{ground_prior, NominalMount};
 use groundcal::calib::plane::{fit_ground, FitBuffers, PlaneFitSettings};
-use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange};
-use groundcal::schedule::Schedule;
-use groundcal_hal::sim::kinect::{DepthRenderer, SimKinectConfig};
+use groundcal::calib::sensor::DepthModel;
 use groundcal_hal::sim::world::World;
 
-/// config/sim.toml's true mount, and what the operator knows of it.
-const TRUE_MOUNT: [f64; 6] = [0.8, -33.0, 1.5, 510.0, 370.0, 15.0];
+/// What the operator knows of the mount (config/sim.toml).
 const NOMINAL_MOUNT: [f64; 6] = [0.0, -35.0, 0.0, 520.0, 360.0, 0.0];
 
 fn transform(values: [f64; 6]) -> Transform {
@@ -46,23 +45,10 @@ impl Tally {
 /// Renders the home stance and six poses of the shipped schedule in `world`,
 /// fits each frame as the daemon's picture does, and tallies its cells.
 fn tally(world: &World, model: DepthModel, seed: u64) -> Tally {
-    let schedule = Schedule::read(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/schedules/octopus-52.toml"),
-    )
-    .expect("the shipped schedule");
-    let config = SimKinectConfig {
-        depth_model: model,
-        seed,
-        ..Default::default()
-    };
-    let renderer = DepthRenderer::new(&config).unwrap();
-    let camera = DepthCamera::new(
-        DepthEncoding::Raw11(model),
-        config.intrinsics,
-        DepthRange::default(),
-    );
+    let schedule = common::octopus_52();
+    let (renderer, camera) = common::sim_renderer(model, seed);
     let nominal = NominalMount::from_values(NOMINAL_MOUNT);
-    let mount = transform(TRUE_MOUNT);
+    let mount = transform(common::SIM_MOUNT);
     let mut poses = vec![schedule.home];
     poses.extend([0, 9, 19, 29, 39, 49].map(|k| schedule.poses[k]));
     let mut tally = Tally::default();

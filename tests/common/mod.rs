@@ -527,3 +527,34 @@ pub fn two_calibrations_in_store(state_dir: &Path) -> (String, String) {
     }
     (ids[0].clone(), ids[1].clone())
 }
+
+/// The shipped 52-pose schedule (config/schedules/octopus-52.toml).
+pub fn octopus_52() -> groundcal::schedule::Schedule {
+    groundcal::schedule::Schedule::read(&root().join("config/schedules/octopus-52.toml"))
+        .expect("the shipped schedule")
+}
+
+/// The simulated Kinect's renderer for a depth model and a seed, and the
+/// camera that reads its raw frames.
+pub fn sim_renderer(
+    model: groundcal::calib::sensor::DepthModel,
+    seed: u64,
+) -> (
+    groundcal_hal::sim::kinect::DepthRenderer,
+    groundcal::calib::sensor::DepthCamera,
+) {
+    use groundcal::calib::sensor::{DepthCamera, DepthEncoding, DepthRange};
+    let config = groundcal_hal::sim::kinect::SimKinectConfig {
+        depth_model: model,
+        seed,
+        ..Default::default()
+    };
+    let renderer =
+        groundcal_hal::sim::kinect::DepthRenderer::new(&config).expect("a valid simulated Kinect");
+    let camera = DepthCamera::new(
+        DepthEncoding::Raw11(model),
+        config.intrinsics,
+        DepthRange::default(),
+    );
+    (renderer, camera)
+}
