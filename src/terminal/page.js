@@ -681,7 +681,7 @@ function render() {
         const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = t('active'); cell.appendChild(badge);
       } else if (h.status === 'accepted') {
         const b = document.createElement('button');
-        b.className = 'small rollback'; b.textContent = a ? t('rollBackToThis') : t('makeActive');
+        b.className = 'small rollback'; b.textContent = activeId ? t('rollBackToThis') : t('makeActive');
         b.dataset.id = h.id; b.disabled = lost || running;
         b.onclick = () => { model.confirm = { kind: 'rollback', id: h.id }; render(); };
         cell.appendChild(b);
