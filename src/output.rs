@@ -422,6 +422,17 @@ pub struct TiltResultJson {
     pub pitch_to_body_deg: Option<f64>,
 }
 
+/// One pose's noise, in `[calibration.noise]`'s keys.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NoiseJson {
+    /// σ of the ground's normal per tangent direction, degrees.
+    #[serde(deserialize_with = "number_or_nan")]
+    pub normal_sigma_deg: f64,
+    /// σ of the ground's offset, millimetres.
+    #[serde(deserialize_with = "number_or_nan")]
+    pub offset_sigma_mm: f64,
+}
+
 /// Which robot a calibration was made for: the name of the configuration's
 /// `[robot] name` (or a recording's `robot`), and the lower computer's
 /// firmware as its WELCOME said.
@@ -491,6 +502,11 @@ pub struct ResultJson {
     /// Correlation of the depth scale with α, β, γ, px, py, pz.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth_scale_correlations: Option<[f64; 6]>,
+    /// The noise of one pose's ground the solve took: from the residuals
+    /// when they were enough to say. A measured `[calibration.noise]` for
+    /// `plan`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_per_pose: Option<NoiseJson>,
     /// Calibrated at several tilts of the motor (`--tilts`): the motor's
     /// axis and pivot, which give `robot_from_sensor` at any tilt in the
     /// range (`export --tilt`). `robot_from_sensor` is then the one at the
@@ -559,6 +575,10 @@ impl ResultJson {
                 .depth_scale
                 .estimated
                 .then_some(c.depth_scale.correlations),
+            noise_per_pose: Some(NoiseJson {
+                normal_sigma_deg: c.noise_per_pose.0.to_degrees(),
+                offset_sigma_mm: c.noise_per_pose.1 * 1e3,
+            }),
         }
     }
 
@@ -585,6 +605,7 @@ impl ResultJson {
             depth_scale: None,
             depth_scale_estimated: None,
             depth_scale_correlations: None,
+            noise_per_pose: None,
         }
     }
 

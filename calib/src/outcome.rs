@@ -151,6 +151,8 @@ pub struct Calibration {
     pub observability: Observability,
     /// Estimated noise relative to the assumed one: normals, offsets.
     pub variance_factors: (f64, f64),
+    /// The noise of one pose's ground the solve took ([`Solution`]'s).
+    pub noise_per_pose: (f64, f64),
     /// Levenberg-Marquardt's evaluations and termination.
     pub iterations: usize,
     /// Each quality gate with its limit and what was measured, in the
@@ -243,6 +245,10 @@ pub struct Solution {
     pub observability: Observability,
     /// Estimated noise relative to the assumed one: normals, offsets.
     pub variance_factors: (f64, f64),
+    /// The noise of one pose's ground this solve took, one σ: of the normal
+    /// per tangent direction (radians) and of the offset (metres); from the
+    /// residuals when they were enough to say (see `solve`).
+    pub noise_per_pose: (f64, f64),
     /// Levenberg-Marquardt's evaluations.
     pub iterations: usize,
     /// The depth scale the distances were divided by, estimated or given.

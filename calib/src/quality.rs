@@ -121,6 +121,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         summary,
         observability: solution.observability,
         variance_factors: solution.variance_factors,
+        noise_per_pose: solution.noise_per_pose,
         iterations: solution.iterations,
         checks,
         depth_scale: solution.depth_scale,

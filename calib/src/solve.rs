@@ -705,6 +705,7 @@ fn solve_six(
     // plane fits' own covariance stays a lower bound: the poses cannot be
     // less noisy than their pixels. With fewer residuals than that, the
     // assumed noise is a floor: a short schedule cannot vouch for itself.
+    let assumed = assumed_noise(&used, settings);
     let (floor_normals, floor_offsets) = fit_share_of_assumed(&used, settings);
     let factor = |chi2: f64, dof: f64, fit_share: f64| {
         if dof <= 0.0 {
@@ -745,6 +746,10 @@ fn solve_six(
         poses: outcomes,
         observability,
         variance_factors,
+        noise_per_pose: (
+            (assumed.0 * variance_factors.0).sqrt(),
+            (assumed.1 * variance_factors.1).sqrt(),
+        ),
         iterations: evaluations,
         depth_scale: DepthScale::fixed(1.0, "given".into()),
     })
@@ -754,6 +759,23 @@ fn solve_six(
 /// its residuals alone: the variance is then known to about ±30 % (√(2/20)),
 /// its σ to ±16 %. 12 poses give the normals 21, 23 poses the offsets 20.
 pub const MIN_EVIDENCE_DOF: f64 = 20.0;
+
+/// The assumed variance of one pose's normal (per tangent direction) and
+/// offset, the fits' covariance and the floors together, averaged over the
+/// poses: what the variance factors scale.
+fn assumed_noise(used: &[&Observation], settings: &SolveSettings) -> (f64, f64) {
+    let (mut normals, mut offsets) = (0.0, 0.0);
+    for obs in used {
+        let w = Weights::of(obs, settings);
+        let cov_t = (w.normal_whitener.transpose() * w.normal_whitener)
+            .try_inverse()
+            .unwrap_or_else(|| Matrix2::identity() * settings.normal_sigma_floor.powi(2));
+        normals += cov_t.trace() / 2.0;
+        offsets += 1.0 / (w.offset_whitener * w.offset_whitener);
+    }
+    let n = used.len().max(1) as f64;
+    (normals / n, offsets / n)
+}
 
 /// What share of the assumed variance of each block (normals, offsets) the
 /// plane fits' own covariance is, on average over the poses: the least the
