@@ -16,7 +16,7 @@
 mod common;
 
 use groundcal::calib::geometry::{ground_in_sensor, PoseDegMm, Transform};
-use groundcal::calib::observe::{NominalMount, ObserveSettings, PoseObserver};
+use groundcal::calib::observe::{ground_prior, NominalMount};
 use groundcal::calib::plane::{fit_ground, FitBuffers, GroundFitMethod, PlaneFitSettings};
 use groundcal::calib::sensor::DepthModel;
 use groundcal::calib::solve::{solve, DepthScaleSetting, Observation, SolveSettings};
@@ -63,23 +63,7 @@ pub struct Outcome {
 fn run(world: &World, model: DepthModel, seed: u64) -> (Outcome, Outcome) {
     let schedule = common::octopus_52();
     let (renderer, camera) = common::sim_renderer(model, seed);
-    let intrinsics = *camera.intrinsics();
-    let home_feet_mm = [
-        [692.8, -600.0, 400.0],
-        [0.0, -600.0, 800.0],
-        [-692.8, -600.0, 400.0],
-        [-692.8, -600.0, -400.0],
-        [0.0, -600.0, -800.0],
-        [692.8, -600.0, -400.0],
-    ];
-    let observer = PoseObserver::new(
-        model,
-        intrinsics,
-        &home_feet_mm,
-        Some(NominalMount::from_values(NOMINAL_MOUNT)),
-        ObserveSettings::default(),
-    )
-    .unwrap();
+    let nominal = NominalMount::from_values(NOMINAL_MOUNT);
     let mount = pose(common::SIM_MOUNT);
     let mut buffers = FitBuffers::default();
     let methods = [GroundFitMethod::Disparity, GroundFitMethod::Paper];
@@ -115,7 +99,7 @@ fn run(world: &World, model: DepthModel, seed: u64) -> (Outcome, Outcome) {
             })
             .collect();
         let frames: Vec<&[u16]> = frames.iter().map(Vec::as_slice).collect();
-        let prior = observer.prior(&ground_from_robot);
+        let prior = ground_prior(Some(&nominal), &ground_from_robot);
         for (m, method) in methods.iter().enumerate() {
             let mut settings = PlaneFitSettings {
                 method: *method,

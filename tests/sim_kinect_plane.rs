@@ -8,7 +8,7 @@
 //! planes per depth model, without bias (where the paper's fit has one).
 
 use groundcal::calib::geometry::{ground_in_sensor, Plane, PoseDegMm, PoseParams, Transform};
-use groundcal::calib::observe::{NominalMount, ObserveSettings, PoseObserver};
+use groundcal::calib::observe::{ground_prior, NominalMount};
 use groundcal::calib::plane::{
     fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitError,
     PlaneFitSettings,
@@ -43,24 +43,11 @@ fn body_poses() -> Vec<Transform> {
 }
 
 /// The pipeline's prior for a body pose, from the nominal mount.
-fn pipeline_prior(model: DepthModel, ground_from_robot: &Transform) -> GroundPrior {
-    let home_feet_mm = [
-        [692.8, -600.0, 400.0],
-        [0.0, -600.0, 800.0],
-        [-692.8, -600.0, 400.0],
-        [-692.8, -600.0, -400.0],
-        [0.0, -600.0, -800.0],
-        [692.8, -600.0, -400.0],
-    ];
-    let processor = PoseObserver::new(
-        model,
-        SimKinectConfig::default().intrinsics,
-        &home_feet_mm,
-        Some(NominalMount::from_values(NOMINAL_MOUNT)),
-        ObserveSettings::default(),
+fn pipeline_prior(ground_from_robot: &Transform) -> GroundPrior {
+    ground_prior(
+        Some(&NominalMount::from_values(NOMINAL_MOUNT)),
+        ground_from_robot,
     )
-    .unwrap();
-    processor.prior(ground_from_robot)
 }
 
 /// Renders one frame and fits the ground; returns (angle °, height error mm).
@@ -156,7 +143,7 @@ fn ground_among_boxes_and_a_wall_is_fitted_to_the_truth_with_the_pipelines_prior
         let world = World::boxes_and_wall(seed);
         for model in [DepthModel::default(), DepthModel::inverse_linear_default()] {
             for (i, body) in body_poses().iter().enumerate() {
-                let prior = pipeline_prior(model, body);
+                let prior = pipeline_prior(body);
                 let (angle, height) = fit_error(&world, model, body, &prior, seed);
                 assert!(
                     angle < 0.05 && height < 1.0,
@@ -267,7 +254,7 @@ fn the_floor_is_found_when_it_is_a_tenth_of_the_view() {
                 let ground_from_sensor = body * pose(TRUE_MOUNT);
                 let share = ground_share(&world, model, &ground_from_sensor);
                 shares.push(share);
-                let prior = pipeline_prior(model, body);
+                let prior = pipeline_prior(body);
                 let (fit, truth) = fit_frame(
                     &world,
                     model,
