@@ -706,7 +706,7 @@ fn solve_six(
     // less noisy than their pixels. With fewer residuals than that, the
     // assumed noise is a floor: a short schedule cannot vouch for itself.
     let assumed = assumed_noise(&used, settings);
-    let (floor_normals, floor_offsets) = fit_share_of_assumed(&used, settings);
+    let (floor_normals, floor_offsets) = assumed.fit_share;
     let factor = |chi2: f64, dof: f64, fit_share: f64| {
         if dof <= 0.0 {
             1.0
@@ -747,8 +747,8 @@ fn solve_six(
         observability,
         variance_factors,
         noise_per_pose: (
-            (assumed.0 * variance_factors.0).sqrt(),
-            (assumed.1 * variance_factors.1).sqrt(),
+            (assumed.variance.0 * variance_factors.0).sqrt(),
+            (assumed.variance.1 * variance_factors.1).sqrt(),
         ),
         iterations: evaluations,
         depth_scale: DepthScale::fixed(1.0, "given".into()),
@@ -760,42 +760,47 @@ fn solve_six(
 /// its σ to ±16 %. 12 poses give the normals 21, 23 poses the offsets 20.
 pub const MIN_EVIDENCE_DOF: f64 = 20.0;
 
-/// The assumed variance of one pose's normal (per tangent direction) and
-/// offset, the fits' covariance and the floors together, averaged over the
-/// poses: what the variance factors scale.
-fn assumed_noise(used: &[&Observation], settings: &SolveSettings) -> (f64, f64) {
-    let (mut normals, mut offsets) = (0.0, 0.0);
-    for obs in used {
-        let w = Weights::of(obs, settings);
-        let cov_t = (w.normal_whitener.transpose() * w.normal_whitener)
-            .try_inverse()
-            .unwrap_or_else(|| Matrix2::identity() * settings.normal_sigma_floor.powi(2));
-        normals += cov_t.trace() / 2.0;
-        offsets += 1.0 / (w.offset_whitener * w.offset_whitener);
-    }
-    let n = used.len().max(1) as f64;
-    (normals / n, offsets / n)
+/// The noise assumed for one pose, averaged over the poses.
+struct AssumedNoise {
+    /// The variance of the normal per tangent direction and of the offset:
+    /// the fit's covariance plus the floors (what the variance factors scale).
+    variance: (f64, f64),
+    /// The share of each that the fit's own covariance makes up: the least
+    /// a variance factor may be (1 when a pose has no fit covariance).
+    fit_share: (f64, f64),
 }
 
-/// What share of the assumed variance of each block (normals, offsets) the
-/// plane fits' own covariance is, on average over the poses: the least the
-/// residuals' variance factor may be.
-fn fit_share_of_assumed(used: &[&Observation], settings: &SolveSettings) -> (f64, f64) {
+fn assumed_noise(used: &[&Observation], settings: &SolveSettings) -> AssumedNoise {
     let floor_n = settings.normal_sigma_floor.powi(2);
     let floor_d = settings.offset_sigma_floor.powi(2);
-    let (mut normals, mut offsets) = (0.0, 0.0);
+    let (mut variance, mut share) = ((0.0, 0.0), (0.0, 0.0));
+    let mut all_fitted = true;
     for obs in used {
-        let Some(c) = obs.plane_covariance else {
-            return (1.0, 1.0);
+        let (fit_n, fit_d) = match obs.plane_covariance {
+            Some(c) => {
+                let tangent = Weights::of(obs, settings).tangent;
+                let fit_t = tangent.transpose() * c.fixed_view::<3, 3>(0, 0) * tangent;
+                (fit_t.trace() / 2.0, c[(3, 3)])
+            }
+            None => {
+                all_fitted = false;
+                (0.0, 0.0)
+            }
         };
-        let w = Weights::of(obs, settings);
-        let fit_t = w.tangent.transpose() * c.fixed_view::<3, 3>(0, 0) * w.tangent;
-        let fit_n = fit_t.trace() / 2.0;
-        normals += fit_n / (fit_n + floor_n);
-        offsets += c[(3, 3)] / (c[(3, 3)] + floor_d);
+        variance.0 += fit_n + floor_n;
+        variance.1 += fit_d + floor_d;
+        share.0 += fit_n / (fit_n + floor_n);
+        share.1 += fit_d / (fit_d + floor_d);
     }
     let n = used.len().max(1) as f64;
-    (normals / n, offsets / n)
+    AssumedNoise {
+        variance: (variance.0 / n, variance.1 / n),
+        fit_share: if all_fitted {
+            (share.0 / n, share.1 / n)
+        } else {
+            (1.0, 1.0)
+        },
+    }
 }
 
 /// Levenberg-Marquardt from the closed form, inside iteratively reweighted
