@@ -281,6 +281,35 @@ pub struct SimConfig {
     /// check): `{ from_pose = 26, degrees = 1.0 }`.
     #[serde(default)]
     pub motor_slip: Option<MotorSlipConfig>,
+    /// A fixed pattern the simulated Kinect adds to its raw depth (tests of
+    /// the depth distortion): `{ shape = "radial", amplitude_raw = 0.5 }`.
+    #[serde(default)]
+    pub depth_distortion: Option<SimDistortionConfig>,
+}
+
+/// `[sim] depth_distortion`: the simulated Kinect's fixed pattern.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimDistortionConfig {
+    pub shape: SimDistortionShape,
+    pub amplitude_raw: f64,
+    /// Herrera's weakening with depth, per metre; default 0.
+    #[serde(default)]
+    pub decay_per_m: f64,
+    /// The stripes' period for `shape = "bands"`, pixels; default 64.
+    #[serde(default)]
+    pub band_period_px: Option<f64>,
+}
+
+/// The shapes of `[sim] depth_distortion`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SimDistortionShape {
+    Radial,
+    Tilted,
+    Saddle,
+    Bands,
+    Waves,
 }
 
 /// `[sim] motor_slip`.

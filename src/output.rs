@@ -422,6 +422,64 @@ pub struct TiltResultJson {
     pub pitch_to_body_deg: Option<f64>,
 }
 
+/// The depth pattern a calibration found: per cell of `cell_px` pixels,
+/// row-major from the top left, the raw units a reading there is off by
+/// (more is farther; `null` where no pose saw the ground).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DepthPatternJson {
+    /// Whether a pattern was found and the calibration corrected for it.
+    pub corrected: bool,
+    pub note: String,
+    pub cell_px: usize,
+    pub columns: usize,
+    pub rows: usize,
+    pub raw: Vec<Option<f64>>,
+    pub sigma_raw: Vec<Option<f64>>,
+    /// The largest depth error the pattern causes at 2 m, millimetres.
+    pub largest_mm_at_2m: f64,
+    /// RMS of its shape (less its plane part), raw units.
+    pub shape_rms_raw: f64,
+    /// The shape against none, χ² per degree of freedom (about 1: none).
+    pub shape_chi2_per_dof: f64,
+    /// The residuals cell by cell and pose by pose after the pattern, χ² per
+    /// degree of freedom (about 1: a pattern fixed in the image).
+    pub consistency_chi2_per_dof: f64,
+    /// Its plane part from the geometry across poses (raw units at the
+    /// principal point, per 100 pixels along u and along v), with σ.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_part_raw: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_part_sigma_raw: Option<[f64; 3]>,
+    pub plane_part_taken: bool,
+    /// Raw units per 1/m of inverse depth (the depth model's 1/b): the depth
+    /// error at z metres is −z²·raw/raw_per_inverse_depth.
+    pub raw_per_inverse_depth: f64,
+}
+
+impl DepthPatternJson {
+    /// The pattern as the result carries it (cells to 0.001 raw units).
+    pub fn from_pattern(p: &crate::calib::outcome::DepthPattern) -> Self {
+        let thousandths = |v: &Option<f64>| v.map(|v| (v * 1e3).round() / 1e3);
+        DepthPatternJson {
+            corrected: p.corrected,
+            note: p.note.clone().unwrap_or_default(),
+            cell_px: p.cell_px,
+            columns: p.columns,
+            rows: p.rows,
+            raw: p.raw.iter().map(thousandths).collect(),
+            sigma_raw: p.sigma_raw.iter().map(thousandths).collect(),
+            largest_mm_at_2m: p.largest_depth_error_m(2.0) * 1e3,
+            shape_rms_raw: p.shape_rms_raw,
+            shape_chi2_per_dof: p.shape_chi2_per_dof,
+            consistency_chi2_per_dof: p.consistency_chi2_per_dof,
+            plane_part_raw: p.plane_part,
+            plane_part_sigma_raw: p.plane_part_sigma,
+            plane_part_taken: p.plane_part_taken,
+            raw_per_inverse_depth: p.raw_per_inverse_depth,
+        }
+    }
+}
+
 /// One pose's noise, in `[calibration.noise]`'s keys.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct NoiseJson {
@@ -507,6 +565,9 @@ pub struct ResultJson {
     /// `plan`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_per_pose: Option<NoiseJson>,
+    /// The Kinect's fixed depth pattern, found with the mount (docs/method.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_pattern: Option<DepthPatternJson>,
     /// Calibrated at several tilts of the motor (`--tilts`): the motor's
     /// axis and pivot, which give `robot_from_sensor` at any tilt in the
     /// range (`export --tilt`). `robot_from_sensor` is then the one at the
@@ -575,6 +636,7 @@ impl ResultJson {
                 .depth_scale
                 .estimated
                 .then_some(c.depth_scale.correlations),
+            depth_pattern: c.depth_pattern.as_ref().map(DepthPatternJson::from_pattern),
             noise_per_pose: Some(NoiseJson {
                 normal_sigma_deg: c.noise_per_pose.0.to_degrees(),
                 offset_sigma_mm: c.noise_per_pose.1 * 1e3,
@@ -606,6 +668,7 @@ impl ResultJson {
             depth_scale_estimated: None,
             depth_scale_correlations: None,
             noise_per_pose: None,
+            depth_pattern: None,
         }
     }
 

@@ -2,9 +2,10 @@
 //! quality gates judge it. The one entry point for callers that want a
 //! verdict (the session, replay, `groundcal solve`).
 
+use crate::distortion;
 use crate::outcome::Calibration;
 use crate::quality::{self, Gates};
-use crate::solve::{self, Observation, SolveError, SolveSettings};
+use crate::solve::{Observation, SolveError, SolveSettings};
 
 /// How to solve and what to accept.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -29,6 +30,6 @@ pub fn calibrate_among(
     poses_total: usize,
     settings: &CalibrationSettings,
 ) -> Result<Calibration, SolveError> {
-    let solution = solve::solve(observations, &settings.solve)?;
+    let solution = distortion::solve_with_pattern(observations, &settings.solve)?;
     Ok(quality::assess(solution, poses_total, &settings.gates))
 }

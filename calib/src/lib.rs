@@ -19,6 +19,7 @@
 //! - [`outcome`]: what a calibration found, shared by the solve and the verdict;
 //! - [`solve`]: `robot_from_sensor` from all observations (paper 4.3);
 //! - [`quality`]: θ and e_d (paper 5.2), gates and the verdict;
+//! - [`distortion`]: the Kinect's fixed depth pattern, found with the mount;
 //! - [`calibrate`]: the solve then the verdict, in one call;
 //! - [`tilt`]: the motor's axis and pivot from calibrations at several tilts;
 //! - [`verify`]: whether the sensor still sits where a calibration says.
@@ -34,6 +35,7 @@ pub mod body;
 pub mod calibrate;
 pub mod depth;
 pub mod disparity;
+pub mod distortion;
 pub mod geometry;
 pub mod ground_view;
 pub mod observe;

@@ -7,6 +7,7 @@
 use nalgebra::Vector3;
 
 use crate::body::{Feet, GroundFrame};
+use crate::distortion::GroundResiduals;
 use crate::geometry::{PoseDegMm, Transform};
 use crate::plane::{fit_ground, FitBuffers, GroundFit, GroundPrior, PlaneFitSettings};
 use crate::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
@@ -325,6 +326,12 @@ impl PoseObserver {
             inliers: Some(fit.inliers),
             set_aside: body.set_aside.clone(),
             note: body.note.clone(),
+            ground_residuals: Some(std::sync::Arc::new(GroundResiduals::of(
+                frames,
+                &self.camera,
+                &fit,
+                buffers.residual_image(),
+            ))),
         };
         Ok((observation, fit))
     }

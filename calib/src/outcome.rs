@@ -160,6 +160,8 @@ pub struct Calibration {
     pub checks: Vec<GateCheck>,
     /// The depth scale, estimated or given.
     pub depth_scale: DepthScale,
+    /// The depth pattern, when estimated.
+    pub depth_pattern: Option<DepthPattern>,
 }
 
 /// One quality gate as it was checked: its limit, the value measured and
@@ -253,6 +255,78 @@ pub struct Solution {
     pub iterations: usize,
     /// The depth scale the distances were divided by, estimated or given.
     pub depth_scale: DepthScale,
+    /// The depth pattern, when the observations carried ground residuals.
+    pub depth_pattern: Option<DepthPattern>,
+}
+
+/// The Kinect's fixed depth pattern as a calibration found it
+/// ([`crate::distortion`]): per cell of `cell_px` pixels, the raw units every
+/// reading there is off by (more is farther), row-major from the top left.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthPattern {
+    /// Whether a pattern was found and the planes corrected for it.
+    pub corrected: bool,
+    pub columns: usize,
+    pub rows: usize,
+    pub cell_px: usize,
+    /// Per cell, raw units; `None` where no pose saw the ground.
+    pub raw: Vec<Option<f64>>,
+    /// One σ of each cell's value, raw units.
+    pub sigma_raw: Vec<Option<f64>>,
+    /// RMS of the shape (the pattern less its plane part), raw units.
+    pub shape_rms_raw: f64,
+    /// The shape against none, χ² per degree of freedom (1: no shape).
+    pub shape_chi2_per_dof: f64,
+    /// The cells' residuals pose by pose after the pattern, χ² per degree
+    /// of freedom: near 1 when the pattern is fixed in the image.
+    pub consistency_chi2_per_dof: f64,
+    /// The plane part, by the geometry across poses: raw units at the
+    /// principal point and per 100 pixels along the columns and the rows;
+    /// with its σ. `None` when not estimated.
+    pub plane_part: Option<[f64; 3]>,
+    pub plane_part_sigma: Option<[f64; 3]>,
+    /// Whether the plane part was taken (it differed from none).
+    pub plane_part_taken: bool,
+    /// Raw units per 1/m of inverse depth (the depth model's `1/b`): a cell's
+    /// depth error at depth z is `−z²·value/raw_per_inverse_depth`.
+    pub raw_per_inverse_depth: f64,
+    /// What was found, in words.
+    pub note: Option<String>,
+}
+
+impl DepthPattern {
+    /// No pattern estimated, with why.
+    pub fn not_estimated(note: String) -> Self {
+        DepthPattern {
+            corrected: false,
+            columns: 0,
+            rows: 0,
+            cell_px: 0,
+            raw: Vec::new(),
+            sigma_raw: Vec::new(),
+            shape_rms_raw: 0.0,
+            shape_chi2_per_dof: 0.0,
+            consistency_chi2_per_dof: 0.0,
+            plane_part: None,
+            plane_part_sigma: None,
+            plane_part_taken: false,
+            raw_per_inverse_depth: 0.0,
+            note: Some(note),
+        }
+    }
+
+    /// The largest depth error the pattern causes at depth `z_m`, metres,
+    /// over the cells seen.
+    pub fn largest_depth_error_m(&self, z_m: f64) -> f64 {
+        if self.raw_per_inverse_depth == 0.0 {
+            return 0.0;
+        }
+        self.raw
+            .iter()
+            .flatten()
+            .map(|raw| (z_m * z_m * raw / self.raw_per_inverse_depth).abs())
+            .fold(0.0, f64::max)
+    }
 }
 
 /// The Kinect's depth scale: its depth reads `value` × the truth.

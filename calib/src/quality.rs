@@ -125,6 +125,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         iterations: solution.iterations,
         checks,
         depth_scale: solution.depth_scale,
+        depth_pattern: solution.depth_pattern,
     }
 }
 

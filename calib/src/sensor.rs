@@ -26,6 +26,9 @@ pub struct DepthCamera {
     /// The same frames in inverse depth, for the ground fit.
     inverse_depth: InverseDepthConverter,
     grid: PixelGrid,
+    /// Raw units per 1/m of inverse depth: the depth model's `1/b`, or the
+    /// default model's for metric frames (raw-equivalent units).
+    raw_per_inverse_depth: f64,
 }
 
 /// Points in the sensor frame V, stored as separate coordinate arrays so that the
@@ -160,6 +163,11 @@ impl DepthCamera {
             ray_up,
             inverse_depth: InverseDepthConverter::new(encoding, &intrinsics, range),
             grid: PixelGrid::new(intrinsics),
+            raw_per_inverse_depth: 1.0
+                / match encoding {
+                    DepthEncoding::Raw11(model) => model.inverse_depth_affine().1,
+                    DepthEncoding::Metric { .. } => DepthModel::default().inverse_depth_affine().1,
+                },
         }
     }
 
@@ -187,6 +195,12 @@ impl DepthCamera {
     /// The camera's intrinsics.
     pub fn intrinsics(&self) -> &Intrinsics {
         &self.intrinsics
+    }
+
+    /// Raw units per 1/m of inverse depth (the depth model's `1/b`; for
+    /// metric frames the default model's).
+    pub fn raw_per_inverse_depth(&self) -> f64 {
+        self.raw_per_inverse_depth
     }
 
     /// The trusted depth range.

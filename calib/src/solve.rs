@@ -49,6 +49,9 @@ pub struct Observation {
     /// What the operator should know of a pose that is used: a slipped foot
     /// left out of its body pose.
     pub note: Option<String>,
+    /// The plane fit's residuals per cell of the image, for the depth
+    /// pattern ([`crate::distortion`]), if the frames were at hand.
+    pub ground_residuals: Option<std::sync::Arc<crate::distortion::GroundResiduals>>,
 }
 
 impl Observation {
@@ -62,6 +65,7 @@ impl Observation {
             inliers: None,
             set_aside: None,
             note: None,
+            ground_residuals: None,
         }
     }
 
@@ -752,6 +756,7 @@ fn solve_six(
         ),
         iterations: evaluations,
         depth_scale: DepthScale::fixed(1.0, "given".into()),
+        depth_pattern: None,
     })
 }
 

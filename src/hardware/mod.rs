@@ -254,6 +254,28 @@ pub fn open_sensor(config: &Config, selection: &Selection) -> Result<Sensor, Har
     sensor_from(config, selection, source, sim.as_ref(), robot_is_sim)
 }
 
+/// The simulator's pattern of `[sim] depth_distortion`.
+fn sim_distortion(
+    config: &crate::config::SimDistortionConfig,
+) -> groundcal_hal::sim::kinect::DepthDistortion {
+    use crate::config::SimDistortionShape as Shape;
+    use groundcal_hal::sim::kinect::{DepthDistortion, DistortionShape};
+    let shape = match config.shape {
+        Shape::Radial => DistortionShape::Radial,
+        Shape::Tilted => DistortionShape::Tilted,
+        Shape::Saddle => DistortionShape::Saddle,
+        Shape::Bands => DistortionShape::Bands {
+            period_px: config.band_period_px.unwrap_or(64.0),
+        },
+        Shape::Waves => DistortionShape::Waves,
+    };
+    DepthDistortion {
+        shape,
+        amplitude_raw: config.amplitude_raw,
+        decay_per_m: config.decay_per_m,
+    }
+}
+
 /// The sensor of `source`; the simulated one sees the body of `sim`.
 fn sensor_from(
     config: &Config,
@@ -273,6 +295,11 @@ fn sensor_from(
                 time_scale: parts.sim.time_scale,
                 mount_tilt_deg: config.sensor.tilt_deg,
                 depth_scale: parts.sim.depth_scale.unwrap_or(1.0),
+                distortion: parts
+                    .sim
+                    .depth_distortion
+                    .map(|d| sim_distortion(&d))
+                    .unwrap_or_default(),
                 motor_slip: parts.sim.motor_slip.map(|m| (m.from_pose, m.degrees)),
                 ..SimKinectConfig::default()
             };

@@ -272,6 +272,14 @@ pub enum PlaneFitError {
 pub struct FitBuffers {
     images: Vec<InverseDepthImage>,
     cloud: PointCloud,
+    residuals: InverseDepthImage,
+}
+
+impl FitBuffers {
+    /// An image for the fit's residuals ([`crate::distortion::GroundResiduals`]).
+    pub fn residual_image(&mut self) -> &mut InverseDepthImage {
+        &mut self.residuals
+    }
 }
 
 /// Fits the ground to one pose's frames (raw values or metric units, as the

@@ -120,6 +120,89 @@ pub struct SimKinectConfig {
     /// reads 1 % long. Every point moves along its ray, so a plane keeps its
     /// normal and its distance is multiplied by it.
     pub depth_scale: f64,
+    /// A fixed pattern over the image added to every raw value (a real
+    /// unit's depth distortion); none by default.
+    pub distortion: DepthDistortion,
+}
+
+/// A real Kinect's fixed disparity pattern (Smisek et al. 2011, Herrera et
+/// al. 2012): every pixel reads `amplitude_raw · shape(u, v)` raw units more
+/// than the truth (more is farther), times `exp(−decay_per_m·(z − 1 m))` for
+/// Herrera's weakening with depth. The shapes lie in [−1, 1] over the image.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DepthDistortion {
+    pub shape: DistortionShape,
+    pub amplitude_raw: f64,
+    /// Herrera's decay with depth, per metre (0: the same at every depth).
+    pub decay_per_m: f64,
+}
+
+/// The shape of a [`DepthDistortion`], with `x̂ = (u − cx)/cx` and
+/// `ŷ = (v − cy)/cy` in [−1, 1].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum DistortionShape {
+    #[default]
+    None,
+    /// A bowl: −1 at the principal point, +1 at the corners (`2ρ² − 1`,
+    /// ρ the distance from the centre over the corner's).
+    Radial,
+    /// A tilted plane, `(x̂ + ŷ)/2`: what a free plane per frame absorbs
+    /// entirely, seen only through the geometry across poses.
+    Tilted,
+    /// A saddle, `x̂·ŷ`.
+    Saddle,
+    /// Vertical stripes, `sin(2π·u/period_px)`, as on real units.
+    Bands { period_px: f64 },
+    /// Smooth waves across the image, `sin(π·x̂)·cos(π·ŷ)`.
+    Waves,
+}
+
+impl DepthDistortion {
+    /// The pattern at pixel `(u, v)` at depth 1 m, raw units.
+    pub fn raw_at(&self, u: f64, v: f64, intrinsics: &Intrinsics) -> f64 {
+        let (x, y) = (
+            (u - intrinsics.cx) / intrinsics.cx,
+            (v - intrinsics.cy) / intrinsics.cy,
+        );
+        let shape = match self.shape {
+            DistortionShape::None => 0.0,
+            DistortionShape::Radial => {
+                let corner = intrinsics.cx.hypot(intrinsics.cy);
+                let rho = (u - intrinsics.cx).hypot(v - intrinsics.cy) / corner;
+                2.0 * rho * rho - 1.0
+            }
+            DistortionShape::Tilted => (x + y) / 2.0,
+            DistortionShape::Saddle => x * y,
+            DistortionShape::Bands { period_px } => (std::f64::consts::TAU * u / period_px).sin(),
+            DistortionShape::Waves => {
+                (std::f64::consts::PI * x).sin() * (std::f64::consts::PI * y).cos()
+            }
+        };
+        self.amplitude_raw * shape
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        if !(self.amplitude_raw.is_finite() && self.amplitude_raw.abs() <= 5.0) {
+            return Err(format!(
+                "the distortion's amplitude_raw must lie in [−5, 5] raw units, not {}",
+                self.amplitude_raw
+            ));
+        }
+        if !(self.decay_per_m.is_finite() && (0.0..=5.0).contains(&self.decay_per_m)) {
+            return Err(format!(
+                "the distortion's decay_per_m must lie in [0, 5], not {}",
+                self.decay_per_m
+            ));
+        }
+        if let DistortionShape::Bands { period_px } = self.shape {
+            if !(period_px.is_finite() && period_px >= 8.0) {
+                return Err(format!(
+                    "the distortion's bands must be at least 8 pixels apart, not {period_px}"
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl Default for SimKinectConfig {
@@ -142,6 +225,7 @@ impl Default for SimKinectConfig {
             accelerometer_noise_g: ACCELEROMETER_NOISE_G,
             motor_slip: None,
             depth_scale: 1.0,
+            distortion: DepthDistortion::default(),
         }
     }
 }
@@ -197,6 +281,7 @@ impl SimKinectConfig {
                 ));
             }
         }
+        self.distortion.validate().map_err(SimKinectError::Config)?;
         if !(0.5..=2.0).contains(&self.depth_scale) {
             return bad(format!(
                 "depth_scale must lie in [0.5, 2], not {}",
@@ -354,6 +439,9 @@ pub struct DepthRenderer {
     ray_x: Vec<f64>,
     /// `(v - cy) / fy` per row: the optical ray's y (down) for a depth of 1.
     ray_y: Vec<f64>,
+    /// The distortion per pixel at 1 m in disparity (1/m), row-major; empty
+    /// without one.
+    distortion: Vec<f64>,
 }
 
 impl DepthRenderer {
@@ -366,6 +454,7 @@ impl DepthRenderer {
             quantiser: Quantiser::new(&config.depth_model, config.min_depth_m, config.max_depth_m)?,
             ray_x: (0..k.width).map(|u| (u as f64 - k.cx) / k.fx).collect(),
             ray_y: (0..k.height).map(|v| (v as f64 - k.cy) / k.fy).collect(),
+            distortion: distortion_image(config),
         })
     }
 
@@ -459,8 +548,11 @@ impl DepthRenderer {
                 let z = hit.t;
                 // The noise is in disparity, as the Kinect's correlation
                 // measures it: constant in 1/z, σ(z) ≈ 1.4·10⁻³·z² in depth.
-                let disparity =
+                let mut disparity =
                     1.0 / (z * c.depth_scale) + c.noise_scale * DISPARITY_SIGMA * gaussian;
+                if let Some(pattern) = self.distortion.get(v * width + u) {
+                    disparity += pattern * (-c.distortion.decay_per_m * (z - 1.0)).exp();
+                }
                 if disparity <= 0.0 {
                     continue;
                 }
@@ -488,6 +580,21 @@ impl DepthRenderer {
         });
         raw
     }
+}
+
+/// The distortion of every pixel at 1 m in disparity, 1/m (row-major), or
+/// nothing without one: `b` raw units per 1/m (the model's inverse depth is
+/// `a + b·raw`).
+fn distortion_image(config: &SimKinectConfig) -> Vec<f64> {
+    if config.distortion.shape == DistortionShape::None || config.distortion.amplitude_raw == 0.0 {
+        return Vec::new();
+    }
+    let (_, b) = config.depth_model.inverse_depth_affine();
+    let k = &config.intrinsics;
+    (0..k.height)
+        .flat_map(|v| (0..k.width).map(move |u| (u, v)))
+        .map(|(u, v)| b * config.distortion.raw_at(u as f64, v as f64, k))
+        .collect()
 }
 
 /// The pixel rectangles that hold each obstacle's image, as seen by a

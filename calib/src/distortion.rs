@@ -1,0 +1,760 @@
+//! The Kinect's fixed depth pattern ("depth distortion", Smisek et al. 2011,
+//! Herrera et al. 2012): every pixel of a real unit reads a few tenths of a
+//! raw unit more or less than the truth, the same at every pose. A plane
+//! fitted per pose absorbs the pattern's constant and linear parts over the
+//! ground it saw and leaves the rest in its residuals; both bias the mount.
+//!
+//! The pattern is found in two parts (docs/method.md, "The depth pattern"):
+//!
+//! 1. **Its shape** from the fits' residuals. Each pose's residuals are summed
+//!    over cells of [`CELL_PX`] pixels ([`GroundResiduals`], a few hundred
+//!    kilobytes a pose, no frames kept). Over all poses, the cells' pattern
+//!    and a correction of each pose's plane are fitted together by least
+//!    squares ([`estimate_shape`]); the shape is defined without a plane
+//!    part over the cells seen, which no single frame can tell from the
+//!    ground's own plane.
+//! 2. **Its plane part** from the geometry across poses ([`solve_with_pattern`]):
+//!    a constant and two gradients of the raw values, the same at every
+//!    pose, move every pose's measured plane by the same amount in inverse
+//!    depth, where a change of the mount moves it by amounts that change
+//!    with the sensor's height and tilt. Three parameters more in the solve
+//!    (by variable projection: the mount is solved again for each), costing
+//!    the mount some σ; taken only when the evidence shows them.
+//!
+//! Units: the fit's inverse depth (1/m) inside, raw units of the depth model
+//! outside (one raw unit is about 12 mm of depth at 2 m).
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+
+use crate::depth::Intrinsics;
+use crate::disparity::{InverseDepthImage, PixelPlane};
+use crate::outcome::{DepthPattern, Solution};
+use crate::plane::{GroundFit, InlierBand};
+use crate::sensor::DepthCamera;
+use crate::solve::{self, Observation, SolveError, SolveSettings};
+
+/// The side of a cell of the pattern, pixels: 80 × 60 cells on a Kinect's
+/// 640 × 480 image, fine enough for stripes 48 pixels apart.
+pub const CELL_PX: usize = 8;
+
+/// A cell enters the estimate with at least this many readings over all
+/// poses, from at least two poses.
+const MIN_CELL_READINGS: f64 = 48.0;
+
+/// Fewest poses with residuals to estimate a pattern from.
+pub const MIN_PATTERN_POSES: usize = 10;
+
+/// A shape is taken as real when its χ² per degree of freedom exceeds 1 by
+/// this many of its standard deviations (√(2/dof)) and its RMS reaches
+/// [`MIN_SHAPE_RMS_RAW`].
+const SHAPE_SIGNIFICANCE: f64 = 8.0;
+
+/// Below this RMS (raw units) a shape is too small to matter: 0.03 raw
+/// units is 0.4 mm at 2 m.
+pub const MIN_SHAPE_RMS_RAW: f64 = 0.03;
+
+/// The plane part is taken when it differs from none at this χ² with 3
+/// degrees of freedom (a chance of 1 in 1000).
+const PLANE_PART_CHI2: f64 = 16.27;
+
+/// The residuals are taken within this many times the fit's band (±2σ):
+/// where the pattern lifts the readings by a σ, the fit's own band cuts
+/// their upper tail and the cells' means would show the pattern smaller
+/// than it is; at ±4σ the loss is under 1 %.
+const WIDER_BAND: f64 = 2.0;
+
+/// One cell's sums over a pose's ground readings: residual `r` (1/m) and
+/// pixel offsets `u' = u − cx`, `v' = v − cy`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct CellSums {
+    n: f64,
+    r: f64,
+    rr: f64,
+    u: f64,
+    v: f64,
+}
+
+/// One pose's ground residuals, summed per cell: what the pattern's
+/// estimate needs from a pose, taken while its frames are in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroundResiduals {
+    columns: usize,
+    rows: usize,
+    cells: Vec<CellSums>,
+    /// Σφφᵀ over the pose's ground readings, φ = (1, u', v').
+    moments: Matrix3<f64>,
+    /// Σ r·φ.
+    rhs: Vector3<f64>,
+    intrinsics: Intrinsics,
+    /// Raw units per 1/m of inverse depth (the depth model's `1/b`).
+    raw_per_inverse_depth: f64,
+}
+
+impl GroundResiduals {
+    /// The residuals of `frames` from the ground `fit` found in them: the
+    /// readings the fit took for the ground, by its own band.
+    pub fn of(
+        frames: &[&[u16]],
+        camera: &DepthCamera,
+        fit: &GroundFit,
+        image: &mut InverseDepthImage,
+    ) -> Self {
+        let intrinsics = *camera.intrinsics();
+        let (width, height) = (intrinsics.width, intrinsics.height);
+        let columns = width.div_ceil(CELL_PX);
+        let rows = height.div_ceil(CELL_PX);
+        let mut cells = vec![CellSums::default(); columns * rows];
+        let mut moments = Matrix3::zeros();
+        let mut rhs = Vector3::zeros();
+        let plane = PixelPlane::from_plane(&fit.plane, &intrinsics);
+        for pixels in frames {
+            if pixels.len() != width * height {
+                continue;
+            }
+            camera.inverse_depth_into(pixels, image);
+            for v in 0..height {
+                let dv = v as f64 - intrinsics.cy;
+                let row = &image.w[v * width..(v + 1) * width];
+                let cell_row = &mut cells[(v / CELL_PX) * columns..(v / CELL_PX + 1) * columns];
+                // Sums per row and cell first, in f64 once per cell.
+                for (cell_index, chunk) in row.chunks(CELL_PX).enumerate() {
+                    let mut sums = CellSums::default();
+                    for (k, &w) in chunk.iter().enumerate() {
+                        if !w.is_finite() {
+                            continue;
+                        }
+                        let u = cell_index * CELL_PX + k;
+                        let du = u as f64 - intrinsics.cx;
+                        let r = f64::from(w) - plane.at(du, dv);
+                        let on_ground = match fit.band {
+                            InlierBand::InverseDepth(band) => r.abs() <= WIDER_BAND * band,
+                            InlierBand::Sigmas(_) => camera
+                                .point_at(u, v, pixels[v * width + u])
+                                .is_some_and(|p| fit.holds(&p)),
+                        };
+                        if !on_ground {
+                            continue;
+                        }
+                        sums.n += 1.0;
+                        sums.r += r;
+                        sums.rr += r * r;
+                        sums.u += du;
+                        sums.v += dv;
+                        let phi = Vector3::new(1.0, du, dv);
+                        moments += phi * phi.transpose();
+                        rhs += phi * r;
+                    }
+                    let cell = &mut cell_row[cell_index];
+                    cell.n += sums.n;
+                    cell.r += sums.r;
+                    cell.rr += sums.rr;
+                    cell.u += sums.u;
+                    cell.v += sums.v;
+                }
+            }
+        }
+        Self {
+            columns,
+            rows,
+            cells,
+            moments,
+            rhs,
+            intrinsics,
+            raw_per_inverse_depth: camera.raw_per_inverse_depth(),
+        }
+    }
+
+    /// Ground readings summed.
+    pub fn readings(&self) -> f64 {
+        self.cells.iter().map(|c| c.n).sum()
+    }
+}
+
+/// The pattern's shape over the cells, and what it changes in each pose's
+/// plane, from [`estimate_shape`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShapeEstimate {
+    pub columns: usize,
+    pub rows: usize,
+    /// Per cell, 1/m (0 where not seen): no plane part over the cells seen.
+    pub shape: Vec<f64>,
+    /// Ground readings per cell over all poses.
+    pub readings: Vec<f64>,
+    /// Whether each cell entered the estimate.
+    pub seen: Vec<bool>,
+    /// Per pose, in the order given: the correction of its plane (1/m, on
+    /// `c0, cu, cv`) that the pattern's shape had bent.
+    pub plane_corrections: Vec<Vector3<f64>>,
+    /// σ of one reading about its cell's mean, 1/m.
+    pub reading_sigma: f64,
+    /// The shape against none: Σ readings·shape²/σ², and its degrees of freedom.
+    pub shape_chi2: f64,
+    pub shape_dof: f64,
+    /// The residuals left by pattern and planes, cell by cell and pose by
+    /// pose, against the readings' noise: about 1 per degree of freedom
+    /// when the pattern is fixed in the image and the ground flat.
+    pub consistency_chi2: f64,
+    pub consistency_dof: f64,
+    /// Raw units per 1/m.
+    pub raw_per_inverse_depth: f64,
+    pub intrinsics: Intrinsics,
+    /// Alternations done.
+    pub iterations: usize,
+}
+
+impl ShapeEstimate {
+    /// The shape's RMS over the cells seen, weighted by their readings, raw units.
+    pub fn rms_raw(&self) -> f64 {
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for k in 0..self.shape.len() {
+            if self.seen[k] {
+                sum += self.readings[k] * self.shape[k].powi(2);
+                weight += self.readings[k];
+            }
+        }
+        if weight > 0.0 {
+            (sum / weight).sqrt() * self.raw_per_inverse_depth.abs()
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether the shape stands out of the noise and matters.
+    pub fn significant(&self) -> bool {
+        self.shape_dof > 0.0
+            && self.shape_chi2 / self.shape_dof
+                > 1.0 + SHAPE_SIGNIFICANCE * (2.0 / self.shape_dof).sqrt()
+            && self.rms_raw() >= MIN_SHAPE_RMS_RAW
+    }
+
+    /// A cell's centre offset from the principal point, pixels.
+    fn cell_offset(&self, k: usize) -> (f64, f64) {
+        let (column, row) = (k % self.columns, k / self.columns);
+        (
+            ((column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0) - self.intrinsics.cx,
+            ((row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0) - self.intrinsics.cy,
+        )
+    }
+}
+
+/// The pattern's shape and each pose's plane correction, by alternating
+/// least squares over the cells (the pattern given the planes, the planes
+/// given the pattern) until the pattern moves by less than 10⁻⁴ raw units.
+/// `None` with fewer than [`MIN_PATTERN_POSES`] poses or cells of mixed sizes.
+pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
+    let first = poses.first()?;
+    if poses.len() < MIN_PATTERN_POSES
+        || poses
+            .iter()
+            .any(|p| p.cells.len() != first.cells.len() || p.columns != first.columns)
+    {
+        return None;
+    }
+    let cells = first.cells.len();
+    let mut readings = vec![0.0; cells];
+    let mut poses_seen = vec![0usize; cells];
+    for pose in poses {
+        for (k, cell) in pose.cells.iter().enumerate() {
+            readings[k] += cell.n;
+            poses_seen[k] += usize::from(cell.n > 0.0);
+        }
+    }
+    let seen: Vec<bool> = (0..cells)
+        .map(|k| readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2)
+        .collect();
+    let inverse_moments: Vec<Matrix3<f64>> = poses
+        .iter()
+        .map(|p| p.moments.try_inverse().unwrap_or_else(Matrix3::zeros))
+        .collect();
+    let tolerance = 1e-4 / first.raw_per_inverse_depth.abs();
+    let mut shape = vec![0.0; cells];
+    let mut corrections = vec![Vector3::zeros(); poses.len()];
+    let mut iterations = 0;
+    for _ in 0..2000 {
+        iterations += 1;
+        // Each pose's plane given the pattern.
+        for (i, pose) in poses.iter().enumerate() {
+            let mut rhs = pose.rhs;
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if seen[k] && cell.n > 0.0 {
+                    rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k];
+                }
+            }
+            corrections[i] = inverse_moments[i] * rhs;
+        }
+        // The pattern given the planes.
+        let mut next = vec![0.0; cells];
+        for (i, pose) in poses.iter().enumerate() {
+            let c = corrections[i];
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if seen[k] && cell.n > 0.0 {
+                    next[k] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
+                }
+            }
+        }
+        for k in 0..cells {
+            if seen[k] {
+                next[k] /= readings[k];
+            }
+        }
+        // No plane part: that is the planes' (and the geometry's) to say.
+        remove_plane_part(&mut next, &readings, &seen, first);
+        let change = next
+            .iter()
+            .zip(&shape)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        shape = next;
+        if change < tolerance {
+            break;
+        }
+    }
+
+    // The readings' noise about their cell's mean, pooled.
+    let (mut within, mut within_dof) = (0.0, 0.0);
+    for pose in poses {
+        for cell in &pose.cells {
+            if cell.n > 1.0 {
+                within += cell.rr - cell.r * cell.r / cell.n;
+                within_dof += cell.n - 1.0;
+            }
+        }
+    }
+    let variance = if within_dof > 0.0 {
+        (within / within_dof).max(f64::MIN_POSITIVE)
+    } else {
+        f64::INFINITY
+    };
+    let observed = seen.iter().filter(|s| **s).count() as f64;
+    let shape_chi2: f64 = (0..cells)
+        .filter(|&k| seen[k])
+        .map(|k| readings[k] * shape[k].powi(2) / variance)
+        .sum();
+    let (mut consistency_chi2, mut cell_poses) = (0.0, 0.0);
+    for (i, pose) in poses.iter().enumerate() {
+        let c = corrections[i];
+        for (k, cell) in pose.cells.iter().enumerate() {
+            if seen[k] && cell.n > 0.0 {
+                let model = shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
+                consistency_chi2 += (cell.r - model).powi(2) / (cell.n * variance);
+                cell_poses += 1.0;
+            }
+        }
+    }
+    Some(ShapeEstimate {
+        columns: first.columns,
+        rows: first.rows,
+        shape,
+        readings,
+        seen,
+        plane_corrections: corrections,
+        reading_sigma: variance.sqrt(),
+        shape_chi2,
+        shape_dof: observed - 3.0,
+        consistency_chi2,
+        consistency_dof: cell_poses - observed - 3.0 * poses.len() as f64,
+        raw_per_inverse_depth: first.raw_per_inverse_depth,
+        intrinsics: first.intrinsics,
+        iterations,
+    })
+}
+
+/// Subtracts the plane `A + B·u' + C·v'` that fits the cells seen, weighted
+/// by their readings.
+fn remove_plane_part(shape: &mut [f64], readings: &[f64], seen: &[bool], grid: &GroundResiduals) {
+    let centre = |k: usize| {
+        let (column, row) = (k % grid.columns, k / grid.columns);
+        Vector3::new(
+            1.0,
+            (column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - grid.intrinsics.cx,
+            (row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - grid.intrinsics.cy,
+        )
+    };
+    let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
+    for k in 0..shape.len() {
+        if seen[k] {
+            let phi = centre(k);
+            normal += phi * phi.transpose() * readings[k];
+            rhs += phi * (shape[k] * readings[k]);
+        }
+    }
+    let Some(plane) = normal.try_inverse().map(|h| h * rhs) else {
+        return;
+    };
+    for k in 0..shape.len() {
+        if seen[k] {
+            shape[k] -= plane.dot(&centre(k));
+        }
+    }
+}
+
+/// The plane part of the pattern in raw units: a constant and its gradients
+/// per 100 pixels along the columns and the rows.
+type PlanePart = Vector3<f64>;
+
+/// The plane part in inverse depth (1/m) on `c0, cu, cv`.
+fn plane_part_inverse_depth(part: &PlanePart, raw_per_inverse_depth: f64) -> Vector3<f64> {
+    Vector3::new(part.x, part.y / 100.0, part.z / 100.0) / raw_per_inverse_depth
+}
+
+/// The observation with its plane moved by `delta` in inverse depth (1/m on
+/// `c0, cu, cv`); unchanged if the plane would not be a plane.
+fn moved(observation: &Observation, delta: &Vector3<f64>, intrinsics: &Intrinsics) -> Observation {
+    let pixel = PixelPlane::from_plane(&observation.plane, intrinsics);
+    let next = PixelPlane {
+        c0: pixel.c0 + delta.x,
+        cu: pixel.cu + delta.y,
+        cv: pixel.cv + delta.z,
+    };
+    let mut observation = observation.clone();
+    if let Some(plane) = next.to_plane(intrinsics) {
+        observation.plane = plane;
+    }
+    observation
+}
+
+/// The solve with the depth pattern: the mount, the depth scale and the
+/// pattern (shape and plane part) together, each part taken only when the
+/// evidence shows it. Without residuals (planes given as numbers) it is the
+/// plain solve.
+pub fn solve_with_pattern(
+    observations: &[Observation],
+    settings: &SolveSettings,
+) -> Result<Solution, SolveError> {
+    let base = solve::solve(observations, settings)?;
+    let used = |o: &Observation| base.poses.iter().any(|p| p.index == o.index && p.used);
+    let with_residuals: Vec<(usize, &GroundResiduals)> = observations
+        .iter()
+        .enumerate()
+        .filter(|(_, o)| used(o))
+        .filter_map(|(k, o)| o.ground_residuals.as_deref().map(|r| (k, r)))
+        .collect();
+    if with_residuals.is_empty() {
+        return Ok(base);
+    }
+    let residuals: Vec<&GroundResiduals> = with_residuals.iter().map(|(_, r)| *r).collect();
+    let Some(shape) = estimate_shape(&residuals) else {
+        let mut base = base;
+        base.depth_pattern = Some(DepthPattern::not_estimated(format!(
+            "not estimated: {} poses had ground readings, at least {MIN_PATTERN_POSES} are needed",
+            residuals.len()
+        )));
+        return Ok(base);
+    };
+    let intrinsics = shape.intrinsics;
+
+    // The shape's corrections of each plane, when the shape is real.
+    let shape_taken = shape.significant();
+    let mut corrected = observations.to_vec();
+    if shape_taken {
+        for ((k, _), correction) in with_residuals.iter().zip(&shape.plane_corrections) {
+            corrected[*k] = moved(&observations[*k], correction, &intrinsics);
+        }
+    }
+    let shaped = if shape_taken {
+        solve::solve(&corrected, settings)?
+    } else {
+        base.clone()
+    };
+
+    // The plane part, by the geometry.
+    let indices: Vec<usize> = with_residuals.iter().map(|(k, _)| *k).collect();
+    let plane = PlanePartSolve {
+        observations: &corrected,
+        indices: &indices,
+        settings,
+        intrinsics,
+        raw_per_inverse_depth: shape.raw_per_inverse_depth,
+        noise: shaped.noise_per_pose,
+    };
+    let estimate = plane.estimate();
+    let (solution, plane_part) = match estimate {
+        Some(found) if found.chi2 > PLANE_PART_CHI2 => {
+            let mut solution = found.solution.clone();
+            // The mount's σ with the plane part's own uncertainty.
+            solution.covariance +=
+                found.sensitivity * found.covariance * found.sensitivity.transpose();
+            (solution, Some(found))
+        }
+        other => (
+            shaped,
+            other.map(|found| PlanePartEstimate {
+                taken: false,
+                ..found
+            }),
+        ),
+    };
+    let mut solution = solution;
+    solution.depth_pattern = Some(pattern_of(&shape, shape_taken, plane_part.as_ref()));
+    Ok(solution)
+}
+
+/// The plane part's estimate.
+#[derive(Debug, Clone)]
+struct PlanePartEstimate {
+    value: PlanePart,
+    /// Its covariance, raw units.
+    covariance: Matrix3<f64>,
+    /// Its χ² against none.
+    chi2: f64,
+    /// How the six parameters move with it (radians and metres per unit).
+    sensitivity: nalgebra::Matrix6x3<f64>,
+    /// The solve with it.
+    solution: Solution,
+    taken: bool,
+}
+
+/// The plane part by variable projection: Gauss-Newton on the poses'
+/// whitened residuals, the mount (and scale) solved again at each value.
+struct PlanePartSolve<'a> {
+    observations: &'a [Observation],
+    /// The observations with ground residuals (the pattern's poses).
+    indices: &'a [usize],
+    settings: &'a SolveSettings,
+    intrinsics: Intrinsics,
+    raw_per_inverse_depth: f64,
+    /// σ of one pose's normal (radians) and offset (metres) to whiten by.
+    noise: (f64, f64),
+}
+
+/// Steps of the numerical derivatives, raw units (and per 100 pixels).
+const PLANE_PART_STEP: f64 = 0.02;
+
+impl PlanePartSolve<'_> {
+    /// The observations with `part` taken out of the pattern's poses.
+    fn corrected(&self, part: &PlanePart) -> Vec<Observation> {
+        let delta = -plane_part_inverse_depth(part, self.raw_per_inverse_depth);
+        let mut corrected = self.observations.to_vec();
+        for &k in self.indices {
+            corrected[k] = moved(&self.observations[k], &delta, &self.intrinsics);
+        }
+        corrected
+    }
+
+    /// The whitened residuals of the pattern's poses at `part`, with the solve there.
+    fn residuals(&self, part: &PlanePart) -> Option<(DVector<f64>, Solution)> {
+        let corrected = self.corrected(part);
+        let solution = solve::solve(&corrected, self.settings).ok()?;
+        let (sigma_normal, sigma_offset) = (self.noise.0.max(1e-9), self.noise.1.max(1e-9));
+        let mut values = Vec::with_capacity(3 * self.indices.len());
+        let scale = solution.depth_scale.value;
+        for &k in self.indices {
+            let observed = &corrected[k];
+            let predicted =
+                solve::predict(&solution.robot_from_sensor, &observed.ground_from_robot);
+            // A fixed tangent basis: that of the uncorrected normal.
+            let n = self.observations[k].plane.normal;
+            let helper = if n.x.abs() < 0.9 {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            };
+            let e1 = n.cross(&helper).normalize();
+            let e2 = n.cross(&e1);
+            let dn = predicted.normal - observed.plane.normal;
+            values.push(e1.dot(&dn) / sigma_normal);
+            values.push(e2.dot(&dn) / sigma_normal);
+            values.push((predicted.d - observed.plane.d / scale) / sigma_offset);
+        }
+        Some((DVector::from_vec(values), solution))
+    }
+
+    fn estimate(&self) -> Option<PlanePartEstimate> {
+        let mut part = PlanePart::zeros();
+        let mut last = None;
+        for _ in 0..6 {
+            let (r0, solution) = self.residuals(&part)?;
+            let mut jacobian = DMatrix::zeros(r0.len(), 3);
+            let mut sensitivity = nalgebra::Matrix6x3::zeros();
+            let mount = solution.robot_from_sensor.to_vector();
+            for j in 0..3 {
+                let mut step = part;
+                step[j] += PLANE_PART_STEP;
+                let (r, moved) = self.residuals(&step)?;
+                if r.len() != r0.len() {
+                    return None;
+                }
+                jacobian.set_column(j, &((r - &r0) / PLANE_PART_STEP));
+                let mut change = moved.robot_from_sensor.to_vector() - mount;
+                for angle in 0..3 {
+                    change[angle] = wrap(change[angle]);
+                }
+                sensitivity.set_column(j, &(change / PLANE_PART_STEP));
+            }
+            let information = jacobian.transpose() * &jacobian;
+            let information = Matrix3::from_fn(|i, j| information[(i, j)]);
+            let covariance = information.try_inverse()?;
+            let gradient = jacobian.transpose() * &r0;
+            let step = -(covariance * Vector3::new(gradient[0], gradient[1], gradient[2]));
+            // The noise the residuals show, with the pattern's part taken out.
+            let dof = (r0.len() as f64 - 10.0).max(1.0);
+            let factor = ((r0.norm_squared() - gradient.dot(&-step)) / dof).max(1e-6);
+            last = Some((covariance * factor, sensitivity, solution));
+            part += step;
+            if step.amax() < 1e-3 {
+                break;
+            }
+        }
+        let (covariance, sensitivity, _) = last?;
+        let (_, solution) = self.residuals(&part)?;
+        let chi2 = covariance
+            .try_inverse()
+            .map_or(0.0, |h| (part.transpose() * h * part)[(0, 0)]);
+        Some(PlanePartEstimate {
+            value: part,
+            covariance,
+            chi2,
+            sensitivity,
+            solution,
+            taken: true,
+        })
+    }
+}
+
+/// An angle's difference brought into (−π, π].
+fn wrap(angle: f64) -> f64 {
+    let turned = angle.rem_euclid(std::f64::consts::TAU);
+    if turned > std::f64::consts::PI {
+        turned - std::f64::consts::TAU
+    } else {
+        turned
+    }
+}
+
+/// The pattern as the result carries it: raw units per cell, shape and
+/// plane part, with σ and the words.
+fn pattern_of(
+    shape: &ShapeEstimate,
+    shape_taken: bool,
+    plane_part: Option<&PlanePartEstimate>,
+) -> DepthPattern {
+    let k_raw = shape.raw_per_inverse_depth;
+    let part_taken = plane_part.filter(|p| p.taken);
+    let mut raw = Vec::with_capacity(shape.shape.len());
+    let mut sigma_raw = Vec::with_capacity(shape.shape.len());
+    for k in 0..shape.shape.len() {
+        if !shape.seen[k] {
+            raw.push(None);
+            sigma_raw.push(None);
+            continue;
+        }
+        let (du, dv) = shape.cell_offset(k);
+        let basis = Vector3::new(1.0, du / 100.0, dv / 100.0);
+        let mut value = 0.0;
+        let mut variance = 0.0;
+        if shape_taken {
+            value += shape.shape[k] * k_raw;
+            variance += (shape.reading_sigma * k_raw).powi(2) / shape.readings[k];
+        }
+        if let Some(part) = part_taken {
+            value += part.value.dot(&basis);
+            variance += (basis.transpose() * part.covariance * basis)[(0, 0)];
+        }
+        raw.push(Some(value));
+        sigma_raw.push(Some(variance.max(0.0).sqrt()));
+    }
+    let corrected = shape_taken || part_taken.is_some();
+    let words_rms = shape.rms_raw();
+    let note = match (shape_taken, part_taken) {
+        (false, None) => format!(
+            "none found: the ground's residuals show no fixed pattern beyond the noise (shape {words_rms:.3} raw units RMS over {} cells), and the geometry across poses no offset or gradient of the depth",
+            shape.seen.iter().filter(|s| **s).count()
+        ),
+        (true, None) => "the shape corrected; its offset and gradients are not distinguishable from none by the geometry across poses".to_string(),
+        (false, Some(_)) => "an offset or gradient of the depth over the image, found by the geometry across poses, corrected".to_string(),
+        (true, Some(_)) => "the shape and its offset and gradients corrected".to_string(),
+    };
+    DepthPattern {
+        corrected,
+        columns: shape.columns,
+        rows: shape.rows,
+        cell_px: CELL_PX,
+        raw,
+        sigma_raw,
+        shape_rms_raw: words_rms,
+        shape_chi2_per_dof: shape.shape_chi2 / shape.shape_dof.max(1.0),
+        consistency_chi2_per_dof: shape.consistency_chi2 / shape.consistency_dof.max(1.0),
+        plane_part: plane_part.map(|p| p.value.into()),
+        plane_part_sigma: plane_part
+            .map(|p| [0, 1, 2].map(|i| p.covariance[(i, i)].max(0.0).sqrt())),
+        plane_part_taken: part_taken.is_some(),
+        raw_per_inverse_depth: k_raw,
+        note: Some(note),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Residuals of synthetic poses: a pattern plus a plane per pose over
+    /// a varying ground region, no noise.
+    fn synthetic(pattern: impl Fn(f64, f64) -> f64, poses: usize) -> Vec<GroundResiduals> {
+        let intrinsics = Intrinsics::default();
+        let columns = intrinsics.width.div_ceil(CELL_PX);
+        let rows = intrinsics.height.div_ceil(CELL_PX);
+        (0..poses)
+            .map(|i| {
+                let tilt = Vector3::new(
+                    1e-3 * i as f64,
+                    2e-6 * (i % 3) as f64,
+                    -1e-6 * (i % 5) as f64,
+                );
+                let mut cells = vec![CellSums::default(); columns * rows];
+                let (mut moments, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
+                // The ground covers rows from a height that changes with the pose.
+                let top = 120 + 10 * (i % 7);
+                for v in top..intrinsics.height {
+                    for u in 0..intrinsics.width {
+                        let (du, dv) = (u as f64 - intrinsics.cx, v as f64 - intrinsics.cy);
+                        let r = pattern(du, dv) + tilt.dot(&Vector3::new(1.0, du, dv));
+                        let cell = &mut cells[(v / CELL_PX) * columns + u / CELL_PX];
+                        cell.n += 1.0;
+                        cell.r += r;
+                        cell.rr += r * r + 1e-12;
+                        cell.u += du;
+                        cell.v += dv;
+                        let phi = Vector3::new(1.0, du, dv);
+                        moments += phi * phi.transpose();
+                        rhs += phi * r;
+                    }
+                }
+                GroundResiduals {
+                    columns,
+                    rows,
+                    cells,
+                    moments,
+                    rhs,
+                    intrinsics,
+                    raw_per_inverse_depth: -1.0 / 0.003,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_shape_is_recovered_without_its_plane_part() {
+        let bowl = |du: f64, dv: f64| 1e-3 * ((du / 320.0).powi(2) + (dv / 240.0).powi(2));
+        let poses = synthetic(bowl, 12);
+        let refs: Vec<&GroundResiduals> = poses.iter().collect();
+        let estimate = estimate_shape(&refs).expect("an estimate");
+        // The truth without its plane part over the cells seen.
+        let mut truth: Vec<f64> = (0..estimate.shape.len())
+            .map(|k| {
+                let (du, dv) = estimate.cell_offset(k);
+                bowl(du, dv)
+            })
+            .collect();
+        remove_plane_part(&mut truth, &estimate.readings, &estimate.seen, refs[0]);
+        let worst = (0..truth.len())
+            .filter(|&k| estimate.seen[k])
+            .map(|k| (truth[k] - estimate.shape[k]).abs())
+            .fold(0.0, f64::max);
+        // Within the bowl's own variation inside a cell (about 1 %).
+        assert!(
+            worst < 2e-5,
+            "{worst} after {} iterations",
+            estimate.iterations
+        );
+    }
+}
