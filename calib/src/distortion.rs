@@ -183,7 +183,7 @@ pub struct ShapeEstimate {
     /// Whether each cell entered the estimate.
     pub seen: Vec<bool>,
     /// Per pose, in the order given: the correction of its plane (1/m, on
-    /// `c0, cu, cv`) that the pattern's shape had bent.
+    /// `c0, cu, cv`) for what the pattern's shape had bent it by.
     pub plane_corrections: Vec<Vector3<f64>>,
     /// σ of one reading about its cell's mean, 1/m.
     pub reading_sigma: f64,
@@ -266,11 +266,15 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         .iter()
         .map(|p| p.moments.try_inverse().unwrap_or_else(Matrix3::zeros))
         .collect();
-    let tolerance = 1e-4 / first.raw_per_inverse_depth.abs();
+    let tolerance = std::env::var("GROUNDCAL_PATTERN_TOL")
+        .ok()
+        .and_then(|t| t.parse::<f64>().ok())
+        .unwrap_or(1e-4)
+        / first.raw_per_inverse_depth.abs();
     let mut shape = vec![0.0; cells];
     let mut corrections = vec![Vector3::zeros(); poses.len()];
     let mut iterations = 0;
-    for _ in 0..2000 {
+    for _ in 0..20000 {
         iterations += 1;
         // Each pose's plane given the pattern.
         for (i, pose) in poses.iter().enumerate() {
@@ -341,6 +345,23 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
             }
         }
     }
+    // What the shape bent each plane by, as the cells' least squares sees
+    // it: the fit's own plane (its rows, its guard, its band) is kept and
+    // only the pattern's share is taken out, so that with no pattern nothing
+    // changes.
+    let corrections = poses
+        .iter()
+        .zip(&inverse_moments)
+        .map(|(pose, inverse)| {
+            let mut bent = Vector3::zeros();
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if seen[k] && cell.n > 0.0 {
+                    bent += Vector3::new(cell.n, cell.u, cell.v) * shape[k];
+                }
+            }
+            -(inverse * bent)
+        })
+        .collect();
     Some(ShapeEstimate {
         columns: first.columns,
         rows: first.rows,
@@ -444,7 +465,10 @@ pub fn solve_with_pattern(
     let intrinsics = shape.intrinsics;
 
     // The shape's corrections of each plane, when the shape is real.
-    let shape_taken = shape.significant();
+    let shape_taken = shape.significant() || std::env::var_os("GROUNDCAL_FORCE_SHAPE").is_some();
+    if std::env::var_os("GROUNDCAL_DEBUG_PATTERN").is_some() {
+        eprintln!("pattern: {} iterations", shape.iterations);
+    }
     let mut corrected = observations.to_vec();
     if shape_taken {
         for ((k, _), correction) in with_residuals.iter().zip(&shape.plane_corrections) {
@@ -469,7 +493,7 @@ pub fn solve_with_pattern(
     };
     let estimate = plane.estimate();
     let (solution, plane_part) = match estimate {
-        Some(found) if found.chi2 > PLANE_PART_CHI2 => {
+        Some(found) if shape_taken || found.chi2 > PLANE_PART_CHI2 => {
             let mut solution = found.solution.clone();
             // The mount's σ with the plane part's own uncertainty.
             solution.covariance +=
