@@ -15,6 +15,7 @@
 //! - [`plane`]: the ground in one pose's frames (paper 4.1);
 //! - [`ground_view`]: a coarse picture of a frame with the ground the fit chose, for the page;
 //! - [`body`]: the ground frame and the body pose from the feet (paper 4.2);
+//! - [`residuals`]: a pose's ground residuals per cell, for the depth pattern;
 //! - [`observe`]: one pose's evidence (feet and frames) to one observation;
 //! - [`outcome`]: what a calibration found, shared by the solve and the verdict;
 //! - [`solve`]: `robot_from_sensor` from all observations (paper 4.3);
@@ -43,6 +44,7 @@ pub mod outcome;
 pub mod plan;
 pub mod plane;
 pub mod quality;
+pub mod residuals;
 pub mod sensor;
 pub mod solve;
 pub mod tilt;

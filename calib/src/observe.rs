@@ -7,9 +7,9 @@
 use nalgebra::Vector3;
 
 use crate::body::{Feet, GroundFrame};
-use crate::distortion::GroundResiduals;
 use crate::geometry::{PoseDegMm, Transform};
 use crate::plane::{fit_ground, FitBuffers, GroundFit, GroundPrior, PlaneFitSettings};
+use crate::residuals::GroundResiduals;
 use crate::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::solve::Observation;
 use serde::{Deserialize, Serialize};

@@ -287,6 +287,9 @@ pub struct DepthPattern {
     pub plane_part_sigma: Option<[f64; 3]>,
     /// Whether the plane part was taken (it differed from none).
     pub plane_part_taken: bool,
+    /// The RMS of a shape that stood out of the noise but was not corrected
+    /// (it changed from pose to pose), raw units.
+    pub uncorrected_shape_rms_raw: Option<f64>,
     /// Raw units per 1/m of inverse depth (the depth model's `1/b`): a cell's
     /// depth error at depth z is `−z²·value/raw_per_inverse_depth`.
     pub raw_per_inverse_depth: f64,
@@ -310,6 +313,7 @@ impl DepthPattern {
             plane_part: None,
             plane_part_sigma: None,
             plane_part_taken: false,
+            uncorrected_shape_rms_raw: None,
             raw_per_inverse_depth: 0.0,
             note: Some(note),
         }
@@ -324,9 +328,18 @@ impl DepthPattern {
         self.raw
             .iter()
             .flatten()
-            .map(|raw| (z_m * z_m * raw / self.raw_per_inverse_depth).abs())
+            .map(|raw| depth_error_m(*raw, z_m, self.raw_per_inverse_depth))
             .fold(0.0, f64::max)
     }
+}
+
+/// The depth error `raw` units of disparity cause at depth `z_m`, metres
+/// (`1/z = a + b·raw`, so `|δz| = z²·|raw·b|`).
+pub fn depth_error_m(raw: f64, z_m: f64, raw_per_inverse_depth: f64) -> f64 {
+    if raw_per_inverse_depth == 0.0 {
+        return 0.0;
+    }
+    (z_m * z_m * raw / raw_per_inverse_depth).abs()
 }
 
 /// The Kinect's depth scale: its depth reads `value` × the truth.

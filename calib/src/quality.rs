@@ -29,6 +29,10 @@ pub struct Gates {
     /// Largest |s − 1| of an estimated depth scale: a Kinect's depth is off
     /// by about 1 % at most; more is a wrong depth model or intrinsics.
     pub depth_scale_max_deviation: f64,
+    /// Largest warp of the depth image at 2 m (RMS, millimetres) that is
+    /// left uncorrected because it changes from pose to pose: uneven
+    /// ground, clutter, or a sensor pattern that changes with depth.
+    pub warp_max_mm: f64,
 }
 
 impl Default for Gates {
@@ -41,6 +45,7 @@ impl Default for Gates {
             min_poses_used: 6,
             min_used_fraction: 0.7,
             depth_scale_max_deviation: 0.03,
+            warp_max_mm: 1.0,
         }
     }
 }
@@ -54,6 +59,7 @@ impl Gates {
             ("sigma_angle_max_deg", self.sigma_angle_max_deg),
             ("sigma_position_max_mm", self.sigma_position_max_mm),
             ("depth_scale_max_deviation", self.depth_scale_max_deviation),
+            ("warp_max_mm", self.warp_max_mm),
         ];
         for (name, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -108,6 +114,18 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         }
         checks.push(check);
     }
+    if let Some(pattern) = &solution.depth_pattern {
+        if let Some(check) = warp_check(gates, pattern) {
+            if !check.passed {
+                reasons.push(format!(
+                    "the depth image is warped by {:.1} mm RMS at 2 m in a way that changes from pose to pose ({:.1} times the noise), so it cannot be corrected as the sensor's fixed pattern: calibrate on open, flat ground with nothing in view; if it stays, the Kinect's depth pattern changes with the distance and needs a maintainer",
+                    check.measured,
+                    pattern.consistency_chi2_per_dof
+                ));
+            }
+            checks.push(check);
+        }
+    }
     Calibration {
         verdict: if reasons.is_empty() {
             Verdict::Accepted
@@ -127,6 +145,22 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         depth_scale: solution.depth_scale,
         depth_pattern: solution.depth_pattern,
     }
+}
+
+/// The warp's gate, when the ground's residuals showed a shape that was
+/// not corrected: its RMS as depth at 2 m.
+fn warp_check(gates: &Gates, pattern: &crate::outcome::DepthPattern) -> Option<GateCheck> {
+    let warped = pattern.uncorrected_shape_rms_raw?;
+    let measured = crate::outcome::depth_error_m(warped, 2.0, pattern.raw_per_inverse_depth) * 1e3;
+    Some(GateCheck {
+        gate: "warp_max_mm",
+        limit: gates.warp_max_mm,
+        measured,
+        at_least: false,
+        passed: at_most(measured, gates.warp_max_mm),
+        at: None,
+        place: None,
+    })
 }
 
 /// The depth scale's gate, when it was estimated.

@@ -51,7 +51,7 @@ pub struct Observation {
     pub note: Option<String>,
     /// The plane fit's residuals per cell of the image, for the depth
     /// pattern ([`crate::distortion`]), if the frames were at hand.
-    pub ground_residuals: Option<std::sync::Arc<crate::distortion::GroundResiduals>>,
+    pub ground_residuals: Option<std::sync::Arc<crate::residuals::GroundResiduals>>,
 }
 
 impl Observation {

@@ -188,6 +188,12 @@ fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static s
             format!("{} %", num(100.0 * m, 3)),
             "",
         ),
+        "warp_max_mm" => (
+            "warp of the depth at 2 m that changes from pose to pose (RMS)",
+            format!("≤ {} mm", num(l, 1)),
+            format!("{} mm", num(m, 2)),
+            "",
+        ),
         "min_poses_used" => (
             "poses used",
             format!("≥ {}", num(l, 0)),

@@ -218,6 +218,7 @@ const TODO = {
   min_poses_used: 'todoNoGround',
   min_used_fraction: 'todoNoGround',
   depth_scale_max_deviation: 'todoScale',
+  warp_max_mm: 'todoWarp',
   observable: 'todoSchedule',
 };
 function todoFor(result) {
@@ -324,6 +325,7 @@ const GATE_UNITS = {
   min_used_fraction: ['%', 0],
   observable: ['', 3],
   depth_scale_max_deviation: ['%', 2],
+  warp_max_mm: [' mm', 1],
 };
 // Where a gate's value comes from (the check's typed `place`), in words.
 const AXES = ['forward', 'up', 'right'];
