@@ -48,6 +48,9 @@ pub enum ExportFormat {
     RosStatic,
     /// A JSON document with translation, quaternion, roll-pitch-yaw and matrix.
     Json,
+    /// The Kinect's depth pattern the calibration corrected, for a terrain
+    /// mapper to take out of its frames (`groundcal-depth-correction`).
+    DepthCorrection,
 }
 
 impl ExportFormat {
@@ -57,14 +60,20 @@ impl ExportFormat {
             ExportFormat::Urdf => "urdf",
             ExportFormat::RosStatic => "ros-static",
             ExportFormat::Json => "json",
+            ExportFormat::DepthCorrection => "depth-correction",
         }
     }
 
     /// The format of a command-line name.
     pub fn parse(name: &str) -> Option<Self> {
-        [Self::Urdf, Self::RosStatic, Self::Json]
-            .into_iter()
-            .find(|f| f.name() == name)
+        [
+            Self::Urdf,
+            Self::RosStatic,
+            Self::Json,
+            Self::DepthCorrection,
+        ]
+        .into_iter()
+        .find(|f| f.name() == name)
     }
 }
 
@@ -253,9 +262,10 @@ impl RosMount {
         })
     }
 
-    /// The output in one format, ending with a newline.
-    pub fn render(&self, format: ExportFormat) -> String {
-        match format {
+    /// The output in one of the mount's formats, ending with a newline
+    /// (`None` for a format that is not the mount's).
+    pub fn render(&self, format: ExportFormat) -> Option<String> {
+        Some(match format {
             ExportFormat::Urdf => self.to_urdf(),
             ExportFormat::RosStatic => self.to_ros_static_args() + "\n",
             ExportFormat::Json => {
@@ -268,7 +278,8 @@ impl RosMount {
                 text.push('\n');
                 text
             }
-        }
+            ExportFormat::DepthCorrection => return None,
+        })
     }
 
     /// A URDF fixed joint, preceded by a comment with the groundcal parameters.
@@ -339,9 +350,119 @@ impl RosMount {
     }
 }
 
-/// The output of `groundcal export` for a result's `robot_from_sensor`.
-pub fn render(robot_from_sensor: &PoseDegMm, format: ExportFormat) -> String {
+/// The output of `groundcal export` for a result's `robot_from_sensor` in
+/// one of the mount's formats.
+pub fn render(robot_from_sensor: &PoseDegMm, format: ExportFormat) -> Option<String> {
     RosMount::from_groundcal(robot_from_sensor).render(format)
+}
+
+/// `export --format depth-correction`: the depth pattern a calibration
+/// corrected, for the robot's other programs (docs/export.md).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DepthCorrectionJson {
+    /// `"groundcal-depth-correction"`.
+    pub format: &'static str,
+    pub version: u32,
+    /// Cells of `cell_px` pixels, `columns` × `rows`, row-major from the top left.
+    pub cell_px: usize,
+    pub columns: usize,
+    pub rows: usize,
+    /// Per cell, the raw units a reading there is too large (more is
+    /// farther); `null` where the calibration saw no ground: apply 0.
+    pub raw: Vec<Option<f64>>,
+    pub sigma_raw: Vec<Option<f64>>,
+    /// The depth model's 1/b (raw units per 1/m): a metric depth z is
+    /// corrected as `1/z' = 1/z − raw/raw_per_inverse_depth`.
+    pub raw_per_inverse_depth: f64,
+    /// The depth scale found with it: divide the corrected depth by it.
+    pub depth_scale: f64,
+    /// The largest depth error the pattern causes at 2 m, millimetres.
+    pub largest_mm_at_2m: f64,
+    /// How to apply it, in one line.
+    pub apply: &'static str,
+}
+
+/// Reads a `groundcal-depth-correction` document (`export --format
+/// depth-correction`): its grid must agree with its cells, and every value
+/// must be a Kinect's (at most 50 raw units).
+pub fn read_depth_correction_file(
+    path: &Path,
+) -> Result<crate::calib::distortion::DepthCorrection, InputError> {
+    let bytes = read_bounded(path, 16 << 20)?;
+    let fail = |message: String| InputError::new(path, None, message);
+    let document: Value = serde_json::from_slice(&bytes)
+        .map_err(|e| fail(format!("not a groundcal depth correction (JSON): {e}")))?;
+    if document.get("format").and_then(Value::as_str) != Some("groundcal-depth-correction") {
+        return Err(fail(
+            "not a groundcal depth correction: \"format\" must be \"groundcal-depth-correction\" (write one with groundcal export RESULT.json --format depth-correction)".into(),
+        ));
+    }
+    if document.get("version").and_then(Value::as_u64) != Some(1) {
+        return Err(fail("\"version\" must be 1".into()));
+    }
+    let count = |key: &str| {
+        document
+            .get(key)
+            .and_then(Value::as_u64)
+            .filter(|v| (1..=1024).contains(v))
+            .map(|v| v as usize)
+            .ok_or_else(|| fail(format!("\"{key}\" must be a whole number from 1 to 1024")))
+    };
+    let (columns, rows, cell_px) = (count("columns")?, count("rows")?, count("cell_px")?);
+    let cells: Vec<Option<f64>> = document
+        .get("raw")
+        .and_then(Value::as_array)
+        .ok_or_else(|| fail("\"raw\" must be an array of numbers or null".into()))?
+        .iter()
+        .enumerate()
+        .map(|(k, v)| match v {
+            Value::Null => Ok(None),
+            v => v
+                .as_f64()
+                .filter(|x| x.is_finite() && x.abs() <= 50.0)
+                .map(Some)
+                .ok_or_else(|| {
+                    fail(format!(
+                        "\"raw[{k}]\" is {v}, not a pattern of a Kinect (at most 50 raw units)"
+                    ))
+                }),
+        })
+        .collect::<Result<_, _>>()?;
+    crate::calib::distortion::DepthCorrection::from_cells(columns, rows, cell_px, &cells)
+        .ok_or_else(|| {
+            fail(format!(
+                "\"raw\" has {} cells for a grid of {columns} × {rows}",
+                cells.len()
+            ))
+        })
+}
+
+/// The depth correction of an accepted result that corrected a pattern.
+pub fn read_depth_correction(path: &Path) -> Result<DepthCorrectionJson, ExportError> {
+    let (_, scale) = read_result_with_scale(path, false)?;
+    let fail = |message: String| ExportError::Input(InputError::new(path, None, message));
+    let bytes = read_bounded(path, 64 << 20)?;
+    let document: Value = serde_json::from_slice(&bytes)
+        .map_err(|e| fail(format!("not a groundcal result document: {e}")))?;
+    let result = ResultJson::parse(document).map_err(fail)?;
+    let Some(pattern) = result.depth_pattern.filter(|p| p.corrected) else {
+        return Err(fail(
+            "the calibration corrected no depth pattern (its \"depth_pattern\" says none was found, or it has none): there is nothing to export; the depth needs no correction beyond its scale".into(),
+        ));
+    };
+    Ok(DepthCorrectionJson {
+        format: "groundcal-depth-correction",
+        version: 1,
+        cell_px: pattern.cell_px,
+        columns: pattern.columns,
+        rows: pattern.rows,
+        raw: pattern.raw,
+        sigma_raw: pattern.sigma_raw,
+        raw_per_inverse_depth: pattern.raw_per_inverse_depth,
+        depth_scale: scale.unwrap_or(1.0),
+        largest_mm_at_2m: pattern.largest_mm_at_2m,
+        apply: "raw' = raw - bilinear(raw cells at their centres ((c+0.5)*cell_px-0.5, (r+0.5)*cell_px-0.5), held at the border, null = 0); metric: 1/z' = 1/z - correction/raw_per_inverse_depth; then z'' = z' / depth_scale",
+    })
 }
 
 // ---------------------------------------------------------------------------
@@ -667,7 +788,7 @@ mod tests {
     #[test]
     fn urdf_round_trips_to_the_six_parameters() {
         for mount in random_mounts(200) {
-            let urdf = render(&mount, ExportFormat::Urdf);
+            let urdf = render(&mount, ExportFormat::Urdf).expect("a mount format");
             let (r, t) = from_urdf(&urdf);
             assert_params_close(&groundcal_of(&r, t), &mount, 1e-9);
         }
@@ -676,7 +797,7 @@ mod tests {
     #[test]
     fn ros_static_round_trips_to_the_six_parameters() {
         for mount in random_mounts(200) {
-            let args = render(&mount, ExportFormat::RosStatic);
+            let args = render(&mount, ExportFormat::RosStatic).expect("a mount format");
             assert!(args
                 .ends_with("--frame-id base_link --child-frame-id camera_depth_optical_frame\n"));
             assert_eq!(args.lines().count(), 1);
@@ -688,7 +809,7 @@ mod tests {
     #[test]
     fn json_round_trips_and_its_parts_agree() {
         for mount in random_mounts(200) {
-            let text = render(&mount, ExportFormat::Json);
+            let text = render(&mount, ExportFormat::Json).expect("a mount format");
             let (r, t, v) = from_json(&text);
             assert_params_close(&groundcal_of(&r, t), &mount, 1e-9);
             assert_eq!(v["parent"], "base_link");
@@ -764,12 +885,12 @@ mod tests {
                     ExportFormat::RosStatic,
                     ExportFormat::Json,
                 ] {
-                    let text = render(&mount, format);
+                    let text = render(&mount, format).expect("a mount format");
                     assert!(!text.contains("NaN") && !text.contains("inf"), "{text}");
                     let (r, t) = match format {
                         ExportFormat::Urdf => from_urdf(&text),
                         ExportFormat::RosStatic => from_ros_static(&text),
-                        ExportFormat::Json => {
+                        ExportFormat::Json | ExportFormat::DepthCorrection => {
                             let (r, t, _) = from_json(&text);
                             (r, t)
                         }
@@ -798,7 +919,7 @@ mod tests {
                 ExportFormat::RosStatic,
                 ExportFormat::Json,
             ] {
-                let text = render(&mount, format);
+                let text = render(&mount, format).expect("a mount format");
                 assert!(!text.contains("NaN"), "{text}");
             }
             let (back_r, back_t) = from_urdf(&ros.to_urdf());
@@ -826,7 +947,7 @@ mod tests {
     #[test]
     fn urdf_names_the_joint_frames_and_groundcal_parameters() {
         let mount = pose(-0.4398, -37.4072, -3.0471, 527.8885, 364.8007, -33.4003);
-        let urdf = render(&mount, ExportFormat::Urdf);
+        let urdf = render(&mount, ExportFormat::Urdf).expect("a mount format");
         assert!(urdf.contains(
             "alpha_deg=-0.4398 beta_deg=-37.4072 gamma_deg=-3.0471 \
              px_mm=527.8885 py_mm=364.8007 pz_mm=-33.4003"
@@ -1071,14 +1192,20 @@ mod tests {
             value("py_mm"),
             value("pz_mm"),
         );
-        assert_eq!(urdf, render(&mount, ExportFormat::Urdf));
-        let args = render(&mount, ExportFormat::RosStatic);
+        assert_eq!(
+            urdf,
+            render(&mount, ExportFormat::Urdf).expect("a mount format")
+        );
+        let args = render(&mount, ExportFormat::RosStatic).expect("a mount format");
         assert!(doc.contains(args.trim_end()), "docs lack {args}");
         let json = doc
             .split("```json\n")
             .nth(1)
             .and_then(|s| s.split("```").next())
             .expect("a json example");
-        assert_eq!(json, render(&mount, ExportFormat::Json));
+        assert_eq!(
+            json,
+            render(&mount, ExportFormat::Json).expect("a mount format")
+        );
     }
 }

@@ -301,6 +301,10 @@ enum Command {
         /// or paper (the paper's eigenvector fit in metres, to compare).
         #[arg(long, value_name = "disparity|paper", default_value = "disparity")]
         ground_fit: GroundFitMethod,
+        /// The Kinect's depth pattern to take out of the image first: a
+        /// document of `groundcal export RESULT.json --format depth-correction`.
+        #[arg(long, value_name = "FILE")]
+        depth_correction: Option<PathBuf>,
     },
 }
 
@@ -463,6 +467,7 @@ fn run(args: Args) -> ExitStatus {
             up,
             up_tolerance,
             ground_fit,
+            depth_correction,
         } => {
             let model = match cli::plane::parse_model(&model) {
                 Ok(m) => m,
@@ -482,6 +487,7 @@ fn run(args: Args) -> ExitStatus {
                 up_optical: up,
                 up_tolerance_deg: up_tolerance,
                 ground_fit,
+                depth_correction,
             };
             cli::plane::run(&file, json, &options)
         }

@@ -451,6 +451,11 @@ pub struct DepthPatternJson {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plane_part_sigma_raw: Option<[f64; 3]>,
     pub plane_part_taken: bool,
+    /// A warp that stood out of the noise but was not corrected because it
+    /// changed from pose to pose: its RMS at 2 m, millimetres (the gate
+    /// `warp_max_mm` judges it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncorrected_mm_at_2m: Option<f64>,
     /// Raw units per 1/m of inverse depth (the depth model's 1/b): the depth
     /// error at z metres is −z²·raw/raw_per_inverse_depth.
     pub raw_per_inverse_depth: f64,
@@ -475,8 +480,56 @@ impl DepthPatternJson {
             plane_part_raw: p.plane_part,
             plane_part_sigma_raw: p.plane_part_sigma,
             plane_part_taken: p.plane_part_taken,
+            uncorrected_mm_at_2m: p.uncorrected_shape_rms_raw.map(|raw| {
+                crate::calib::outcome::depth_error_m(raw, 2.0, p.raw_per_inverse_depth) * 1e3
+            }),
             raw_per_inverse_depth: p.raw_per_inverse_depth,
         }
+    }
+
+    /// Whether the document's pattern is one: its grid's size agrees with
+    /// its cells (or it has none, as in the daemon's status), and every
+    /// number is one a Kinect's pattern can have.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.columns > 1024
+            || self.rows > 1024
+            || (!(1..=64).contains(&self.cell_px) && !self.raw.is_empty())
+        {
+            return Err(format!(
+                "has a grid of {} × {} cells of {} pixels, not a depth image's",
+                self.columns, self.rows, self.cell_px
+            ));
+        }
+        let cells = self.columns * self.rows;
+        let without_cells = self.raw.is_empty() && self.sigma_raw.is_empty();
+        if !without_cells && (self.raw.len() != cells || self.sigma_raw.len() != cells) {
+            return Err(format!(
+                "has {} values and {} σ for {} × {} = {cells} cells",
+                self.raw.len(),
+                self.sigma_raw.len(),
+                self.columns,
+                self.rows
+            ));
+        }
+        for (name, values) in [("raw", &self.raw), ("sigma_raw", &self.sigma_raw)] {
+            if let Some((k, v)) = values.iter().enumerate().find_map(|(k, v)| {
+                v.filter(|v| !(v.is_finite() && v.abs() <= 50.0))
+                    .map(|v| (k, v))
+            }) {
+                return Err(format!(
+                    "\"{name}[{k}]\" is {v}, not a pattern of a Kinect (at most 50 raw units)"
+                ));
+            }
+        }
+        if !self.raw_per_inverse_depth.is_finite()
+            || (cells > 0 && self.raw_per_inverse_depth == 0.0)
+        {
+            return Err(format!(
+                "\"raw_per_inverse_depth\" is {}, not a depth model's 1/b",
+                self.raw_per_inverse_depth
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -717,6 +770,17 @@ impl ResultJson {
         self
     }
 
+    /// The result without the depth pattern's cells (`raw` and `sigma_raw`
+    /// empty, the rest kept): for the daemon's status, which every page polls;
+    /// the stored document has them.
+    pub fn without_pattern_cells(mut self) -> Self {
+        if let Some(pattern) = &mut self.depth_pattern {
+            pattern.raw = Vec::new();
+            pattern.sigma_raw = Vec::new();
+        }
+        self
+    }
+
     /// Whether the calibration was accepted.
     pub fn accepted(&self) -> bool {
         self.status == ResultStatus::Accepted
@@ -814,7 +878,7 @@ impl ResultJson {
         if !document.is_object() {
             return Err("not a groundcal result document: expected a JSON object with \"status\" and \"robot_from_sensor\"".into());
         }
-        serde_path_to_error::deserialize(document).map_err(|e| {
+        let result: Self = serde_path_to_error::deserialize(document).map_err(|e| {
             let path = e.path().to_string();
             let message = e.into_inner().to_string();
             let key = |field: &str| {
@@ -832,7 +896,13 @@ impl ResultJson {
                 None if message.starts_with("is ") => format!("\"{path}\" {message}"),
                 None => format!("\"{path}\": {message}"),
             }
-        })
+        })?;
+        if let Some(pattern) = &result.depth_pattern {
+            pattern
+                .validate()
+                .map_err(|e| format!("\"depth_pattern\" {e}"))?;
+        }
+        Ok(result)
     }
 }
 

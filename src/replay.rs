@@ -143,6 +143,7 @@ pub fn observe_recording(
     nominal: Option<NominalMount>,
     settings: ObserveSettings,
     threads: Option<usize>,
+    correction: Option<&crate::calib::distortion::DepthCorrection>,
 ) -> Result<ObservedRecording, InputError> {
     let session = &recording.session;
     let session_path = recording.dir.join("session.json");
@@ -153,6 +154,10 @@ pub fn observe_recording(
         nominal,
         settings,
     )
+    .map(|observer| match correction {
+        Some(correction) => observer.with_depth_correction(correction),
+        None => observer,
+    })
     .map_err(|e| InputError::new(&session_path, None, e))?;
 
     // The body poses first, in the order the poses were visited: a foot
@@ -232,7 +237,8 @@ pub fn observe_recording(
 pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, InputError> {
     let session = &recording.session;
     let nominal = options.nominal_mount.or(session.nominal_mount);
-    let observed = observe_recording(recording, nominal, options.pose, options.threads)?;
+    // A replay finds the depth pattern afresh, as the calibration did.
+    let observed = observe_recording(recording, nominal, options.pose, options.threads, None)?;
     let mut observations = Vec::new();
     let mut failed = Vec::new();
     for pose in &observed.poses {

@@ -142,6 +142,10 @@ pub struct ActiveDocument {
     /// The robot it was made for.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub robot: Option<RobotJson>,
+    /// The Kinect's depth pattern it corrected, which checks against it
+    /// take out of their frames.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_pattern: Option<crate::output::DepthPatternJson>,
 }
 
 /// `running.json`: who started the calibration in progress, and when.
@@ -361,6 +365,7 @@ impl Store {
             correlations: result.correlations,
             created: entry.created,
             robot: result.robot,
+            depth_pattern: result.depth_pattern.filter(|p| p.corrected),
         };
         let bytes = serde_json::to_vec_pretty(&active).map_err(|e| StoreError::Invalid {
             path: self.active_path(),

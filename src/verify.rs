@@ -78,6 +78,9 @@ pub struct Calibration {
     /// The robot it was made for, when it says (`robot.name`, or a
     /// replay's `setup.robot`).
     pub robot: Option<String>,
+    /// The Kinect's depth pattern it corrected: a check takes it out of its
+    /// frames, as the calibration did.
+    pub depth_correction: Option<std::sync::Arc<crate::calib::distortion::DepthCorrection>>,
 }
 
 impl Calibration {
@@ -159,12 +162,23 @@ fn calibration_of(document: serde_json::Value, source: String) -> Result<Calibra
         .map(String::from);
     let result = ResultJson::parse(document).map_err(|e| format!("{source}: {e}"))?;
     let mount = mount_of(&result).map_err(|e| format!("{source}: {e}"))?;
+    let depth_correction = result
+        .depth_pattern
+        .as_ref()
+        .filter(|p| p.corrected)
+        .and_then(|p| {
+            crate::calib::distortion::DepthCorrection::from_cells(
+                p.columns, p.rows, p.cell_px, &p.raw,
+            )
+        })
+        .map(std::sync::Arc::new);
     Ok(Calibration {
         id,
         robot,
         mount,
         tilt_deg: result.kinect_tilt_deg,
         source,
+        depth_correction,
     })
 }
 

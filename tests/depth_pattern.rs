@@ -9,35 +9,15 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{groundcal, sim_config, temp_dir};
+use common::{groundcal, sim_config_with_pattern, temp_dir};
 use groundcal::calib::sensor::Intrinsics;
 use groundcal_hal::sim::kinect::{DepthDistortion, DistortionShape};
 use serde_json::Value;
 
 use common::MOUNT_KEYS as KEYS;
 use common::SIM_MOUNT as TRUTH;
-
-/// The simulator with `pattern` in its depth (`depth_model`: the
-/// configuration's line, or "" for libfreenect's zero-plane model), and no
-/// noise table.
-fn config(dir: &Path, pattern: &str, depth_model: Option<&str>) -> PathBuf {
-    std::fs::create_dir_all(dir).unwrap();
-    let world = format!("world = \"flat\"\n{pattern}");
-    let model_line =
-        "depth_model = { kind = \"inverse-linear\", a = 3.3309495161, b = -0.0030711016 }";
-    let mut replacements = vec![("world = \"flat\"", world.as_str())];
-    if let Some(model) = depth_model {
-        replacements.push((model_line, model));
-    }
-    let path = sim_config(dir, &replacements);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let (before, rest) = text.split_once("[calibration.noise]").unwrap();
-    let after = &rest[rest.find("[calibration.gates]").unwrap()..];
-    std::fs::write(&path, format!("{before}{after}")).unwrap();
-    path
-}
 
 /// `calibrate` recording into `dir/rec`, then `replay` of it: both results.
 fn calibrate_and_replay(config: &Path, dir: &Path) -> [(i32, Value); 2] {
@@ -73,9 +53,9 @@ fn errors(result: &Value) -> ((f64, f64), (f64, f64)) {
     )
 }
 
-/// RMS of the found pattern's cells against the simulator's, raw units.
-fn pattern_error(result: &Value, truth: &DepthDistortion) -> f64 {
-    let pattern = &result["depth_pattern"];
+/// RMS of a found pattern's cells (a result's `depth_pattern`, or an
+/// exported correction) against the simulator's, raw units.
+fn pattern_error(pattern: &Value, truth: &DepthDistortion) -> f64 {
     let intrinsics = Intrinsics::default();
     let columns = pattern["columns"].as_u64().unwrap() as usize;
     let cell = pattern["cell_px"].as_u64().unwrap() as usize;
@@ -99,8 +79,6 @@ fn pattern_error(result: &Value, truth: &DepthDistortion) -> f64 {
     (sum / count).sqrt()
 }
 
-const ZERO_PLANE: &str = "";
-
 #[test]
 fn a_fixed_pattern_is_found_and_corrected() {
     let dir = temp_dir("depth-pattern");
@@ -121,7 +99,7 @@ fn a_fixed_pattern_is_found_and_corrected() {
         };
         let line = format!("depth_distortion = {{ shape = \"{name}\", amplitude_raw = 0.5 }}");
         let case = dir.join(name);
-        let runs = calibrate_and_replay(&config(&case, &line, model), &case);
+        let runs = calibrate_and_replay(&sim_config_with_pattern(&case, &line, zero_plane), &case);
         for (how, (code, result)) in ["live", "replay"].iter().zip(&runs) {
             assert_eq!(*code, 0, "{name} {how}: {result:#}");
             assert_eq!(result["depth_pattern"]["corrected"], true, "{name} {how}");
@@ -132,7 +110,7 @@ fn a_fixed_pattern_is_found_and_corrected() {
                 position < 0.3 && angle_sigmas < 3.0,
                 "{name} {how}: {angle}° ({angle_sigmas}σ), {position} mm ({position_sigmas}σ)"
             );
-            let rms = pattern_error(result, &truth);
+            let rms = pattern_error(&result["depth_pattern"], &truth);
             assert!(
                 rms < 0.1,
                 "{name} {how}: pattern off by {rms} raw units RMS"
@@ -144,7 +122,7 @@ fn a_fixed_pattern_is_found_and_corrected() {
 #[test]
 fn without_a_pattern_nothing_is_corrected() {
     let dir = temp_dir("depth-pattern-none");
-    let runs = calibrate_and_replay(&config(&dir, "", None), &dir);
+    let runs = calibrate_and_replay(&sim_config_with_pattern(&dir, "", false), &dir);
     for (how, (code, result)) in ["live", "replay"].iter().zip(&runs) {
         assert_eq!(*code, 0, "{how}: {result:#}");
         let pattern = &result["depth_pattern"];
@@ -166,7 +144,7 @@ fn without_a_pattern_nothing_is_corrected() {
 fn a_pattern_that_changes_with_depth_is_rejected_in_words() {
     let dir = temp_dir("depth-pattern-decay");
     let line = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5, decay_per_m = 0.5 }";
-    let runs = calibrate_and_replay(&config(&dir, line, None), &dir);
+    let runs = calibrate_and_replay(&sim_config_with_pattern(&dir, line, false), &dir);
     for (how, (code, result)) in ["live", "replay"].iter().zip(&runs) {
         assert_eq!(*code, 3, "{how}: {result:#}");
         let reasons = result["reasons"].to_string();
@@ -181,4 +159,79 @@ fn a_pattern_that_changes_with_depth_is_rejected_in_words() {
             .iter()
             .any(|c| c["gate"] == "warp_max_mm" && c["passed"] == false));
     }
+}
+
+/// The found pattern leaves groundcal for a terrain mapper (`export --format
+/// depth-correction`), and a check against the calibration takes it out of
+/// its frames as the calibration did: `verify` of the calibration's own
+/// recording finds the sensor where it was. Without the correction the
+/// pattern's offset and gradients look like a sensor that moved.
+#[test]
+fn the_correction_is_exported_and_checks_take_it_out() {
+    let dir = temp_dir("depth-pattern-export");
+    let truth = DepthDistortion {
+        shape: DistortionShape::Radial,
+        amplitude_raw: 0.5,
+        decay_per_m: 0.0,
+    };
+    let line = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }";
+    let [(code, live), _] = calibrate_and_replay(&sim_config_with_pattern(&dir, line, false), &dir);
+    assert_eq!(code, 0, "{live:#}");
+    let result = dir.join("result.json");
+    std::fs::write(&result, live.to_string()).unwrap();
+
+    let (code, out, err) = groundcal(&[
+        "export",
+        result.to_str().unwrap(),
+        "--format",
+        "depth-correction",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let exported: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(exported["format"], "groundcal-depth-correction");
+    assert_eq!(exported["version"], 1);
+    assert_eq!(exported["raw"].as_array().unwrap().len(), 80 * 60);
+    assert_eq!(exported["depth_scale"], live["depth_scale"]);
+    let rms = pattern_error(&exported, &truth);
+    assert!(rms < 0.1, "exported pattern off by {rms} raw units RMS");
+
+    let verify = |calibration: &Path| {
+        let (code, out, err) = groundcal(&[
+            "verify",
+            "--calibration",
+            calibration.to_str().unwrap(),
+            "--recording",
+            dir.join("rec").to_str().unwrap(),
+            "--json",
+        ]);
+        (code, out, err)
+    };
+    let (code, out, err) = verify(&result);
+    assert_eq!(code, 0, "with the correction: {out}\n{err}");
+
+    // The same calibration without its pattern, as before issue 23.
+    let mut bare = live.clone();
+    bare.as_object_mut().unwrap().remove("depth_pattern");
+    let without = dir.join("without-pattern.json");
+    std::fs::write(&without, bare.to_string()).unwrap();
+    let (code, out, _) = verify(&without);
+    assert_eq!(
+        code, 4,
+        "without the correction the pattern looks like drift: {out}"
+    );
+
+    // A file that is not a correction is refused in words.
+    let frame = std::fs::read_dir(dir.join("rec/kinect"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("d-"))
+        .expect("a depth frame");
+    let (code, _, err) = groundcal(&[
+        "plane",
+        frame.to_str().unwrap(),
+        "--depth-correction",
+        result.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a groundcal depth correction"), "{err}");
 }

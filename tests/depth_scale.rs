@@ -126,12 +126,10 @@ fn without_a_measured_noise_the_scale_is_still_estimated() {
     let dir = temp_dir("depth-scale-no-noise");
     for scale in [1.01, 0.995] {
         let case = dir.join(format!("scale-{scale}"));
-        let config = scaled_config(&case, scale, &[]);
         // The configuration as a real robot's: no noise table.
-        let text = std::fs::read_to_string(&config).unwrap();
-        let (before, rest) = text.split_once("[calibration.noise]").unwrap();
-        let after = &rest[rest.find("[calibration.gates]").unwrap()..];
-        std::fs::write(&config, format!("{before}{after}")).unwrap();
+        std::fs::create_dir_all(&case).unwrap();
+        let world = format!("world = \"flat\"\ndepth_scale = {scale}");
+        let config = common::sim_config_unmeasured(&case, &[("world = \"flat\"", world.as_str())]);
         let runs = calibrate_and_replay(&config, &case.join("rec"));
         for (how, code, result) in &runs {
             let (how, code) = (*how, *code);

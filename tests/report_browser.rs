@@ -94,7 +94,9 @@ fn capitalised(words: &str) -> String {
 fn check_common_sections(sections: &Value, result: &ResultJson) {
     let gates = sections["gates"]["rows"].as_array().unwrap();
     assert_eq!(gates.len(), result.gate_checks.len(), "{sections}");
-    assert_eq!(gates.len(), 7, "every gate: {sections}");
+    // Every gate; the warp's when the ground looked warped.
+    let warp = usize::from(result.gate_checks.iter().any(|c| c.gate == "warp_max_mm"));
+    assert_eq!(gates.len(), 7 + warp, "every gate: {sections}");
     for (row, check) in gates.iter().zip(&result.gate_checks) {
         assert_eq!(row["gate"], check.gate.as_str(), "{row}");
         assert_eq!(row["passed"], check.passed, "{row}");
@@ -311,5 +313,101 @@ fn report_of_a_recording_shows_its_setup_and_commanded_poses() {
             assert_eq!(cell(4), pose.commanded.py_mm, "height: {row}");
         }
         assert_eq!(sections["commanded"]["svgs"], 1, "the chart of tilts");
+    }
+}
+
+/// A calibration whose Kinect warps its depth (a radial bowl of ±0.5 raw
+/// units, simulated): the report draws the warp as a picture of the image,
+/// coloured by the depth error at 2 m as the result says cell by cell, with
+/// its scale in millimetres, at phone and laptop size. Screenshots:
+/// `report-pattern.png`, `report-pattern-desktop.png`.
+#[test]
+fn report_draws_the_depth_images_own_warp() {
+    if !common::browser_ready("report_browser") {
+        return;
+    }
+    let dir = common::temp_dir("report-pattern");
+    let line = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }";
+    let config = common::sim_config_with_pattern(&dir, line, false);
+    let (code, out, err) =
+        common::groundcal(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let result = ResultJson::parse(serde_json::from_str(&out).unwrap()).expect("a result");
+    let pattern = result.depth_pattern.clone().expect("a depth pattern");
+    assert!(pattern.corrected, "{}", pattern.note);
+    let provenance = Provenance::now("a simulated Kinect with a radial pattern", String::new());
+
+    for view in open_in_chromium("pattern", &result, &provenance) {
+        let seen = &view["pattern"];
+        assert_eq!(seen["heading"], "The depth image's own warp", "{seen}");
+        let words = seen["words"].as_str().unwrap();
+        assert!(
+            words.contains(&format!("{:.1} mm", pattern.largest_mm_at_2m))
+                && words.contains("corrected"),
+            "{words}"
+        );
+        let picture = &seen["picture"];
+        assert_eq!(picture["naturalWidth"], pattern.columns, "{picture}");
+        assert_eq!(picture["naturalHeight"], pattern.rows);
+        // Wide enough to read on a phone, and 4:3 as the image.
+        let (width, height) = (
+            picture["width"].as_f64().unwrap(),
+            picture["height"].as_f64().unwrap(),
+        );
+        assert!(
+            width >= 300.0 && (width / height - 4.0 / 3.0).abs() < 0.02,
+            "{width} × {height}"
+        );
+        // Each cell coloured as its value says: red farther, blue nearer,
+        // grey unseen; the darkest where the error is largest.
+        let rgb = picture["rgb"].as_array().unwrap();
+        assert_eq!(rgb.len(), pattern.raw.len());
+        let (mut farther, mut nearer, mut unseen) = (0, 0, 0);
+        for (cell, colour) in pattern.raw.iter().zip(rgb) {
+            let c: Vec<i64> = colour
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_i64().unwrap())
+                .collect();
+            match cell {
+                None => {
+                    assert_eq!(c, [190, 190, 190]);
+                    unseen += 1;
+                }
+                Some(raw) => {
+                    let error_mm = -4.0 * raw / pattern.raw_per_inverse_depth * 1e3;
+                    if error_mm > 0.5 {
+                        assert!(
+                            c[0] > c[2],
+                            "{raw} raw reads {error_mm} mm farther, drawn {c:?}"
+                        );
+                        farther += 1;
+                    } else if error_mm < -0.5 {
+                        assert!(
+                            c[2] > c[0],
+                            "{raw} raw reads {error_mm} mm nearer, drawn {c:?}"
+                        );
+                        nearer += 1;
+                    }
+                }
+            }
+        }
+        // The bowl: nearer in the middle, farther at the corners.
+        assert!(
+            farther > 500 && nearer > 500,
+            "{farther} farther, {nearer} nearer, {unseen} unseen"
+        );
+        let ticks: Vec<&str> = seen["ticks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| t.as_str().unwrap())
+            .collect();
+        assert_eq!(ticks.len(), 3, "{ticks:?}");
+        assert!(
+            ticks[0].ends_with("mm nearer") && ticks[2].ends_with("mm farther"),
+            "{ticks:?}"
+        );
     }
 }

@@ -55,6 +55,10 @@ enum Conversion {
 #[derive(Debug, Clone)]
 pub struct InverseDepthConverter {
     conversion: Conversion,
+    /// A fixed pattern to take out of every frame, per pixel in inverse
+    /// depth (1/m, row-major): the Kinect's depth pattern a calibration
+    /// found (`crate::distortion`). The frames are then fitted converted.
+    correction: Option<std::sync::Arc<[f32]>>,
     /// The domain the fit reads frames in, worked out once.
     domain: ValueDomain,
     width: usize,
@@ -119,10 +123,33 @@ impl InverseDepthConverter {
         };
         Self {
             conversion,
+            correction: None,
             domain,
             width: intrinsics.width,
             height: intrinsics.height,
         }
+    }
+
+    /// This converter taking `offsets` (1/m per pixel, row-major, the
+    /// image's size) out of every frame's inverse depth. Frames are then
+    /// converted before they are fitted, in inverse depth.
+    pub fn with_correction(mut self, offsets: std::sync::Arc<[f32]>) -> Self {
+        if offsets.len() != self.width * self.height {
+            return self;
+        }
+        if let Conversion::Affine { a, b, lo, hi } = self.conversion {
+            let (w_lo, w_hi) = (a + b * f64::from(lo), a + b * f64::from(hi));
+            // Wide enough for the corrected values (a pattern is a few raw
+            // units at most; the range's ends stay where the depths are).
+            let slack = offsets.iter().fold(0f32, |m, o| m.max(o.abs()));
+            self.domain = ValueDomain {
+                offset: 0.0,
+                scale: 1.0,
+                trusted: (w_lo.min(w_hi) as f32 - slack, w_lo.max(w_hi) as f32 + slack),
+            };
+        }
+        self.correction = Some(offsets);
+        self
     }
 
     /// The domain the fit reads frames in: raw values as they are (no
@@ -133,7 +160,7 @@ impl InverseDepthConverter {
 
     /// Whether frames are fitted as they are (raw values), with no conversion.
     pub fn reads_raw(&self) -> bool {
-        matches!(self.conversion, Conversion::Affine { .. })
+        matches!(self.conversion, Conversion::Affine { .. }) && self.correction.is_none()
     }
 
     /// Converts a frame into `image`, reusing its memory. A frame of another
@@ -166,6 +193,12 @@ impl InverseDepthConverter {
                     *out = w;
                     valid += usize::from(w.is_finite());
                 }
+            }
+        }
+        if let Some(offsets) = &self.correction {
+            // +∞ (no reading) stays +∞.
+            for (w, offset) in image.w.iter_mut().zip(offsets.iter()) {
+                *w -= offset;
             }
         }
         image.valid = valid;

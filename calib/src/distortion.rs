@@ -51,6 +51,10 @@ const SHAPE_SIGNIFICANCE: f64 = 8.0;
 /// clutter 7, uneven ground 90, a pattern that weakens with depth 2.
 const MAX_CONSISTENCY: f64 = 1.5;
 
+/// At least this share of the cells seen must keep residuals fixed in the
+/// image for the pattern to be the sensor's.
+const MIN_KEPT_FRACTION: f64 = 0.5;
+
 /// Below this RMS (raw units) a shape is too small to matter: 0.03 raw
 /// units is 0.4 mm at 2 m.
 pub const MIN_SHAPE_RMS_RAW: f64 = 0.03;
@@ -84,6 +88,12 @@ pub struct ShapeEstimate {
     /// when the pattern is fixed in the image and the ground flat.
     pub consistency_chi2: f64,
     pub consistency_dof: f64,
+    /// The shape's RMS over every cell seen, before any was left out, raw
+    /// units: how warped the ground looked, whatever warped it.
+    pub all_cells_rms_raw: f64,
+    /// The share of the cells seen that stayed in the estimate (the others'
+    /// residuals changed from pose to pose).
+    pub kept_fraction: f64,
     /// Raw units per 1/m.
     pub raw_per_inverse_depth: f64,
     pub intrinsics: Intrinsics,
@@ -94,25 +104,15 @@ pub struct ShapeEstimate {
 impl ShapeEstimate {
     /// The shape's RMS over the cells seen, weighted by their readings, raw units.
     pub fn rms_raw(&self) -> f64 {
-        let (mut sum, mut weight) = (0.0, 0.0);
-        for k in 0..self.shape.len() {
-            if self.seen[k] {
-                sum += self.readings[k] * self.shape[k].powi(2);
-                weight += self.readings[k];
-            }
-        }
-        if weight > 0.0 {
-            (sum / weight).sqrt() * self.raw_per_inverse_depth.abs()
-        } else {
-            0.0
-        }
+        weighted_rms(&self.shape, &self.readings, &self.seen) * self.raw_per_inverse_depth.abs()
     }
 
     /// Whether the residuals are a pattern fixed in the image: what is left
     /// after it is noise, cell by cell and pose by pose. Uneven ground and
     /// clutter move in the image from pose to pose and are not.
     pub fn consistent(&self) -> bool {
-        self.consistency_dof > 0.0
+        self.kept_fraction >= MIN_KEPT_FRACTION
+            && self.consistency_dof > 0.0
             && self.consistency_chi2 / self.consistency_dof <= MAX_CONSISTENCY
     }
 
@@ -148,100 +148,44 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         return None;
     }
     let cells = first.cells.len();
-    let mut readings = vec![0.0; cells];
-    let mut poses_seen = vec![0usize; cells];
-    for pose in poses {
-        for (k, cell) in pose.cells.iter().enumerate() {
-            readings[k] += cell.n;
-            poses_seen[k] += usize::from(cell.n > 0.0);
+    let variance = reading_variance(poses);
+    let mut kept = Kept::all(poses);
+    let seen_at_first = kept.seen.clone();
+    let total: f64 = kept.readings.iter().sum();
+
+    // A cell's sum at one pose whose mean lies far from the pattern and the
+    // plane is not the sensor's (an obstacle's foot in that cell at that
+    // pose, a bump of the ground): it leaves the estimate, which is made
+    // again without it, until the sums kept stay the same.
+    let mut fitted = alternate(poses, &kept);
+    let all_cells_rms_raw =
+        weighted_rms(&fitted.shape, &kept.readings, &kept.seen) * first.raw_per_inverse_depth.abs();
+    for _ in 0..5 {
+        let next = Kept::within(poses, &fitted, variance, &seen_at_first);
+        if next.out == kept.out {
+            break;
         }
+        kept = next;
+        fitted = alternate(poses, &kept);
     }
-    let seen: Vec<bool> = (0..cells)
-        .map(|k| readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2)
-        .collect();
+    let Fitted {
+        shape, iterations, ..
+    } = &fitted;
+    let seen = kept.seen.clone();
+    let observed = seen.iter().filter(|s| **s).count() as f64;
+    let shape_chi2: f64 = (0..cells)
+        .filter(|&k| seen[k])
+        .map(|k| kept.readings[k] * shape[k].powi(2) / variance)
+        .sum();
+    let (consistency_chi2, entries) = consistency(poses, &kept, &fitted, variance);
+    // What the shape bent each plane by, as the cells' least squares sees
+    // it: the fit's own plane (its rows, its guard, its band) is kept and
+    // only the pattern's share is taken out, so that with no pattern nothing
+    // changes. Every sum the fit took counts, kept or not.
     let inverse_moments: Vec<Matrix3<f64>> = poses
         .iter()
         .map(|p| p.moments.try_inverse().unwrap_or_else(Matrix3::zeros))
         .collect();
-    let tolerance = 1e-4 / first.raw_per_inverse_depth.abs();
-    let mut shape = vec![0.0; cells];
-    let mut corrections = vec![Vector3::zeros(); poses.len()];
-    let mut iterations = 0;
-    for _ in 0..2000 {
-        iterations += 1;
-        // Each pose's plane given the pattern.
-        for (i, pose) in poses.iter().enumerate() {
-            let mut rhs = pose.rhs;
-            for (k, cell) in pose.cells.iter().enumerate() {
-                if seen[k] && cell.n > 0.0 {
-                    rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k];
-                }
-            }
-            corrections[i] = inverse_moments[i] * rhs;
-        }
-        // The pattern given the planes.
-        let mut next = vec![0.0; cells];
-        for (i, pose) in poses.iter().enumerate() {
-            let c = corrections[i];
-            for (k, cell) in pose.cells.iter().enumerate() {
-                if seen[k] && cell.n > 0.0 {
-                    next[k] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
-                }
-            }
-        }
-        for k in 0..cells {
-            if seen[k] {
-                next[k] /= readings[k];
-            }
-        }
-        // No plane part: that is the planes' (and the geometry's) to say.
-        remove_plane_part(&mut next, &readings, &seen, first);
-        let change = next
-            .iter()
-            .zip(&shape)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
-        shape = next;
-        if change < tolerance {
-            break;
-        }
-    }
-
-    // The readings' noise about their cell's mean, pooled.
-    let (mut within, mut within_dof) = (0.0, 0.0);
-    for pose in poses {
-        for cell in &pose.cells {
-            if cell.n > 1.0 {
-                within += cell.rr - cell.r * cell.r / cell.n;
-                within_dof += cell.n - 1.0;
-            }
-        }
-    }
-    let variance = if within_dof > 0.0 {
-        (within / within_dof).max(f64::MIN_POSITIVE)
-    } else {
-        f64::INFINITY
-    };
-    let observed = seen.iter().filter(|s| **s).count() as f64;
-    let shape_chi2: f64 = (0..cells)
-        .filter(|&k| seen[k])
-        .map(|k| readings[k] * shape[k].powi(2) / variance)
-        .sum();
-    let (mut consistency_chi2, mut cell_poses) = (0.0, 0.0);
-    for (i, pose) in poses.iter().enumerate() {
-        let c = corrections[i];
-        for (k, cell) in pose.cells.iter().enumerate() {
-            if seen[k] && cell.n > 0.0 {
-                let model = shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
-                consistency_chi2 += (cell.r - model).powi(2) / (cell.n * variance);
-                cell_poses += 1.0;
-            }
-        }
-    }
-    // What the shape bent each plane by, as the cells' least squares sees
-    // it: the fit's own plane (its rows, its guard, its band) is kept and
-    // only the pattern's share is taken out, so that with no pattern nothing
-    // changes.
     let corrections = poses
         .iter()
         .zip(&inverse_moments)
@@ -255,22 +199,253 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
             -(inverse * bent)
         })
         .collect();
+    let kept_readings: f64 = (0..cells)
+        .filter(|&k| seen[k])
+        .map(|k| kept.readings[k])
+        .sum();
     Some(ShapeEstimate {
         columns: first.columns,
         rows: first.rows,
-        shape,
-        readings,
+        shape: shape.clone(),
+        readings: kept.readings.clone(),
         seen,
         plane_corrections: corrections,
         reading_sigma: variance.sqrt(),
         shape_chi2,
         shape_dof: observed - 3.0,
         consistency_chi2,
-        consistency_dof: cell_poses - observed - 3.0 * poses.len() as f64,
+        consistency_dof: entries - observed - 3.0 * poses.len() as f64,
+        all_cells_rms_raw,
+        kept_fraction: if total > 0.0 {
+            kept_readings / total
+        } else {
+            0.0
+        },
         raw_per_inverse_depth: first.raw_per_inverse_depth,
         intrinsics: first.intrinsics,
-        iterations,
+        iterations: *iterations,
     })
+}
+
+/// A cell's sum at one pose is left out when its mean lies this many of its
+/// σ from the pattern and the plane.
+const ENTRY_SIGMAS: f64 = 4.5;
+
+/// Which cells' sums, pose by pose, enter the estimate.
+#[derive(Debug, Clone, PartialEq)]
+struct Kept {
+    /// `out[i·cells + k]`: pose i's sum of cell k is left out.
+    out: Vec<bool>,
+    /// Per cell: readings of the sums kept.
+    readings: Vec<f64>,
+    /// Per cell: whether it enters the estimate (enough readings kept,
+    /// from two poses at least).
+    seen: Vec<bool>,
+    /// Per pose: the inverse of Σφφᵀ and Σr·φ over its readings less
+    /// those of the sums left out.
+    inverse_moments: Vec<Matrix3<f64>>,
+    rhs: Vec<Vector3<f64>>,
+}
+
+impl Kept {
+    /// Every sum.
+    fn all(poses: &[&GroundResiduals]) -> Self {
+        let cells = poses[0].cells.len();
+        Self::from_out(poses, vec![false; poses.len() * cells], None)
+    }
+
+    /// The sums within [`ENTRY_SIGMAS`] of `fitted`, among the cells first seen.
+    fn within(
+        poses: &[&GroundResiduals],
+        fitted: &Fitted,
+        variance: f64,
+        first_seen: &[bool],
+    ) -> Self {
+        let cells = first_seen.len();
+        let mut out = vec![false; poses.len() * cells];
+        for (i, pose) in poses.iter().enumerate() {
+            let c = fitted.planes[i];
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if first_seen[k] && cell.n > 0.0 {
+                    let model =
+                        fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
+                    let z = (cell.r - model) / (cell.n * variance).sqrt();
+                    out[i * cells + k] = z.abs() > ENTRY_SIGMAS;
+                }
+            }
+        }
+        Self::from_out(poses, out, Some(first_seen))
+    }
+
+    fn from_out(poses: &[&GroundResiduals], out: Vec<bool>, among: Option<&[bool]>) -> Self {
+        let cells = poses[0].cells.len();
+        let mut readings = vec![0.0; cells];
+        let mut poses_seen = vec![0usize; cells];
+        // A reading's spread about its cell's centre, per axis (pixels²).
+        let spread = ((CELL_PX * CELL_PX) as f64 - 1.0) / 12.0;
+        let mut inverse_moments = Vec::with_capacity(poses.len());
+        let mut rhs = Vec::with_capacity(poses.len());
+        for (i, pose) in poses.iter().enumerate() {
+            let (mut moments, mut sums) = (pose.moments, pose.rhs);
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if cell.n <= 0.0 {
+                    continue;
+                }
+                if out[i * cells + k] {
+                    // Its readings leave the pose's plane too (their spread
+                    // about the cell's centre taken as uniform).
+                    let centre = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
+                    moments -= (centre * centre.transpose()
+                        + Matrix3::from_diagonal(&Vector3::new(0.0, spread, spread)))
+                        * cell.n;
+                    sums -= centre * cell.r;
+                } else {
+                    readings[k] += cell.n;
+                    poses_seen[k] += 1;
+                }
+            }
+            inverse_moments.push(moments.try_inverse().unwrap_or_else(Matrix3::zeros));
+            rhs.push(sums);
+        }
+        let seen = (0..cells)
+            .map(|k| {
+                among.is_none_or(|a| a[k]) && readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2
+            })
+            .collect();
+        Self {
+            out,
+            readings,
+            seen,
+            inverse_moments,
+            rhs,
+        }
+    }
+
+    /// Whether pose i's sum of cell k enters the estimate.
+    fn takes(&self, i: usize, k: usize) -> bool {
+        self.seen[k] && !self.out[i * self.seen.len() + k]
+    }
+}
+
+/// The pattern over the cells seen and each pose's plane given it.
+struct Fitted {
+    /// Per cell, 1/m, without a plane part over the cells seen.
+    shape: Vec<f64>,
+    /// Per pose: the plane (1/m on `c0, cu, cv`) that fits its residuals
+    /// less the pattern.
+    planes: Vec<Vector3<f64>>,
+    iterations: usize,
+}
+
+/// Alternating least squares of the pattern and the planes over the sums
+/// kept, until the pattern moves by less than 10⁻⁴ raw units.
+fn alternate(poses: &[&GroundResiduals], kept: &Kept) -> Fitted {
+    let cells = kept.seen.len();
+    let grid = poses[0];
+    let tolerance = 1e-4 / grid.raw_per_inverse_depth.abs();
+    let mut shape = vec![0.0; cells];
+    let mut planes = vec![Vector3::zeros(); poses.len()];
+    let mut iterations = 0;
+    for _ in 0..2000 {
+        iterations += 1;
+        // Each pose's plane given the pattern.
+        for (i, pose) in poses.iter().enumerate() {
+            let mut rhs = kept.rhs[i];
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if cell.n > 0.0 && kept.takes(i, k) {
+                    rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k];
+                }
+            }
+            planes[i] = kept.inverse_moments[i] * rhs;
+        }
+        // The pattern given the planes.
+        let mut next = vec![0.0; cells];
+        for (i, pose) in poses.iter().enumerate() {
+            let c = planes[i];
+            for (k, cell) in pose.cells.iter().enumerate() {
+                if cell.n > 0.0 && kept.takes(i, k) {
+                    next[k] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
+                }
+            }
+        }
+        for k in 0..cells {
+            if kept.seen[k] {
+                next[k] /= kept.readings[k];
+            }
+        }
+        // No plane part: that is the planes' (and the geometry's) to say.
+        remove_plane_part(&mut next, &kept.readings, &kept.seen, grid);
+        let change = next
+            .iter()
+            .zip(&shape)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        shape = next;
+        if change < tolerance {
+            break;
+        }
+    }
+    Fitted {
+        shape,
+        planes,
+        iterations,
+    }
+}
+
+/// The readings' noise about their cell's mean, pooled over cells and
+/// poses: a variance, (1/m)².
+fn reading_variance(poses: &[&GroundResiduals]) -> f64 {
+    let (mut within, mut within_dof) = (0.0, 0.0);
+    for pose in poses {
+        for cell in &pose.cells {
+            if cell.n > 1.0 {
+                within += cell.rr - cell.r * cell.r / cell.n;
+                within_dof += cell.n - 1.0;
+            }
+        }
+    }
+    if within_dof > 0.0 {
+        (within / within_dof).max(f64::MIN_POSITIVE)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// χ² of the sums kept about pattern and plane, and how many sums.
+fn consistency(
+    poses: &[&GroundResiduals],
+    kept: &Kept,
+    fitted: &Fitted,
+    variance: f64,
+) -> (f64, f64) {
+    let (mut chi2, mut entries) = (0.0, 0.0);
+    for (i, pose) in poses.iter().enumerate() {
+        let c = fitted.planes[i];
+        for (k, cell) in pose.cells.iter().enumerate() {
+            if cell.n > 0.0 && kept.takes(i, k) {
+                let model = fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
+                chi2 += (cell.r - model).powi(2) / (cell.n * variance);
+                entries += 1.0;
+            }
+        }
+    }
+    (chi2, entries)
+}
+
+/// RMS of the values of the cells seen, weighted by their readings.
+fn weighted_rms(values: &[f64], readings: &[f64], seen: &[bool]) -> f64 {
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for k in 0..values.len() {
+        if seen[k] {
+            sum += readings[k] * values[k].powi(2);
+            weight += readings[k];
+        }
+    }
+    if weight > 0.0 {
+        (sum / weight).sqrt()
+    } else {
+        0.0
+    }
 }
 
 /// Subtracts the plane `A + B·u' + C·v'` that fits the cells seen, weighted
@@ -299,6 +474,52 @@ fn remove_plane_part(shape: &mut [f64], readings: &[f64], seen: &[bool], grid: &
         if seen[k] {
             shape[k] -= plane.dot(&centre(k));
         }
+    }
+}
+
+/// A found pattern as a correction of raw values at any pixel: the cells'
+/// values interpolated bilinearly between their centres, held at the
+/// border's; cells no pose saw count as 0 (nothing known, nothing changed).
+/// `raw' = raw − raw_at(u, v)` (docs/export.md, "depth-correction").
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthCorrection {
+    pub columns: usize,
+    pub rows: usize,
+    pub cell_px: usize,
+    /// Per cell, raw units, row-major.
+    pub raw: Vec<f64>,
+}
+
+impl DepthCorrection {
+    /// The correction of a grid of cells (`None`: not seen, taken as 0);
+    /// `None` if the grid's size disagrees with its values.
+    pub fn from_cells(
+        columns: usize,
+        rows: usize,
+        cell_px: usize,
+        cells: &[Option<f64>],
+    ) -> Option<Self> {
+        (columns > 0 && rows > 0 && cell_px > 0 && cells.len() == columns * rows).then(|| Self {
+            columns,
+            rows,
+            cell_px,
+            raw: cells.iter().map(|c| c.unwrap_or(0.0)).collect(),
+        })
+    }
+
+    /// The raw units a reading at pixel `(u, v)` reads too much.
+    pub fn raw_at(&self, u: f64, v: f64) -> f64 {
+        let size = self.cell_px as f64;
+        // Cell (c, r)'s centre is pixel ((c + ½)·size − ½, (r + ½)·size − ½).
+        let x = ((u + 0.5) / size - 0.5).clamp(0.0, (self.columns - 1) as f64);
+        let y = ((v + 0.5) / size - 0.5).clamp(0.0, (self.rows - 1) as f64);
+        let (c0, r0) = (x.floor() as usize, y.floor() as usize);
+        let (c1, r1) = ((c0 + 1).min(self.columns - 1), (r0 + 1).min(self.rows - 1));
+        let (fx, fy) = (x - c0 as f64, y - r0 as f64);
+        let at = |c: usize, r: usize| self.raw[r * self.columns + c];
+        let top = at(c0, r0) * (1.0 - fx) + at(c1, r0) * fx;
+        let bottom = at(c0, r1) * (1.0 - fx) + at(c1, r1) * fx;
+        top * (1.0 - fy) + bottom * fy
     }
 }
 
@@ -569,18 +790,44 @@ fn pattern_of(
     }
     let corrected = shape_taken || part_taken.is_some();
     let words_rms = shape.rms_raw();
+    let seen_cells = shape.seen.iter().filter(|s| **s).count();
+    let left_out = (shape.kept_fraction < 1.0).then(|| {
+        format!(
+            "; {:.0} % of the cells seen changed from pose to pose (obstacles' feet, bumps) and were left out",
+            100.0 * (1.0 - shape.kept_fraction)
+        )
+    });
+    // A warp not corrected: the ground looked warped, but not by a pattern
+    // fixed in the image.
+    let uncorrected = !shape_taken
+        && part_taken.is_none()
+        && shape.all_cells_rms_raw >= MIN_SHAPE_RMS_RAW
+        && (shape.kept_fraction < 1.0 || !shape.consistent());
     let note = match (shape_taken, part_taken) {
-        (false, _) if shape.significant() && !shape.consistent() => format!(
-            "not corrected: the ground's residuals ({words_rms:.3} raw units RMS) change from pose to pose ({:.1} times the noise), so they are not a pattern fixed in the image: uneven ground, clutter, or a pattern that changes with depth",
-            shape.consistency_chi2 / shape.consistency_dof.max(1.0)
-        ),
+        (false, None) if uncorrected && !shape.consistent() => {
+            let how = if shape.kept_fraction < MIN_KEPT_FRACTION {
+                format!(
+                    "in {:.0} % of the cells seen",
+                    100.0 * (1.0 - shape.kept_fraction)
+                )
+            } else {
+                format!(
+                    "{:.1} times the noise",
+                    shape.consistency_chi2 / shape.consistency_dof.max(1.0)
+                )
+            };
+            format!(
+                "not corrected: the ground's residuals ({:.3} raw units RMS) change from pose to pose ({how}), so they are not a pattern fixed in the image: uneven ground, clutter, or a pattern that changes with depth",
+                shape.all_cells_rms_raw
+            )
+        }
         (false, None) => format!(
-            "none found: the ground's residuals show no fixed pattern beyond the noise (shape {words_rms:.3} raw units RMS over {} cells), and the geometry across poses no offset or gradient of the depth",
-            shape.seen.iter().filter(|s| **s).count()
+            "none found: the ground's residuals show no fixed pattern beyond the noise (shape {words_rms:.3} raw units RMS over {seen_cells} cells{}), and the geometry across poses no offset or gradient of the depth",
+            left_out.unwrap_or_default()
         ),
         (true, None) => "the shape corrected; its offset and gradients are not distinguishable from none by the geometry across poses".to_string(),
         (false, Some(_)) => "an offset or gradient of the depth over the image, found by the geometry across poses, corrected".to_string(),
-        (true, Some(_)) => "the shape and its offset and gradients corrected".to_string(),
+        (true, Some(_)) => format!("the shape and its offset and gradients corrected{}", left_out.unwrap_or_default()),
     };
     DepthPattern {
         corrected,
@@ -596,7 +843,7 @@ fn pattern_of(
         plane_part_sigma: plane_part
             .map(|p| [0, 1, 2].map(|i| p.covariance[(i, i)].max(0.0).sqrt())),
         plane_part_taken: part_taken.is_some(),
-        uncorrected_shape_rms_raw: (shape.significant() && !shape_taken).then_some(words_rms),
+        uncorrected_shape_rms_raw: uncorrected.then_some(shape.all_cells_rms_raw),
         raw_per_inverse_depth: k_raw,
         note: Some(note),
     }
@@ -650,6 +897,25 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    #[test]
+    fn the_correction_is_the_cells_at_their_centres_and_linear_between() {
+        let cells: Vec<Option<f64>> = (0..12).map(|k| Some(k as f64)).collect();
+        let correction = DepthCorrection::from_cells(4, 3, 8, &cells).expect("a grid");
+        // Centres at 3.5, 11.5, 19.5, 27.5 (columns) and 3.5, 11.5, 19.5 (rows).
+        assert_eq!(correction.raw_at(3.5, 3.5), 0.0);
+        assert_eq!(correction.raw_at(11.5, 11.5), 5.0);
+        assert!((correction.raw_at(7.5, 3.5) - 0.5).abs() < 1e-12);
+        assert!((correction.raw_at(11.5, 7.5) - 3.0).abs() < 1e-12);
+        // Held at the border.
+        assert_eq!(correction.raw_at(0.0, 0.0), 0.0);
+        assert_eq!(correction.raw_at(31.0, 23.0), 11.0);
+        assert!(DepthCorrection::from_cells(4, 3, 8, &cells[..11]).is_none());
+        assert_eq!(
+            DepthCorrection::from_cells(4, 3, 8, &[None; 12]).map(|c| c.raw_at(9.0, 9.0)),
+            Some(0.0)
+        );
     }
 
     #[test]

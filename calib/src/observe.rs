@@ -265,6 +265,16 @@ impl PoseObserver {
         })
     }
 
+    /// This observer with the Kinect's depth pattern a calibration found
+    /// taken out of every frame (a check against that calibration).
+    pub fn with_depth_correction(
+        mut self,
+        correction: &crate::distortion::DepthCorrection,
+    ) -> Self {
+        self.camera = self.camera.with_depth_correction(correction);
+        self
+    }
+
     /// The converter from raw frames to points.
     pub fn camera(&self) -> &DepthCamera {
         &self.camera

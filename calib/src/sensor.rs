@@ -29,6 +29,9 @@ pub struct DepthCamera {
     /// Raw units per 1/m of inverse depth: the depth model's `1/b`, or the
     /// default model's for metric frames (raw-equivalent units).
     raw_per_inverse_depth: f64,
+    /// The Kinect's depth pattern taken out of every reading, per pixel in
+    /// inverse depth (1/m), when a calibration found one.
+    correction: Option<std::sync::Arc<[f32]>>,
 }
 
 /// Points in the sensor frame V, stored as separate coordinate arrays so that the
@@ -126,6 +129,17 @@ impl PointCloud {
     }
 }
 
+/// A depth with `offset` (1/m) taken out of its inverse; 0 (no reading) if
+/// that leaves none.
+fn corrected_depth(z: f32, offset: f32) -> f32 {
+    let w = 1.0 / z - offset;
+    if w > 0.0 {
+        1.0 / w
+    } else {
+        0.0
+    }
+}
+
 impl DepthCamera {
     /// A converter for images of the given encoding and intrinsics.
     pub fn new(encoding: DepthEncoding, intrinsics: Intrinsics, range: DepthRange) -> Self {
@@ -168,7 +182,30 @@ impl DepthCamera {
                     DepthEncoding::Raw11(model) => model.inverse_depth_affine().1,
                     DepthEncoding::Metric { .. } => DepthModel::default().inverse_depth_affine().1,
                 },
+            correction: None,
         }
+    }
+
+    /// This camera with the Kinect's depth pattern a calibration found
+    /// taken out of every reading: `raw' = raw − correction(u, v)`, that is
+    /// `1/z' = 1/z − correction(u, v)/k` (k = [`Self::raw_per_inverse_depth`]).
+    pub fn with_depth_correction(&self, correction: &crate::distortion::DepthCorrection) -> Self {
+        let (width, height) = (self.intrinsics.width, self.intrinsics.height);
+        let offsets: std::sync::Arc<[f32]> = (0..height)
+            .flat_map(|v| (0..width).map(move |u| (u, v)))
+            .map(|(u, v)| {
+                (correction.raw_at(u as f64, v as f64) / self.raw_per_inverse_depth) as f32
+            })
+            .collect();
+        let mut camera = self.clone();
+        camera.inverse_depth = camera.inverse_depth.with_correction(offsets.clone());
+        camera.correction = Some(offsets);
+        camera
+    }
+
+    /// Whether a depth pattern is taken out of the readings.
+    pub fn corrects_depth(&self) -> bool {
+        self.correction.is_some()
     }
 
     /// Converts a frame to inverse depth (`1/z`, the Kinect's noise domain)
@@ -225,13 +262,20 @@ impl DepthCamera {
         cloud.z.resize(room, 0.0);
         cloud.weight.resize(room, 0.0);
         let mut cursor = before;
-        for (row, up) in pixels.chunks_exact(width).zip(&self.ray_up) {
-            for (&value, &right) in row.iter().zip(&self.ray_right) {
-                let (z, w) = self
+        for (v, (row, up)) in pixels.chunks_exact(width).zip(&self.ray_up).enumerate() {
+            let offsets = self
+                .correction
+                .as_ref()
+                .and_then(|c| c.get(v * width..(v + 1) * width));
+            for (u, (&value, &right)) in row.iter().zip(&self.ray_right).enumerate() {
+                let (mut z, w) = self
                     .table
                     .get(usize::from(value))
                     .copied()
                     .unwrap_or((0.0, 0.0));
+                if let (Some(offsets), true) = (offsets, z > 0.0) {
+                    z = corrected_depth(z, offsets[u]);
+                }
                 cloud.x[cursor] = z;
                 cloud.y[cursor] = up * z;
                 cloud.z[cursor] = right * z;
@@ -250,7 +294,10 @@ impl DepthCamera {
     /// `None` for no reading, one outside the trusted range, or a pixel
     /// outside the image.
     pub fn point_at(&self, u: usize, v: usize, value: u16) -> Option<nalgebra::Vector3<f64>> {
-        let (z, _) = *self.table.get(usize::from(value))?;
+        let (mut z, _) = *self.table.get(usize::from(value))?;
+        if let (Some(offsets), true) = (&self.correction, z > 0.0) {
+            z = corrected_depth(z, *offsets.get(v * self.intrinsics.width + u)?);
+        }
         let right = *self.ray_right.get(u)?;
         let up = *self.ray_up.get(v)?;
         (z > 0.0).then(|| {

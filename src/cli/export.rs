@@ -1,5 +1,5 @@
-//! `groundcal export RESULT.json --format urdf|ros-static|json`: the calibration
-//! in other tools' formats (`crate::export`, `docs/export.md`).
+//! `groundcal export RESULT.json --format urdf|ros-static|json|depth-correction`:
+//! the calibration in other tools' formats (`crate::export`, `docs/export.md`).
 
 use std::io::Write;
 use std::path::Path;
@@ -10,6 +10,9 @@ use crate::export::{read_result_with_scale, ExportFormat, RosMount};
 /// Runs the command: the export on stdout, messages on stderr. A rejected
 /// calibration, a missing file or an inconsistent result is bad input (exit 2).
 pub fn run(file: &Path, format: ExportFormat, tilt: Option<f64>) -> ExitStatus {
+    if format == ExportFormat::DepthCorrection {
+        return depth_correction(file);
+    }
     let (mut robot_from_sensor, depth_scale) = match read_result_with_scale(file, false) {
         Ok(read) => read,
         Err(e) => {
@@ -34,7 +37,31 @@ pub fn run(file: &Path, format: ExportFormat, tilt: Option<f64>) -> ExitStatus {
     if let (ExportFormat::RosStatic, Some(note)) = (format, mount.depth_scale_note()) {
         eprintln!("groundcal export: {note}");
     }
-    let text = mount.render(format);
+    let Some(text) = mount.render(format) else {
+        return depth_correction(file);
+    };
+    print(&text)
+}
+
+/// `--format depth-correction`: the corrected pattern as a JSON document.
+fn depth_correction(file: &Path) -> ExitStatus {
+    match crate::export::read_depth_correction(file) {
+        Ok(document) => match serde_json::to_string(&document) {
+            Ok(text) => print(&(text + "\n")),
+            Err(e) => {
+                eprintln!("groundcal export: cannot encode the depth correction: {e}");
+                ExitStatus::RuntimeFailure
+            }
+        },
+        Err(e) => {
+            eprintln!("groundcal export: {e}");
+            ExitStatus::BadInput
+        }
+    }
+}
+
+/// Writes the export on stdout.
+fn print(text: &str) -> ExitStatus {
     let mut stdout = std::io::stdout().lock();
     if let Err(e) = stdout
         .write_all(text.as_bytes())

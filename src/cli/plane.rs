@@ -27,6 +27,8 @@ pub struct PlaneOptions {
     pub up_optical: Vector3<f64>,
     pub up_tolerance_deg: f64,
     pub ground_fit: GroundFitMethod,
+    /// A `groundcal-depth-correction` document to take out of the image.
+    pub depth_correction: Option<std::path::PathBuf>,
 }
 
 impl Default for PlaneOptions {
@@ -41,6 +43,7 @@ impl Default for PlaneOptions {
             up_optical: Vector3::new(0.0, -1.0, 0.0),
             up_tolerance_deg: 60.0,
             ground_fit: GroundFitMethod::Disparity,
+            depth_correction: None,
         }
     }
 }
@@ -117,7 +120,12 @@ pub fn fit_file(file: &Path, options: &PlaneOptions) -> Result<GroundFit, (ExitS
             metres_per_unit: 1.0 / 5000.0,
         },
     };
-    let camera = DepthCamera::new(encoding, intrinsics, DepthRange::default());
+    let mut camera = DepthCamera::new(encoding, intrinsics, DepthRange::default());
+    if let Some(path) = &options.depth_correction {
+        let correction =
+            crate::export::read_depth_correction_file(path).map_err(|e| bad(e.to_string()))?;
+        camera = camera.with_depth_correction(&correction);
+    }
     let up_sensor = sensor_from_optical() * options.up_optical.normalize();
     let prior = GroundPrior::up_only(up_sensor, options.up_tolerance_deg.to_radians());
     let settings = PlaneFitSettings {

@@ -94,6 +94,7 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
             Some(ground_prior(&calibration.mount)),
             pose_settings,
             None,
+            calibration.depth_correction.as_deref(),
         ) {
             Ok(o) => o,
             Err(e) => {

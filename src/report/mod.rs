@@ -3,14 +3,15 @@
 //!
 //! The page is self-contained so that it can be mailed, archived next to the
 //! recording or opened on a robot with no network: inline CSS, no script, no
-//! font or image from anywhere, and a Content-Security-Policy that forbids
-//! loading anything. Charts are drawn by `plotters` into SVG strings and
+//! font or image from anywhere (the one picture, the depth pattern, is a data
+//! URI), and a Content-Security-Policy that forbids loading anything. Charts are drawn by `plotters` into SVG strings and
 //! inlined ([`chart`]); every text that comes from outside (reasons, paths)
 //! is escaped ([`html`]).
 //!
 //! The sections, in the order an operator reads them: the verdict, the
 //! quality gates (limit, measured, pass or fail), the mount with its σ, the
-//! setup and the change from the nominal mount, the summary, what the
+//! setup and the change from the nominal mount, the summary, the depth
+//! image's own warp (the Kinect's fixed pattern, [`pattern`]), what the
 //! schedule could tell (the weakest directions in words), the correlations
 //! of the six parameters as a heat map, θ and e_d per pose with the gates as
 //! lines, the signed residuals, the measured and predicted ground, the
@@ -19,6 +20,7 @@
 
 mod chart;
 mod html;
+mod pattern;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -87,7 +89,7 @@ pub fn render_html(result: &ResultJson, provenance: &Provenance) -> String {
 <head>
 <meta charset="utf-8">
 <meta name="viewport" content="width=device-width, initial-scale=1">
-<meta http-equiv="Content-Security-Policy" content="default-src 'none'; style-src 'unsafe-inline'">
+<meta http-equiv="Content-Security-Policy" content="default-src 'none'; style-src 'unsafe-inline'; img-src data:">
 <title>groundcal calibration: {verdict} ({input})</title>
 <style>{STYLE}</style>
 </head>
@@ -102,6 +104,7 @@ pub fn render_html(result: &ResultJson, provenance: &Provenance) -> String {
     parameters_section(&mut page, result);
     setup_section(&mut page, result, &provenance.input);
     summary_section(&mut page, result);
+    pattern::depth_pattern_section(&mut page, result.depth_pattern.as_ref());
     observability_section(&mut page, result);
     correlations_section(&mut page, result);
     accuracy_section(&mut page, result);
@@ -1180,6 +1183,11 @@ table.poses { font-size: .85rem; }
 tr.unused td { background: #fbeceb; }
 details { margin-top: 10px; }
 summary { cursor: pointer; font-weight: 600; }
+figure.warp { margin: 8px 0; max-width: 480px; }
+img.warp { display: block; width: 100%; height: auto; image-rendering: pixelated; border: 1px solid #ccc; }
+.warp-scale { height: 12px; margin-top: 6px; border: 1px solid #ccc; }
+.warp-ticks { display: flex; justify-content: space-between; font-size: 0.85em; }
+figure.warp figcaption { font-size: 0.85em; color: #5f6368; margin-top: 4px; }
 dl.facts { display: grid; grid-template-columns: max-content 1fr; gap: 4px 14px; margin: 0; }
 dl.facts dt { color: var(--muted); }
 dl.facts dd { margin: 0; overflow-wrap: anywhere; }

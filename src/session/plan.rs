@@ -49,6 +49,9 @@ pub struct Plan {
     /// A calibration (true: the schedule must observe all six parameters,
     /// provisional solves feed the live charts) or a check (`verify`).
     pub calibrating: bool,
+    /// The Kinect's depth pattern to take out of every frame: a check's,
+    /// from the calibration it checks. A calibration finds its own.
+    pub depth_correction: Option<std::sync::Arc<crate::calib::distortion::DepthCorrection>>,
     /// Accelerometer readings taken at each pose after its frames (their
     /// mean is the pose's gravity).
     pub accelerometer_readings: usize,
@@ -121,6 +124,7 @@ impl Plan {
             link_recovery: Duration::from_secs(30),
             sensor_timeout: Duration::from_secs(10),
             calibrating: true,
+            depth_correction: None,
             accelerometer_readings: 10,
             verify: config.verify.settings(c),
             recorded_poses: None,
@@ -182,6 +186,7 @@ impl Plan {
         let mut plan = Plan::from_config(config, schedule, None, record)?;
         plan.calibrating = false;
         plan.nominal_mount = Some(crate::verify::ground_prior(&calibration.mount));
+        plan.depth_correction = calibration.depth_correction.clone();
         if let Some(tilt) = calibration.tilt_deg {
             plan.tilt_deg = tilt;
         }

@@ -402,6 +402,10 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
             plan.nominal_mount,
             plan.pose,
         )
+        .map(|observer| match &plan.depth_correction {
+            Some(correction) => observer.with_depth_correction(correction),
+            None => observer,
+        })
         .map_err(|e| SessionError::Robot {
             kind: ErrorKind::Protocol,
             message: format!("home feet: {e}"),

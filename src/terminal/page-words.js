@@ -219,6 +219,14 @@ const WORDS = {
     rollBackToThis: 'Roll back to this',
     makeActive: 'Make active',
 
+    // The depth image's own warp (the Kinect's fixed pattern).
+    warpTitle: 'The depth image\'s own warp',
+    warpCorrected: (mm) => 'The Kinect reads the depth up to ' + mm + ' mm off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer). The calibration was corrected for it.',
+    warpUncorrected: (mm) => 'The ground looked warped by ' + mm + ' mm at 2 m, differently at each pose: not the sensor\'s fixed pattern, so nothing was corrected.',
+    warpNone: 'The depth image shows no warp of its own.',
+    warpNearer: (mm) => '−' + mm + ' mm nearer',
+    warpFarther: (mm) => '+' + mm + ' mm farther',
+
     // The live picture.
     viewTitle: 'What the camera sees',
     viewLegend: 'Green: the ground the fit chose. Grey: everything else, lighter when nearer. Black: no reading.',
@@ -432,6 +440,13 @@ const WORDS = {
     setAsideByOperator: '被操作员搁置',
     rollBackToThis: '回退到这个',
     makeActive: '设为当前',
+
+    warpTitle: '深度图像自身的扭曲',
+    warpCorrected: (mm) => 'Kinect 在 2 米处的深度读数最多偏差 ' + mm + ' 毫米，偏差图案固定在图像中（红色：比实际远，蓝色：比实际近）。标定已对此进行校正。',
+    warpUncorrected: (mm) => '地面在 2 米处看起来扭曲了 ' + mm + ' 毫米，且每个姿态不同：这不是传感器固定的图案，因此没有校正。',
+    warpNone: '深度图像没有自身的扭曲。',
+    warpNearer: (mm) => '−' + mm + ' 毫米 更近',
+    warpFarther: (mm) => '+' + mm + ' 毫米 更远',
 
     viewTitle: '相机看到的画面',
     viewLegend: '绿色：拟合选中的地面。灰色：其他东西，越近越亮。黑色：没有读数。',

@@ -607,6 +607,7 @@ function render() {
       if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against, r.predicted_sigma, scale);
       else $('values').innerHTML = '';
     });
+    redraw('warp', JSON.stringify([s.result_id, language]), () => showWarp(r.depth_pattern, s.result_id));
     activeHere = !!activeId && activeId === s.result_id;
     $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, activeDoc) : '';
     $('activeline').innerHTML = '';
@@ -635,6 +636,7 @@ function render() {
       say(s.error, true);
     }
     redraw('values', 'none', () => { $('values').innerHTML = ''; });
+    redraw('warp', 'none', () => drawWarp(null));
     $('change').textContent = ''; $('activeline').textContent = ''; $('resultid').textContent = '';
     redraw('charts', 'none', () => charts([], 1, false));
   } else {
@@ -708,6 +710,69 @@ async function loadView() {
   } finally { view.loading = false; }
   renderView();
 }
+// The Kinect's fixed depth pattern a calibration found: one canvas pixel per
+// cell, coloured by the depth error it causes at 2 m (red farther, blue
+// nearer, white none, grey where no ground was seen), on a scale rounded up
+// to 1, 2 or 5 × 10ⁿ mm.
+function drawWarp(p) {
+  const box = $('warp-box');
+  box.hidden = !p;
+  if (!p) return;
+  const drawn = !!p.corrected && p.columns > 0 && p.rows > 0 && p.raw.length === p.columns * p.rows;
+  for (const id of ['warp', 'warp-scale', 'warp-ticks']) $(id).hidden = !drawn;
+  const mm = (v) => (Math.round(v * 10) / 10).toString();
+  if (!drawn) {
+    $('warp-words').textContent = typeof p.uncorrected_mm_at_2m === 'number'
+      ? t('warpUncorrected', mm(p.uncorrected_mm_at_2m)) : t('warpNone');
+    return;
+  }
+  const largest = Math.max(p.largest_mm_at_2m || 0, 1);
+  const decade = Math.pow(10, Math.floor(Math.log10(largest)));
+  const range = [1, 2, 5, 10].map((m) => m * decade).find((v) => v >= largest);
+  const canvas = $('warp');
+  canvas.width = p.columns; canvas.height = p.rows;
+  const context = canvas.getContext('2d');
+  const image = context.createImageData(p.columns, p.rows);
+  const nearer = [33, 102, 172], farther = [178, 24, 43];
+  for (let i = 0; i < p.raw.length; i++) {
+    const raw = p.raw[i];
+    let rgb = [190, 190, 190];
+    if (typeof raw === 'number' && p.raw_per_inverse_depth) {
+      const error = -4 * raw / p.raw_per_inverse_depth * 1000;
+      const a = Math.max(-1, Math.min(1, error / range));
+      const end = a < 0 ? nearer : farther;
+      rgb = end.map((c) => Math.round(255 + (c - 255) * Math.abs(a)));
+    }
+    image.data.set([rgb[0], rgb[1], rgb[2], 255], 4 * i);
+  }
+  context.putImageData(image, 0, 0);
+  $('warp-near').textContent = t('warpNearer', String(range));
+  $('warp-far').textContent = t('warpFarther', String(range));
+  $('warp-words').textContent = t('warpCorrected', mm(p.largest_mm_at_2m));
+}
+
+// The status leaves the pattern's cells out (it is polled every second);
+// the stored calibration has them, fetched once per result.
+async function showWarp(p, id) {
+  if (p && p.corrected && p.raw.length === 0 && id) {
+    // Until the cells come, nothing is claimed.
+    $('warp-box').hidden = false;
+    for (const part of ['warp', 'warp-scale', 'warp-ticks']) $(part).hidden = true;
+    $('warp-words').textContent = '';
+    try {
+      const r = await fetchWithin('/api/calibrations/' + encodeURIComponent(id), {}, 5000);
+      if (r.ok) {
+        const stored = await r.json();
+        if (stored.depth_pattern && drawn.get('warp') === JSON.stringify([id, language])) drawWarp(stored.depth_pattern);
+      }
+    } catch (e) {
+      // The words stay; the picture comes with the next result.
+    }
+    return;
+  }
+  drawWarp(p);
+}
+
 // One canvas pixel per cell: grey by depth (lighter when nearer), green
 // where the fit took the reading for the ground, black without a reading.
 function drawView(v) {

@@ -248,11 +248,13 @@ fn finish(state: &AppState, result: Result<ResultJson, String>) {
                 Ok(id) => {
                     {
                         let mut status = state.status_mut();
+                        // The pattern's cells stay in the store: the status is
+                        // polled every second, the cells are drawn once.
                         status.result = Some(StoredResult {
                             id: id.clone(),
                             created,
                             operator_rejection: None,
-                            result,
+                            result: result.without_pattern_cells(),
                         });
                         status.result_id = Some(id.clone());
                         status.state = RunState::Idle;

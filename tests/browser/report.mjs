@@ -217,12 +217,41 @@ async function visit({ name, ...options }) {
     either('commanded', sections.commanded.rows.length > 0, 'commanded poses');
     if (sections.setup.facts.input === undefined) problems.push(`${name}: the setup does not name the input`);
 
+    // The depth image's own warp, when the result has a pattern: the
+    // picture's cells as the browser decoded them (RGB), to compare with
+    // the result it was drawn from.
+    const pattern = await page.evaluate(() => {
+      const section = document.getElementById('depth-pattern');
+      if (!section) return null;
+      const text = (el) => (el ? el.textContent.replace(/\s+/g, ' ').trim() : '');
+      const img = section.querySelector('img.warp');
+      let picture = null;
+      if (img) {
+        const canvas = document.createElement('canvas');
+        canvas.width = img.naturalWidth; canvas.height = img.naturalHeight;
+        const context = canvas.getContext('2d');
+        context.drawImage(img, 0, 0);
+        const data = context.getImageData(0, 0, canvas.width, canvas.height).data;
+        const rgb = [];
+        for (let i = 0; i < data.length; i += 4) rgb.push([data[i], data[i + 1], data[i + 2]]);
+        const box = img.getBoundingClientRect();
+        picture = { naturalWidth: img.naturalWidth, naturalHeight: img.naturalHeight, width: box.width, height: box.height, rgb };
+      }
+      return {
+        heading: text(section.querySelector('h2')),
+        words: text(section.querySelector('.warp-words')),
+        none: text(section.querySelector('.none')),
+        ticks: [...section.querySelectorAll('.warp-ticks span')].map(text),
+        picture,
+      };
+    });
+
     const screenshot = screenshotFor(name);
     await page.screenshot({ path: screenshot, fullPage: true });
     const bytes = statSync(screenshot).size;
     if (bytes === 0) problems.push(`${name}: the screenshot ${screenshot} is empty`);
 
-    return { seen: { viewport: name, verdict, svgs: svgs.length, rendered, overflow, sticking, sections, screenshot, bytes }, problems };
+    return { seen: { viewport: name, verdict, svgs: svgs.length, rendered, overflow, sticking, sections, pattern, screenshot, bytes }, problems };
 
   } finally {
     await close();

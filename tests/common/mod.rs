@@ -243,6 +243,38 @@ pub fn sim_config(dir: &Path, replacements: &[(&str, &str)]) -> PathBuf {
     path
 }
 
+/// [`sim_config`] as a real robot's configuration: without the noise
+/// table nobody has measured on a real robot (`[calibration.noise]`).
+pub fn sim_config_unmeasured(dir: &Path, replacements: &[(&str, &str)]) -> PathBuf {
+    let path = sim_config(dir, replacements);
+    let text = std::fs::read_to_string(&path).expect("the configuration written");
+    let (before, rest) = text
+        .split_once("[calibration.noise]")
+        .expect("config/sim.toml has a noise table");
+    let after = &rest[rest
+        .find("[calibration.gates]")
+        .expect("and gates after it")..];
+    std::fs::write(&path, format!("{before}{after}")).expect("configuration written");
+    path
+}
+
+/// The line of config/sim.toml that names the simulated Kinect's depth model.
+pub const SIM_DEPTH_MODEL_LINE: &str =
+    "depth_model = { kind = \"inverse-linear\", a = 3.3309495161, b = -0.0030711016 }";
+
+/// config/sim.toml, unmeasured ([`sim_config_unmeasured`]), with the
+/// simulated Kinect's depth carrying `pattern` (a `depth_distortion = {…}`
+/// line, or "") and, with `zero_plane`, libfreenect's zero-plane model.
+pub fn sim_config_with_pattern(dir: &Path, pattern: &str, zero_plane: bool) -> PathBuf {
+    std::fs::create_dir_all(dir).expect("configuration directory");
+    let world = format!("world = \"flat\"\n{pattern}");
+    let mut replacements = vec![("world = \"flat\"", world.as_str())];
+    if zero_plane {
+        replacements.push((SIM_DEPTH_MODEL_LINE, ""));
+    }
+    sim_config_unmeasured(dir, &replacements)
+}
+
 /// `groundcal serve` as systemd would run it: the binary, on the simulation
 /// configuration copied into `dir` (token `token`, state in `dir/state`),
 /// listening on 127.0.0.1:0, with these further arguments and environment

@@ -1,0 +1,197 @@
+//! The depth pattern in the report: the Kinect's own warp of the depth image,
+//! drawn as a picture of the image (one pixel per cell, scaled up without
+//! smoothing) coloured by the depth error it causes at 2 m, with its scale.
+//! A PNG inlined as a data URI: the report loads nothing from anywhere.
+
+use std::fmt::Write as _;
+
+use super::html::{escape, num, signed};
+use crate::output::DepthPatternJson;
+
+/// The colours of the scale's ends: reads nearer than the truth, farther.
+const NEARER: [u8; 3] = [33, 102, 172];
+const FARTHER: [u8; 3] = [178, 24, 43];
+/// Cells no pose saw the ground in.
+const UNSEEN: [u8; 3] = [190, 190, 190];
+
+/// The depth the picture's colours are for, metres: where a legged robot's
+/// terrain map reaches.
+const AT_M: f64 = 2.0;
+
+/// A cell's depth error at [`AT_M`], millimetres (positive: reads farther).
+fn error_mm(raw: f64, pattern: &DepthPatternJson) -> f64 {
+    if pattern.raw_per_inverse_depth == 0.0 {
+        return 0.0;
+    }
+    // 1/z reads raw/k more (k = raw_per_inverse_depth), so z reads −z²·raw/k more.
+    -AT_M * AT_M * raw / pattern.raw_per_inverse_depth * 1e3
+}
+
+/// The scale's half-range: the largest error, rounded up to 1, 2 or 5 × 10ⁿ mm.
+fn half_range_mm(largest: f64) -> f64 {
+    let largest = largest.max(1.0);
+    let decade = 10f64.powf(largest.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * decade)
+        .find(|v| *v >= largest)
+        .unwrap_or(10.0 * decade)
+}
+
+/// The colour of an error on the scale of ± `range` mm: white at 0.
+fn colour(error: f64, range: f64) -> [u8; 3] {
+    let t = (error / range).clamp(-1.0, 1.0);
+    let end = if t < 0.0 { NEARER } else { FARTHER };
+    let a = t.abs();
+    [0, 1, 2].map(|i| (255.0 + (f64::from(end[i]) - 255.0) * a).round() as u8)
+}
+
+/// The picture as PNG bytes, one pixel per cell.
+fn png(pattern: &DepthPatternJson, range: f64) -> Option<Vec<u8>> {
+    let (width, height) = (pattern.columns as u32, pattern.rows as u32);
+    let mut pixels = Vec::with_capacity(pattern.raw.len() * 3);
+    for cell in &pattern.raw {
+        pixels.extend(match cell {
+            Some(raw) => colour(error_mm(*raw, pattern), range),
+            None => UNSEEN,
+        });
+    }
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, width, height);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().ok()?;
+        writer.write_image_data(&pixels).ok()?;
+    }
+    Some(bytes)
+}
+
+/// Standard base64 (RFC 4648) for the data URI.
+fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for (i, shift) in [18, 12, 6, 0].into_iter().enumerate() {
+            if i <= chunk.len() {
+                out.push(char::from(ALPHABET[((n >> shift) & 63) as usize]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+/// The section: the picture and its scale when a pattern was corrected,
+/// else what was found in words.
+pub(super) fn depth_pattern_section(page: &mut String, pattern: Option<&DepthPatternJson>) {
+    let Some(pattern) = pattern else {
+        return;
+    };
+    page.push_str("<section id=\"depth-pattern\"><h2>The depth image's own warp</h2>\n");
+    let rgb = |c: [u8; 3]| format!("rgb({},{},{})", c[0], c[1], c[2]);
+    let drawn = pattern.corrected && pattern.columns > 0 && pattern.rows > 0;
+    let image = drawn
+        .then(|| {
+            let range = half_range_mm(pattern.largest_mm_at_2m);
+            png(pattern, range).map(|bytes| (range, base64(&bytes)))
+        })
+        .flatten();
+    match image {
+        Some((range, data)) => {
+            let _ = write!(
+                page,
+                "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer). The calibration was corrected for it.</p>\n",
+                num(pattern.largest_mm_at_2m, 1)
+            );
+            let _ = write!(
+                page,
+                "<figure class=\"warp\"><img class=\"warp\" src=\"data:image/png;base64,{data}\" width=\"{}\" height=\"{}\" alt=\"the depth error over the image at 2 m, up to {} mm\">\n<div class=\"warp-scale\" style=\"background: linear-gradient(to right, {}, #fff, {})\"></div>\n<div class=\"warp-ticks\"><span>−{} mm nearer</span><span>0</span><span>+{} mm farther</span></div>\n<figcaption>The depth image as the sensor sees it, {} × {} cells of {} pixels; grey: no ground seen there.</figcaption></figure>\n",
+                pattern.columns,
+                pattern.rows,
+                num(pattern.largest_mm_at_2m, 1),
+                rgb(NEARER),
+                rgb(FARTHER),
+                num(range, 0),
+                num(range, 0),
+                pattern.columns,
+                pattern.rows,
+                pattern.cell_px,
+            );
+            page.push_str("<dl class=\"facts\">\n");
+            let _ = write!(
+                page,
+                "<dt>shape, RMS</dt><dd>{} raw units</dd>\n",
+                num(pattern.shape_rms_raw, 3)
+            );
+            if let (Some(part), Some(sigma), true) = (
+                pattern.plane_part_raw,
+                pattern.plane_part_sigma_raw,
+                pattern.plane_part_taken,
+            ) {
+                let _ = write!(
+                    page,
+                    "<dt>offset</dt><dd>{} ± {} raw units</dd>\n<dt>gradient along a row</dt><dd>{} ± {} per 100 px</dd>\n<dt>gradient down a column</dt><dd>{} ± {} per 100 px</dd>\n",
+                    signed(part[0], 3),
+                    num(sigma[0], 3),
+                    signed(part[1], 3),
+                    num(sigma[1], 3),
+                    signed(part[2], 3),
+                    num(sigma[2], 3),
+                );
+            }
+            let _ = write!(
+                page,
+                "<dt>left after it, pose by pose</dt><dd>{} × the noise</dd>\n</dl>\n",
+                num(pattern.consistency_chi2_per_dof, 2)
+            );
+        }
+        None => {
+            let _ = write!(page, "<p class=\"none\">{}</p>\n", escape(&pattern.note));
+        }
+    }
+    let _ = write!(
+        page,
+        "<p class=\"note\">{}</p>\n</section>\n",
+        if drawn {
+            escape(&pattern.note)
+        } else {
+            "A real Kinect's depth carries a fixed pattern of a few tenths of a raw unit (about 12 mm at 2 m per unit); groundcal looks for it in the ground's residuals at every calibration.".to_string()
+        }
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_of_rfc_4648_vectors() {
+        for (text, encoded) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(text.as_bytes()), encoded);
+        }
+    }
+
+    #[test]
+    fn the_scale_rounds_up_to_one_two_five() {
+        assert_eq!(half_range_mm(0.2), 1.0);
+        assert_eq!(half_range_mm(1.3), 2.0);
+        assert_eq!(half_range_mm(8.8), 10.0);
+        assert_eq!(half_range_mm(12.0), 20.0);
+    }
+}
