@@ -360,16 +360,21 @@ fn report_draws_the_depth_images_own_warp() {
         );
         // Each cell coloured as its value says: red farther, blue nearer,
         // grey unseen; the darkest where the error is largest.
-        let rgb = picture["rgb"].as_array().unwrap();
-        assert_eq!(rgb.len(), pattern.raw.len());
+        let hex = picture["rgb"].as_str().unwrap();
+        assert_eq!(hex.len(), 6 * pattern.raw.len());
+        let rgb: Vec<[i64; 3]> = hex
+            .as_bytes()
+            .chunks(6)
+            .map(|c| {
+                let part = |k: usize| {
+                    i64::from_str_radix(std::str::from_utf8(&c[k..k + 2]).unwrap(), 16).unwrap()
+                };
+                [part(0), part(2), part(4)]
+            })
+            .collect();
         let (mut farther, mut nearer, mut unseen) = (0, 0, 0);
         for (cell, colour) in pattern.raw.iter().zip(rgb) {
-            let c: Vec<i64> = colour
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_i64().unwrap())
-                .collect();
+            let c = colour;
             match cell {
                 None => {
                     assert_eq!(c, [190, 190, 190]);

@@ -702,7 +702,9 @@ fn after_a_crash_nothing_moves_until_a_person_confirms() {
 /// What the camera sees, on the page (issue 21): with boxes and a wall in
 /// view, the picture is drawn as the daemon serves it, the floor coloured
 /// and the boxes not, at phone and pad size; and the page in Simplified
-/// Chinese at phone size, through a whole calibration.
+/// Chinese at phone size, through a whole calibration. The Kinect's depth
+/// carries a radial pattern (issue 23): the result card draws the warp the
+/// calibration found, cell by cell (screenshot `serve-warp.png`).
 #[test]
 fn the_page_shows_what_the_camera_sees_and_speaks_chinese() {
     if !common::browser_ready("serve_browser") {
@@ -712,7 +714,10 @@ fn the_page_shows_what_the_camera_sees_and_speaks_chinese() {
     let (server, addr) = common::spawn_serve_with(
         &dir,
         TOKEN,
-        &[("world = \"flat\"", "world = \"clutter\"")],
+        &[(
+            "world = \"flat\"",
+            "world = \"clutter\"\ndepth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }",
+        )],
         &[],
         &[],
     );
@@ -736,6 +741,19 @@ fn the_page_shows_what_the_camera_sees_and_speaks_chinese() {
         seen["zhVerdict"].as_str().unwrap().contains("检查"),
         "{seen}"
     );
+    // The Kinect's own warp (a radial bowl of ±0.5 raw units), drawn as the
+    // calibration found it, in both languages.
+    for (key, words) in [("zhWarp", "毫米"), ("warp", "mm off at 2 m")] {
+        let warp = &seen[key];
+        assert_eq!(warp["corrected"], true, "{warp}");
+        assert_eq!(warp["wrong"], 0, "{warp}");
+        // Most cells warped by more than 0.5 mm at 2 m, coloured so.
+        assert!(
+            warp["farther"].as_u64().unwrap() + warp["nearer"].as_u64().unwrap() > 3000,
+            "{warp}"
+        );
+        assert!(warp["words"].as_str().unwrap().contains(words), "{warp}");
+    }
     let (code, stderr) = common::terminate(server);
     assert_eq!(code, 0, "{stderr}");
     let _ = fs::remove_dir_all(&dir);

@@ -265,6 +265,52 @@ impl Default for DepthRange {
     }
 }
 
+/// A found pattern as a correction of raw values at any pixel: the cells'
+/// values interpolated bilinearly between their centres, held at the
+/// border's; cells no pose saw count as 0 (nothing known, nothing changed).
+/// `raw' = raw − raw_at(u, v)` (docs/export.md, "depth-correction"); found by `crate::distortion`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthCorrection {
+    pub columns: usize,
+    pub rows: usize,
+    pub cell_px: usize,
+    /// Per cell, raw units, row-major.
+    pub raw: Vec<f64>,
+}
+
+impl DepthCorrection {
+    /// The correction of a grid of cells (`None`: not seen, taken as 0);
+    /// `None` if the grid's size disagrees with its values.
+    pub fn from_cells(
+        columns: usize,
+        rows: usize,
+        cell_px: usize,
+        cells: &[Option<f64>],
+    ) -> Option<Self> {
+        (columns > 0 && rows > 0 && cell_px > 0 && cells.len() == columns * rows).then(|| Self {
+            columns,
+            rows,
+            cell_px,
+            raw: cells.iter().map(|c| c.unwrap_or(0.0)).collect(),
+        })
+    }
+
+    /// The raw units a reading at pixel `(u, v)` reads too much.
+    pub fn raw_at(&self, u: f64, v: f64) -> f64 {
+        let size = self.cell_px as f64;
+        // Cell (c, r)'s centre is pixel ((c + ½)·size − ½, (r + ½)·size − ½).
+        let x = ((u + 0.5) / size - 0.5).clamp(0.0, (self.columns - 1) as f64);
+        let y = ((v + 0.5) / size - 0.5).clamp(0.0, (self.rows - 1) as f64);
+        let (c0, r0) = (x.floor() as usize, y.floor() as usize);
+        let (c1, r1) = ((c0 + 1).min(self.columns - 1), (r0 + 1).min(self.rows - 1));
+        let (fx, fy) = (x - c0 as f64, y - r0 as f64);
+        let at = |c: usize, r: usize| self.raw[r * self.columns + c];
+        let top = at(c0, r0) * (1.0 - fx) + at(c1, r0) * fx;
+        let bottom = at(c0, r1) * (1.0 - fx) + at(c1, r1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

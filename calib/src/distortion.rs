@@ -31,6 +31,7 @@ use crate::disparity::PixelPlane;
 use crate::outcome::{DepthPattern, Solution};
 use crate::solve::{self, Observation, SolveError, SolveSettings};
 
+pub use crate::depth::DepthCorrection;
 pub use crate::residuals::{GroundResiduals, CELL_PX};
 
 /// A cell enters the estimate with at least this many readings over all
@@ -168,6 +169,20 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         kept = next;
         fitted = alternate(poses, &kept);
     }
+    // A cell far from the cells above and below it is not the sensor's
+    // either: a pattern is smooth down the image (a real unit's stripes run
+    // down it), where the foot of a wall or a box lies along a row and sits
+    // at the same place in the image at every pose.
+    for _ in 0..3 {
+        let lone = lone_cells(&fitted.shape, &kept, first.raw_per_inverse_depth, variance);
+        if lone.is_empty() {
+            break;
+        }
+        for k in lone {
+            kept.seen[k] = false;
+        }
+        fitted = alternate(poses, &kept);
+    }
     let Fitted {
         shape, iterations, ..
     } = &fitted;
@@ -227,6 +242,43 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
     })
 }
 
+/// A cell is left out when it lies this far (raw units) from the median of
+/// the two cells above and the two below it, and 6 of its σ: a simulated
+/// bowl of ±0.5 raw units changes by 0.03 from a cell to the next down the
+/// image, the foot of a box by several tenths.
+const LONE_CELL_RAW: f64 = 0.15;
+
+/// The cells seen that lie far from those above and below them.
+fn lone_cells(shape: &[f64], kept: &Kept, raw_per_inverse_depth: f64, variance: f64) -> Vec<usize> {
+    let cells = shape.len();
+    let columns = kept.columns;
+    let k_raw = raw_per_inverse_depth.abs();
+    let mut lone = Vec::new();
+    for k in 0..cells {
+        if !kept.seen[k] {
+            continue;
+        }
+        let mut around: Vec<f64> = [-2i64, -1, 1, 2]
+            .iter()
+            .filter_map(|dr| {
+                let j = k as i64 + dr * columns as i64;
+                (j >= 0 && (j as usize) < cells && kept.seen[j as usize]).then(|| shape[j as usize])
+            })
+            .collect();
+        if around.len() < 2 {
+            continue;
+        }
+        around.sort_by(f64::total_cmp);
+        let median = (around[(around.len() - 1) / 2] + around[around.len() / 2]) / 2.0;
+        let off = (shape[k] - median).abs() * k_raw;
+        let sigma = (variance / kept.readings[k].max(1.0)).sqrt() * k_raw;
+        if off > LONE_CELL_RAW.max(6.0 * sigma) {
+            lone.push(k);
+        }
+    }
+    lone
+}
+
 /// A cell's sum at one pose is left out when its mean lies this many of its
 /// σ from the pattern and the plane.
 const ENTRY_SIGMAS: f64 = 4.5;
@@ -234,6 +286,8 @@ const ENTRY_SIGMAS: f64 = 4.5;
 /// Which cells' sums, pose by pose, enter the estimate.
 #[derive(Debug, Clone, PartialEq)]
 struct Kept {
+    /// Cells per row of the image.
+    columns: usize,
     /// `out[i·cells + k]`: pose i's sum of cell k is left out.
     out: Vec<bool>,
     /// Per cell: readings of the sums kept.
@@ -313,6 +367,7 @@ impl Kept {
             })
             .collect();
         Self {
+            columns: poses[0].columns,
             out,
             readings,
             seen,
@@ -368,9 +423,9 @@ fn alternate(poses: &[&GroundResiduals], kept: &Kept) -> Fitted {
                 }
             }
         }
-        for k in 0..cells {
-            if kept.seen[k] {
-                next[k] /= kept.readings[k];
+        for ((value, seen), readings) in next.iter_mut().zip(&kept.seen).zip(&kept.readings) {
+            if *seen {
+                *value /= readings;
             }
         }
         // No plane part: that is the planes' (and the geometry's) to say.
@@ -474,52 +529,6 @@ fn remove_plane_part(shape: &mut [f64], readings: &[f64], seen: &[bool], grid: &
         if seen[k] {
             shape[k] -= plane.dot(&centre(k));
         }
-    }
-}
-
-/// A found pattern as a correction of raw values at any pixel: the cells'
-/// values interpolated bilinearly between their centres, held at the
-/// border's; cells no pose saw count as 0 (nothing known, nothing changed).
-/// `raw' = raw − raw_at(u, v)` (docs/export.md, "depth-correction").
-#[derive(Debug, Clone, PartialEq)]
-pub struct DepthCorrection {
-    pub columns: usize,
-    pub rows: usize,
-    pub cell_px: usize,
-    /// Per cell, raw units, row-major.
-    pub raw: Vec<f64>,
-}
-
-impl DepthCorrection {
-    /// The correction of a grid of cells (`None`: not seen, taken as 0);
-    /// `None` if the grid's size disagrees with its values.
-    pub fn from_cells(
-        columns: usize,
-        rows: usize,
-        cell_px: usize,
-        cells: &[Option<f64>],
-    ) -> Option<Self> {
-        (columns > 0 && rows > 0 && cell_px > 0 && cells.len() == columns * rows).then(|| Self {
-            columns,
-            rows,
-            cell_px,
-            raw: cells.iter().map(|c| c.unwrap_or(0.0)).collect(),
-        })
-    }
-
-    /// The raw units a reading at pixel `(u, v)` reads too much.
-    pub fn raw_at(&self, u: f64, v: f64) -> f64 {
-        let size = self.cell_px as f64;
-        // Cell (c, r)'s centre is pixel ((c + ½)·size − ½, (r + ½)·size − ½).
-        let x = ((u + 0.5) / size - 0.5).clamp(0.0, (self.columns - 1) as f64);
-        let y = ((v + 0.5) / size - 0.5).clamp(0.0, (self.rows - 1) as f64);
-        let (c0, r0) = (x.floor() as usize, y.floor() as usize);
-        let (c1, r1) = ((c0 + 1).min(self.columns - 1), (r0 + 1).min(self.rows - 1));
-        let (fx, fy) = (x - c0 as f64, y - r0 as f64);
-        let at = |c: usize, r: usize| self.raw[r * self.columns + c];
-        let top = at(c0, r0) * (1.0 - fx) + at(c1, r0) * fx;
-        let bottom = at(c0, r1) * (1.0 - fx) + at(c1, r1) * fx;
-        top * (1.0 - fy) + bottom * fy
     }
 }
 
@@ -791,7 +800,7 @@ fn pattern_of(
     let corrected = shape_taken || part_taken.is_some();
     let words_rms = shape.rms_raw();
     let seen_cells = shape.seen.iter().filter(|s| **s).count();
-    let left_out = (shape.kept_fraction < 1.0).then(|| {
+    let left_out = (shape.kept_fraction < 0.995).then(|| {
         format!(
             "; {:.0} % of the cells seen changed from pose to pose (obstacles' feet, bumps) and were left out",
             100.0 * (1.0 - shape.kept_fraction)

@@ -267,10 +267,7 @@ impl PoseObserver {
 
     /// This observer with the Kinect's depth pattern a calibration found
     /// taken out of every frame (a check against that calibration).
-    pub fn with_depth_correction(
-        mut self,
-        correction: &crate::distortion::DepthCorrection,
-    ) -> Self {
+    pub fn with_depth_correction(mut self, correction: &crate::depth::DepthCorrection) -> Self {
         self.camera = self.camera.with_depth_correction(correction);
         self
     }

@@ -189,7 +189,7 @@ impl DepthCamera {
     /// This camera with the Kinect's depth pattern a calibration found
     /// taken out of every reading: `raw' = raw − correction(u, v)`, that is
     /// `1/z' = 1/z − correction(u, v)/k` (k = [`Self::raw_per_inverse_depth`]).
-    pub fn with_depth_correction(&self, correction: &crate::distortion::DepthCorrection) -> Self {
+    pub fn with_depth_correction(&self, correction: &crate::depth::DepthCorrection) -> Self {
         let (width, height) = (self.intrinsics.width, self.intrinsics.height);
         let offsets: std::sync::Arc<[f32]> = (0..height)
             .flat_map(|v| (0..width).map(move |u| (u, v)))

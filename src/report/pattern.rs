@@ -106,9 +106,9 @@ pub(super) fn depth_pattern_section(page: &mut String, pattern: Option<&DepthPat
         .flatten();
     match image {
         Some((range, data)) => {
-            let _ = write!(
+            let _ = writeln!(
                 page,
-                "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer). The calibration was corrected for it.</p>\n",
+                "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer). The calibration was corrected for it.</p>",
                 num(pattern.largest_mm_at_2m, 1)
             );
             let _ = write!(
@@ -126,9 +126,9 @@ pub(super) fn depth_pattern_section(page: &mut String, pattern: Option<&DepthPat
                 pattern.cell_px,
             );
             page.push_str("<dl class=\"facts\">\n");
-            let _ = write!(
+            let _ = writeln!(
                 page,
-                "<dt>shape, RMS</dt><dd>{} raw units</dd>\n",
+                "<dt>shape, RMS</dt><dd>{} raw units</dd>",
                 num(pattern.shape_rms_raw, 3)
             );
             if let (Some(part), Some(sigma), true) = (
@@ -154,7 +154,7 @@ pub(super) fn depth_pattern_section(page: &mut String, pattern: Option<&DepthPat
             );
         }
         None => {
-            let _ = write!(page, "<p class=\"none\">{}</p>\n", escape(&pattern.note));
+            let _ = writeln!(page, "<p class=\"none\">{}</p>", escape(&pattern.note));
         }
     }
     let _ = write!(

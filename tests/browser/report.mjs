@@ -232,8 +232,10 @@ async function visit({ name, ...options }) {
         const context = canvas.getContext('2d');
         context.drawImage(img, 0, 0);
         const data = context.getImageData(0, 0, canvas.width, canvas.height).data;
-        const rgb = [];
-        for (let i = 0; i < data.length; i += 4) rgb.push([data[i], data[i + 1], data[i + 2]]);
+        // Six hex digits per cell (a long array would not fit the pipe).
+        let rgb = '';
+        const hex = (v) => v.toString(16).padStart(2, '0');
+        for (let i = 0; i < data.length; i += 4) rgb += hex(data[i]) + hex(data[i + 1]) + hex(data[i + 2]);
         const box = img.getBoundingClientRect();
         picture = { naturalWidth: img.naturalWidth, naturalHeight: img.naturalHeight, width: box.width, height: box.height, rgb };
       }
@@ -269,6 +271,7 @@ try {
 } catch (error) {
   problems.push(`the browser failed: ${error.stack ?? error}`);
 }
-console.log(JSON.stringify({ url, seen, problems }));
 for (const problem of problems) console.error(`report.mjs: ${problem}`);
-process.exit(problems.length === 0 ? 0 : 1);
+// Exit once the whole document is out: a pipe takes 64 KiB at a time, and
+// process.exit does not wait for the rest.
+process.stdout.write(JSON.stringify({ url, seen, problems }) + '\n', () => process.exit(problems.length === 0 ? 0 : 1));

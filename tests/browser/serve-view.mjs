@@ -131,9 +131,43 @@ try {
   seen.zhVerdict = await zh.locator('#verdict').innerText();
   seen.zhGates = await zh.locator('#gates-title').innerText();
   seen.zhEnglishResult = await englishWords();
+  // The Kinect's own warp, drawn from the stored calibration's cells: each
+  // cell as its value says (red farther, blue nearer, grey unseen).
+  await zh.waitForFunction(() => !document.getElementById('warp').hidden, null, { timeout: 15_000 });
+  const warp = () => zh.evaluate(async () => {
+    const canvas = document.getElementById('warp');
+    const id = document.getElementById('resultid').dataset.id;
+    const stored = await (await fetch('/api/calibrations/' + encodeURIComponent(id))).json();
+    const p = stored.depth_pattern;
+    const data = canvas.getContext('2d').getImageData(0, 0, canvas.width, canvas.height).data;
+    let wrong = 0, farther = 0, nearer = 0, unseen = 0;
+    p.raw.forEach((raw, i) => {
+      const [r, g, b] = [data[4 * i], data[4 * i + 1], data[4 * i + 2]];
+      if (raw === null) {
+        unseen++;
+        if (!(r === 190 && g === 190 && b === 190)) wrong++;
+        return;
+      }
+      const error = -4 * raw / p.raw_per_inverse_depth * 1000;
+      if (error > 0.5) { farther++; if (!(r > b)) wrong++; }
+      if (error < -0.5) { nearer++; if (!(b > r)) wrong++; }
+    });
+    const box = canvas.getBoundingClientRect();
+    return {
+      corrected: p.corrected, columns: canvas.width, rows: canvas.height, cells: p.raw.length,
+      width: box.width, wrong, farther, nearer, unseen,
+      words: document.getElementById('warp-words').textContent,
+      ticks: [...document.querySelectorAll('#warp-ticks span')].map((s) => s.textContent),
+    };
+  });
+  seen.zhWarp = await warp();
   await zh.screenshot({ path: resolve(shotDir, 'serve-zh-4-result.png'), fullPage: true });
   await zh.selectOption('#language', 'en');
   seen.switchedBack = await zh.locator('#verdict').innerText();
+  await zh.waitForFunction(() => /Kinect/.test(document.getElementById('warp-words').textContent), null, { timeout: 5_000 });
+  seen.warp = await warp();
+  await zh.locator('#warp-box').scrollIntoViewIfNeeded();
+  await zh.screenshot({ path: resolve(shotDir, 'serve-warp.png') });
   seen.switchedLang = await zh.evaluate(() => document.documentElement.lang);
 } catch (error) {
   problems.push(`the browser failed: ${error.stack ?? error}`);
@@ -157,6 +191,13 @@ for (const key of ['zhEnglishIdle', 'zhEnglishRunning', 'zhEnglishResult']) {
   if (seen[key] && seen[key].length) problems.push(`${key}: English on the Chinese page: ${seen[key].join(' ')}`);
 }
 if (seen.switchedBack && !/checks/.test(seen.switchedBack)) problems.push(`the switch to English left "${seen.switchedBack}"`);
+for (const key of ['zhWarp', 'warp']) {
+  const w = seen[key];
+  if (!w) continue;
+  if (w.wrong !== 0) problems.push(`${key}: ${w.wrong} cells of the warp drawn otherwise than the calibration says`);
+  if (w.columns * w.rows !== w.cells) problems.push(`${key}: a canvas of ${w.columns} × ${w.rows} for ${w.cells} cells`);
+  if (!(w.width >= 300)) problems.push(`${key}: the warp is ${w.width} px wide on a phone`);
+}
 console.log(JSON.stringify({ url, seen, problems }));
 for (const problem of problems) console.error(`serve-view.mjs: ${problem}`);
 process.exit(problems.length === 0 ? 0 : 1);
