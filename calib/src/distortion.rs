@@ -193,26 +193,14 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         .map(|k| kept.readings[k] * shape[k].powi(2) / variance)
         .sum();
     let (consistency_chi2, entries) = consistency(poses, &kept, &fitted, variance);
-    // What the shape bent each plane by, as the cells' least squares sees
-    // it: the fit's own plane (its rows, its guard, its band) is kept and
-    // only the pattern's share is taken out, so that with no pattern nothing
-    // changes. Every sum the fit took counts, kept or not.
-    let inverse_moments: Vec<Matrix3<f64>> = poses
-        .iter()
-        .map(|p| p.moments.try_inverse().unwrap_or_else(Matrix3::zeros))
-        .collect();
+    // What the shape bent each plane by: the fit's own plane (its rows, its
+    // guard, its band) is kept and only the pattern's share is taken out, so
+    // that with no pattern nothing changes. Every sum the fit took counts,
+    // kept or not.
+    let sigma = variance.sqrt();
     let corrections = poses
         .iter()
-        .zip(&inverse_moments)
-        .map(|(pose, inverse)| {
-            let mut bent = Vector3::zeros();
-            for (k, cell) in pose.cells.iter().enumerate() {
-                if seen[k] && cell.n > 0.0 {
-                    bent += Vector3::new(cell.n, cell.u, cell.v) * shape[k];
-                }
-            }
-            -(inverse * bent)
-        })
+        .map(|pose| -bend(pose, shape, &seen, sigma))
         .collect();
     let kept_readings: f64 = (0..cells)
         .filter(|&k| seen[k])
@@ -485,6 +473,91 @@ fn consistency(
         }
     }
     (chi2, entries)
+}
+
+/// The plane (1/m on `c0, cu, cv`) by which the pattern `shape` bent the
+/// fit of one pose. The fit took only the readings within its band of its
+/// own plane, so where the pattern lifts the readings it cut more of their
+/// upper tail, and it saw the pattern smaller than it is (a third smaller
+/// where the pattern is a σ): its plane `β` solves the expected truncated
+/// normal equations `Σ_k n_k·φ_k·g(D_k − φ_k·β) = 0`, with `g(m)` the mean
+/// of a reading `m + ε` (ε ~ N(0, σ²)) within the band, times the share
+/// kept. Newton's method from the untruncated bend `M⁻¹·Σ D_k·(n, Σu', Σv')_k`.
+fn bend(pose: &GroundResiduals, shape: &[f64], seen: &[bool], sigma: f64) -> Vector3<f64> {
+    let inverse = pose.moments.try_inverse().unwrap_or_else(Matrix3::zeros);
+    let mut untruncated = Vector3::zeros();
+    for (k, cell) in pose.cells.iter().enumerate() {
+        if seen[k] && cell.n > 0.0 {
+            untruncated += Vector3::new(cell.n, cell.u, cell.v) * shape[k];
+        }
+    }
+    let mut plane = inverse * untruncated;
+    let Some(band) = pose
+        .fit_band
+        .filter(|b| *b > 0.0 && sigma.is_finite() && sigma > 0.0)
+    else {
+        return plane;
+    };
+    let beta = band / sigma;
+    for _ in 0..8 {
+        let (mut value, mut slope) = (Vector3::zeros(), Matrix3::zeros());
+        for (k, cell) in pose.cells.iter().enumerate() {
+            if cell.n <= 0.0 {
+                continue;
+            }
+            let phi = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
+            let pattern = if seen[k] { shape[k] } else { 0.0 };
+            let m = (pattern - phi.dot(&plane)) / sigma;
+            let (g, dg) = truncated_mean(m, beta);
+            value += phi * (cell.n * g * sigma);
+            slope -= phi * phi.transpose() * (cell.n * dg);
+        }
+        let Some(step) = slope.try_inverse().map(|h| h * value) else {
+            break;
+        };
+        plane -= step;
+        if step.amax() < 1e-12 {
+            break;
+        }
+    }
+    plane
+}
+
+/// For ε ~ N(0, 1): `g(m) = E[(m + ε)·1{|m + ε| < β}]` and its derivative.
+fn truncated_mean(m: f64, beta: f64) -> (f64, f64) {
+    let (hi, lo) = (beta - m, -beta - m);
+    let kept = normal_cdf(hi) - normal_cdf(lo);
+    let g = m * kept - (normal_pdf(hi) - normal_pdf(lo));
+    // d/dm: the share kept, less what the band's edges take with them.
+    let dg = kept - beta * (normal_pdf(hi) + normal_pdf(lo));
+    (g, dg)
+}
+
+fn normal_pdf(x: f64) -> f64 {
+    (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt()
+}
+
+/// Φ(x) by the complementary error function (Numerical Recipes' erfc,
+/// relative error below 1.2·10⁻⁷).
+fn normal_cdf(x: f64) -> f64 {
+    let z = x.abs() / std::f64::consts::SQRT_2;
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let erfc = t
+        * (-z * z - 1.265_512_23
+            + t * (1.000_023_68
+                + t * (0.374_091_96
+                    + t * (0.096_784_18
+                        + t * (-0.186_288_06
+                            + t * (0.278_868_07
+                                + t * (-1.135_203_98
+                                    + t * (1.488_515_87
+                                        + t * (-0.822_152_23 + t * 0.170_872_77)))))))))
+            .exp();
+    if x >= 0.0 {
+        1.0 - 0.5 * erfc
+    } else {
+        0.5 * erfc
+    }
 }
 
 /// RMS of the values of the cells seen, weighted by their readings.
@@ -903,9 +976,38 @@ mod tests {
                     rhs,
                     intrinsics,
                     raw_per_inverse_depth: -1.0 / 0.003,
+                    fit_band: None,
                 }
             })
             .collect()
+    }
+
+    #[test]
+    fn the_truncated_mean_and_its_slope() {
+        // Φ against tabulated values.
+        for (x, phi) in [
+            (0.0, 0.5),
+            (1.0, 0.841_344_746),
+            (-1.96, 0.024_997_895),
+            (3.0, 0.998_650_102),
+        ] {
+            assert!(
+                (normal_cdf(x) - phi).abs() < 2e-7,
+                "Φ({x}) = {}",
+                normal_cdf(x)
+            );
+        }
+        // No pattern, no bend; the mean within ±2σ of a reading lifted by
+        // a σ is 0.60 of it (times the share kept).
+        assert_eq!(truncated_mean(0.0, 2.0).0, 0.0);
+        let (g, _) = truncated_mean(1.0, 2.0);
+        assert!((g - 0.602_456).abs() < 1e-5, "{g}");
+        // The slope by differences.
+        for m in [-1.5, -0.3, 0.0, 0.7, 2.0] {
+            let h = 1e-5;
+            let numeric = (truncated_mean(m + h, 2.2).0 - truncated_mean(m - h, 2.2).0) / (2.0 * h);
+            assert!((numeric - truncated_mean(m, 2.2).1).abs() < 1e-6, "{m}");
+        }
     }
 
     #[test]

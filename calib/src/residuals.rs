@@ -45,6 +45,9 @@ pub struct GroundResiduals {
     pub(crate) intrinsics: Intrinsics,
     /// Raw units per 1/m of inverse depth (the depth model's `1/b`).
     pub(crate) raw_per_inverse_depth: f64,
+    /// The fit's own rejection band (1/m): the readings it took for the
+    /// ground lay within it of its plane. `None` for the paper's fit.
+    pub(crate) fit_band: Option<f64>,
 }
 
 impl GroundResiduals {
@@ -118,6 +121,10 @@ impl GroundResiduals {
             rhs,
             intrinsics,
             raw_per_inverse_depth: camera.raw_per_inverse_depth(),
+            fit_band: match fit.band {
+                InlierBand::InverseDepth(band) => Some(band),
+                InlierBand::Sigmas(_) => None,
+            },
         }
     }
 
