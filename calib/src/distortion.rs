@@ -760,14 +760,7 @@ impl PlanePartSolve<'_> {
             let predicted =
                 solve::predict(&solution.robot_from_sensor, &observed.ground_from_robot);
             // A fixed tangent basis: that of the uncorrected normal.
-            let n = self.observations[k].plane.normal;
-            let helper = if n.x.abs() < 0.9 {
-                Vector3::x()
-            } else {
-                Vector3::y()
-            };
-            let e1 = n.cross(&helper).normalize();
-            let e2 = n.cross(&e1);
+            let (e1, e2) = solve::tangent_basis(&self.observations[k].plane.normal);
             let dn = predicted.normal - observed.plane.normal;
             values.push(e1.dot(&dn) / sigma_normal);
             values.push(e2.dot(&dn) / sigma_normal);

@@ -176,16 +176,22 @@ struct Weights {
     offset_whitener: f64,
 }
 
+/// An orthonormal basis of the plane normal to `n` (a unit vector): the
+/// directions in which a measured normal can be wrong.
+pub(crate) fn tangent_basis(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = n.cross(&helper).normalize();
+    let e2 = n.cross(&e1);
+    (e1, e2)
+}
+
 impl Weights {
     fn of(obs: &Observation, settings: &SolveSettings) -> Self {
-        let n = obs.plane.normal;
-        let helper = if n.x.abs() < 0.9 {
-            Vector3::x()
-        } else {
-            Vector3::y()
-        };
-        let e1 = n.cross(&helper).normalize();
-        let e2 = n.cross(&e1);
+        let (e1, e2) = tangent_basis(&obs.plane.normal);
         let tangent = nalgebra::Matrix3x2::from_columns(&[e1, e2]);
         let floor_n = settings.normal_sigma_floor.powi(2);
         let floor_d = settings.offset_sigma_floor.powi(2);
