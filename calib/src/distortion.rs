@@ -48,9 +48,10 @@ const SHAPE_SIGNIFICANCE: f64 = 8.0;
 
 /// The residuals after a fixed pattern may be at most this many times the
 /// readings' noise (χ² per degree of freedom) for the pattern to be taken
-/// as the sensor's: fixed patterns of every simulated kind leave 1.05–1.08,
-/// clutter 7, uneven ground 90, a pattern that weakens with depth 2.
-const MAX_CONSISTENCY: f64 = 1.5;
+/// as the sensor's: fixed patterns of every simulated kind leave 1.01–1.04
+/// on open ground and 1.03–1.20 among boxes, walls and clutter; a pattern
+/// that weakens with depth 1.48–1.51 (docs/method.md).
+const MAX_CONSISTENCY: f64 = 1.25;
 
 /// At least this share of the cells seen must keep residuals fixed in the
 /// image for the pattern to be the sensor's.
@@ -76,9 +77,6 @@ pub struct ShapeEstimate {
     pub readings: Vec<f64>,
     /// Whether each cell entered the estimate.
     pub seen: Vec<bool>,
-    /// Per pose, in the order given: the correction of its plane (1/m, on
-    /// `c0, cu, cv`) for what the pattern's shape had bent it by.
-    pub plane_corrections: Vec<Vector3<f64>>,
     /// σ of one reading about its cell's mean, 1/m.
     pub reading_sigma: f64,
     /// The shape against none: Σ readings·shape²/σ², and its degrees of freedom.
@@ -106,6 +104,18 @@ impl ShapeEstimate {
     /// The shape's RMS over the cells seen, weighted by their readings, raw units.
     pub fn rms_raw(&self) -> f64 {
         weighted_rms(&self.shape, &self.readings, &self.seen) * self.raw_per_inverse_depth.abs()
+    }
+
+    /// Per pose of `poses` (those it was estimated from, in order): the
+    /// correction of its plane (1/m, on `c0, cu, cv`) for what the shape bent
+    /// it by. The fit's own plane (its rows, its guard, its band) is kept and
+    /// only the pattern's share is taken out, so that with no pattern nothing
+    /// changes. Every sum the fit took counts, kept or not.
+    pub fn plane_corrections(&self, poses: &[&GroundResiduals]) -> Vec<Vector3<f64>> {
+        poses
+            .iter()
+            .map(|pose| -bend(pose, &self.shape, &self.seen, self.reading_sigma))
+            .collect()
     }
 
     /// Whether the residuals are a pattern fixed in the image: what is left
@@ -158,7 +168,7 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
     // plane is not the sensor's (an obstacle's foot in that cell at that
     // pose, a bump of the ground): it leaves the estimate, which is made
     // again without it, until the sums kept stay the same.
-    let mut fitted = alternate(poses, &kept);
+    let mut fitted = alternate(poses, &kept, None);
     let all_cells_rms_raw =
         weighted_rms(&fitted.shape, &kept.readings, &kept.seen) * first.raw_per_inverse_depth.abs();
     for _ in 0..5 {
@@ -167,7 +177,7 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
             break;
         }
         kept = next;
-        fitted = alternate(poses, &kept);
+        fitted = alternate(poses, &kept, Some(&fitted.shape));
     }
     // A cell far from the cells above and below it is not the sensor's
     // either: a pattern is smooth down the image (a real unit's stripes run
@@ -178,10 +188,8 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         if lone.is_empty() {
             break;
         }
-        for k in lone {
-            kept.seen[k] = false;
-        }
-        fitted = alternate(poses, &kept);
+        kept.leave_out(&lone);
+        fitted = alternate(poses, &kept, Some(&fitted.shape));
     }
     let Fitted {
         shape, iterations, ..
@@ -193,15 +201,6 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         .map(|k| kept.readings[k] * shape[k].powi(2) / variance)
         .sum();
     let (consistency_chi2, entries) = consistency(poses, &kept, &fitted, variance);
-    // What the shape bent each plane by: the fit's own plane (its rows, its
-    // guard, its band) is kept and only the pattern's share is taken out, so
-    // that with no pattern nothing changes. Every sum the fit took counts,
-    // kept or not.
-    let sigma = variance.sqrt();
-    let corrections = poses
-        .iter()
-        .map(|pose| -bend(pose, shape, &seen, sigma))
-        .collect();
     let kept_readings: f64 = (0..cells)
         .filter(|&k| seen[k])
         .map(|k| kept.readings[k])
@@ -212,7 +211,6 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         shape: shape.clone(),
         readings: kept.readings.clone(),
         seen,
-        plane_corrections: corrections,
         reading_sigma: variance.sqrt(),
         shape_chi2,
         shape_dof: observed - 3.0,
@@ -287,6 +285,8 @@ struct Kept {
     /// those of the sums left out.
     inverse_moments: Vec<Matrix3<f64>>,
     rhs: Vec<Vector3<f64>>,
+    /// Per pose: the cells whose sums are taken (the loops' work list).
+    taken: Vec<Vec<u32>>,
 }
 
 impl Kept {
@@ -349,9 +349,19 @@ impl Kept {
             inverse_moments.push(moments.try_inverse().unwrap_or_else(Matrix3::zeros));
             rhs.push(sums);
         }
-        let seen = (0..cells)
+        let seen: Vec<bool> = (0..cells)
             .map(|k| {
                 among.is_none_or(|a| a[k]) && readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2
+            })
+            .collect();
+        let taken = poses
+            .iter()
+            .enumerate()
+            .map(|(i, pose)| {
+                (0..cells)
+                    .filter(|&k| pose.cells[k].n > 0.0 && seen[k] && !out[i * cells + k])
+                    .map(|k| k as u32)
+                    .collect()
             })
             .collect();
         Self {
@@ -361,6 +371,18 @@ impl Kept {
             seen,
             inverse_moments,
             rhs,
+            taken,
+        }
+    }
+
+    /// Leaves these cells out of the estimate altogether.
+    fn leave_out(&mut self, cells: &[usize]) {
+        for &k in cells {
+            self.seen[k] = false;
+        }
+        let seen = &self.seen;
+        for taken in &mut self.taken {
+            taken.retain(|&k| seen[k as usize]);
         }
     }
 
@@ -382,11 +404,20 @@ struct Fitted {
 
 /// Alternating least squares of the pattern and the planes over the sums
 /// kept, until the pattern moves by less than 10⁻⁴ raw units.
-fn alternate(poses: &[&GroundResiduals], kept: &Kept) -> Fitted {
+fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&[f64]>) -> Fitted {
     let cells = kept.seen.len();
     let grid = poses[0];
     let tolerance = 1e-4 / grid.raw_per_inverse_depth.abs();
-    let mut shape = vec![0.0; cells];
+    // From the last estimate, when there is one: leaving a few cells out
+    // moves it little.
+    let mut shape = match start {
+        Some(start) if start.len() == cells => start
+            .iter()
+            .zip(&kept.seen)
+            .map(|(v, seen)| if *seen { *v } else { 0.0 })
+            .collect(),
+        _ => vec![0.0; cells],
+    };
     let mut planes = vec![Vector3::zeros(); poses.len()];
     let mut iterations = 0;
     for _ in 0..2000 {
@@ -394,10 +425,9 @@ fn alternate(poses: &[&GroundResiduals], kept: &Kept) -> Fitted {
         // Each pose's plane given the pattern.
         for (i, pose) in poses.iter().enumerate() {
             let mut rhs = kept.rhs[i];
-            for (k, cell) in pose.cells.iter().enumerate() {
-                if cell.n > 0.0 && kept.takes(i, k) {
-                    rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k];
-                }
+            for &k in &kept.taken[i] {
+                let cell = &pose.cells[k as usize];
+                rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k as usize];
             }
             planes[i] = kept.inverse_moments[i] * rhs;
         }
@@ -405,10 +435,9 @@ fn alternate(poses: &[&GroundResiduals], kept: &Kept) -> Fitted {
         let mut next = vec![0.0; cells];
         for (i, pose) in poses.iter().enumerate() {
             let c = planes[i];
-            for (k, cell) in pose.cells.iter().enumerate() {
-                if cell.n > 0.0 && kept.takes(i, k) {
-                    next[k] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
-                }
+            for &k in &kept.taken[i] {
+                let cell = &pose.cells[k as usize];
+                next[k as usize] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
             }
         }
         for ((value, seen), readings) in next.iter_mut().zip(&kept.seen).zip(&kept.readings) {
@@ -499,7 +528,7 @@ fn bend(pose: &GroundResiduals, shape: &[f64], seen: &[bool], sigma: f64) -> Vec
         return plane;
     };
     let beta = band / sigma;
-    for _ in 0..8 {
+    for _ in 0..6 {
         let (mut value, mut slope) = (Vector3::zeros(), Matrix3::zeros());
         for (k, cell) in pose.cells.iter().enumerate() {
             if cell.n <= 0.0 {
@@ -516,7 +545,8 @@ fn bend(pose: &GroundResiduals, shape: &[f64], seen: &[bool], sigma: f64) -> Vec
             break;
         };
         plane -= step;
-        if step.amax() < 1e-12 {
+        // 10⁻⁹ /m is a millionth of a raw unit.
+        if step.amax() < 1e-9 {
             break;
         }
     }
@@ -664,7 +694,8 @@ pub fn solve_with_pattern(
     let shape_taken = shape.significant() && shape.consistent();
     let mut corrected = observations.to_vec();
     if shape_taken {
-        for ((k, _), correction) in with_residuals.iter().zip(&shape.plane_corrections) {
+        let corrections = shape.plane_corrections(&residuals);
+        for ((k, _), correction) in with_residuals.iter().zip(&corrections) {
             corrected[*k] = moved(&observations[*k], correction, &intrinsics);
         }
     }
@@ -748,10 +779,22 @@ impl PlanePartSolve<'_> {
         corrected
     }
 
-    /// The whitened residuals of the pattern's poses at `part`, with the solve there.
+    /// The whitened residuals of the pattern's poses at `part`, with the
+    /// solve there. The poses the first solve set aside stay aside, and no
+    /// more are looked for: the derivatives must not jump with that choice,
+    /// and the search is most of a solve's time.
     fn residuals(&self, part: &PlanePart) -> Option<(DVector<f64>, Solution)> {
-        let corrected = self.corrected(part);
-        let solution = solve::solve(&corrected, self.settings).ok()?;
+        let mut corrected = self.corrected(part);
+        for (k, observation) in corrected.iter_mut().enumerate() {
+            if !self.indices.contains(&k) && observation.set_aside.is_none() {
+                observation.set_aside = Some("set aside by the first solve".into());
+            }
+        }
+        let settings = SolveSettings {
+            max_outlier_fraction: 0.0,
+            ..*self.settings
+        };
+        let solution = solve::solve(&corrected, &settings).ok()?;
         let (sigma_normal, sigma_offset) = (self.noise.0.max(1e-9), self.noise.1.max(1e-9));
         let mut values = Vec::with_capacity(3 * self.indices.len());
         let scale = solution.depth_scale.value;
@@ -806,7 +849,8 @@ impl PlanePartSolve<'_> {
             }
         }
         let (covariance, sensitivity, _) = last?;
-        let (_, solution) = self.residuals(&part)?;
+        // The solve at the plane part found, with the outliers looked for.
+        let solution = solve::solve(&self.corrected(&part), self.settings).ok()?;
         let chi2 = covariance
             .try_inverse()
             .map_or(0.0, |h| (part.transpose() * h * part)[(0, 0)]);

@@ -4,11 +4,17 @@
 //! kept).
 
 use nalgebra::{Matrix3, Vector3};
+use wide::f32x8;
 
 use crate::depth::Intrinsics;
-use crate::disparity::{InverseDepthImage, PixelPlane};
+use crate::disparity::{FitValue, InverseDepthImage, PixelPlane};
 use crate::plane::{GroundFit, InlierBand};
 use crate::sensor::DepthCamera;
+
+/// Every this many rows are summed: a cell then has 32 readings a frame,
+/// its mean a σ of under 0.01 raw units over a calibration's poses, and the
+/// pass costs about as much as the fit.
+const ROW_STEP: usize = 2;
 
 /// The side of a cell of the pattern, pixels: 80 × 60 cells on a Kinect's
 /// 640 × 480 image, fine enough for stripes 48 pixels apart.
@@ -50,6 +56,126 @@ pub struct GroundResiduals {
     pub(crate) fit_band: Option<f64>,
 }
 
+/// The sums as one pose's frames are read.
+struct Sums {
+    cells: Vec<CellSums>,
+    columns: usize,
+    moments: Matrix3<f64>,
+    rhs: Vector3<f64>,
+}
+
+impl Sums {
+    /// One row's readings within `band` of `plane` (both in the row's value
+    /// units; trusted values only), the residuals times `to_inverse_depth`.
+    /// Each cell's 8 readings are summed in f32 without a branch (a
+    /// residual of a few hundredths, squared, loses nothing there), the
+    /// cells in f64.
+    #[allow(clippy::too_many_arguments)]
+    fn add_row<T: FitValue>(
+        &mut self,
+        row: &[T],
+        v: usize,
+        intrinsics: &Intrinsics,
+        plane: &PixelPlane,
+        band: f64,
+        trusted: (f32, f32),
+        to_inverse_depth: f64,
+    ) {
+        let dv = v as f64 - intrinsics.cy;
+        let cell_row = (v / CELL_PX) * self.columns;
+        let (band, scale) = (band as f32, to_inverse_depth);
+        let (mut uu, mut ur) = (0.0f64, 0.0f64);
+        for (cell_index, chunk) in row.chunks(CELL_PX).enumerate() {
+            let first = (cell_index * CELL_PX) as f64 - intrinsics.cx;
+            // The plane at the cell's first pixel, and its step per pixel.
+            let start = (plane.c0 + plane.cv * dv + plane.cu * first) as f32;
+            let step = plane.cu as f32;
+            let (n, sr, srr, su, suu, sur) = if chunk.len() == CELL_PX {
+                cell_sums(chunk, start, step, band, trusted)
+            } else {
+                let mut sums = (0f32, 0f32, 0f32, 0f32, 0f32, 0f32);
+                for (k, value) in chunk.iter().enumerate() {
+                    let x = value.to_f32();
+                    let r = x - (start + step * k as f32);
+                    if r.abs() <= band && x >= trusted.0 && x <= trusted.1 {
+                        let k = k as f32;
+                        sums.0 += 1.0;
+                        sums.1 += r;
+                        sums.2 += r * r;
+                        sums.3 += k;
+                        sums.4 += k * k;
+                        sums.5 += k * r;
+                    }
+                }
+                sums
+            };
+            if n == 0.0 {
+                continue;
+            }
+            // Offsets within the cell (k) back to u' = first + k.
+            let (n, sr, srr) = (
+                f64::from(n),
+                f64::from(sr) * scale,
+                f64::from(srr) * scale * scale,
+            );
+            let (su, suu, sur) = (f64::from(su), f64::from(suu), f64::from(sur) * scale);
+            let sum_u = first * n + su;
+            let cell = &mut self.cells[cell_row + cell_index];
+            cell.n += n;
+            cell.r += sr;
+            cell.rr += srr;
+            cell.u += sum_u;
+            cell.v += n * dv;
+            uu += first * first * n + 2.0 * first * su + suu;
+            ur += first * sr + sur;
+            self.moments[(0, 0)] += n;
+            self.moments[(0, 1)] += sum_u;
+            self.moments[(0, 2)] += n * dv;
+            self.moments[(1, 2)] += sum_u * dv;
+            self.moments[(2, 2)] += n * dv * dv;
+            self.rhs[0] += sr;
+            self.rhs[2] += sr * dv;
+        }
+        self.moments[(1, 1)] += uu;
+        self.rhs[1] += ur;
+    }
+}
+
+/// One cell's 8 readings of a row in one vector: how many lie within
+/// `band` of the plane (`start` at the first, `step` a pixel) among the
+/// trusted ones, and their Σr, Σr², Σk, Σk², Σk·r (k the pixel in the cell).
+#[inline(always)]
+fn cell_sums<T: FitValue>(
+    chunk: &[T],
+    start: f32,
+    step: f32,
+    band: f32,
+    trusted: (f32, f32),
+) -> (f32, f32, f32, f32, f32, f32) {
+    let mut values = [0f32; CELL_PX];
+    for (out, value) in values.iter_mut().zip(chunk) {
+        *out = value.to_f32();
+    }
+    let x = f32x8::from(values);
+    let k = f32x8::from([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+    let r = x - (f32x8::splat(start) + f32x8::splat(step) * k);
+    let keep = r.abs().simd_le(f32x8::splat(band))
+        & x.simd_ge(f32x8::splat(trusted.0))
+        & x.simd_le(f32x8::splat(trusted.1));
+    let zero = f32x8::splat(0.0);
+    let one = f32x8::select(keep, f32x8::splat(1.0), zero);
+    let r = f32x8::select(keep, r, zero);
+    let k = k * one;
+    (
+        one.reduce_add(),
+        r.reduce_add(),
+        (r * r).reduce_add(),
+        k.reduce_add(),
+        (k * k).reduce_add(),
+        (k * r).reduce_add(),
+    )
+}
+
 impl GroundResiduals {
     /// The residuals of `frames` from the ground `fit` found in them: the
     /// readings the fit took for the ground, by its own band.
@@ -63,56 +189,89 @@ impl GroundResiduals {
         let (width, height) = (intrinsics.width, intrinsics.height);
         let columns = width.div_ceil(CELL_PX);
         let rows = height.div_ceil(CELL_PX);
-        let mut cells = vec![CellSums::default(); columns * rows];
-        let mut moments = Matrix3::zeros();
-        let mut rhs = Vector3::zeros();
+        let mut sums = Sums {
+            cells: vec![CellSums::default(); columns * rows],
+            columns,
+            moments: Matrix3::zeros(),
+            rhs: Vector3::zeros(),
+        };
         let plane = PixelPlane::from_plane(&fit.plane, &intrinsics);
         for pixels in frames {
             if pixels.len() != width * height {
                 continue;
             }
-            camera.inverse_depth_into(pixels, image);
-            for v in 0..height {
-                let dv = v as f64 - intrinsics.cy;
-                let row = &image.w[v * width..(v + 1) * width];
-                let cell_row = &mut cells[(v / CELL_PX) * columns..(v / CELL_PX + 1) * columns];
-                // Sums per row and cell first, in f64 once per cell.
-                for (cell_index, chunk) in row.chunks(CELL_PX).enumerate() {
-                    let mut sums = CellSums::default();
-                    for (k, &w) in chunk.iter().enumerate() {
-                        if !w.is_finite() {
-                            continue;
-                        }
-                        let u = cell_index * CELL_PX + k;
-                        let du = u as f64 - intrinsics.cx;
-                        let r = f64::from(w) - plane.at(du, dv);
-                        let on_ground = match fit.band {
-                            InlierBand::InverseDepth(band) => r.abs() <= WIDER_BAND * band,
-                            InlierBand::Sigmas(_) => camera
-                                .point_at(u, v, pixels[v * width + u])
-                                .is_some_and(|p| fit.holds(&p)),
-                        };
-                        if !on_ground {
-                            continue;
-                        }
-                        sums.n += 1.0;
-                        sums.r += r;
-                        sums.rr += r * r;
-                        sums.u += du;
-                        sums.v += dv;
-                        let phi = Vector3::new(1.0, du, dv);
-                        moments += phi * phi.transpose();
-                        rhs += phi * r;
+            match fit.band {
+                // Raw frames as the fit read them, in raw values: no pixel
+                // converted (the residuals scaled to 1/m by the cell).
+                InlierBand::InverseDepth(band) if camera.fits_raw_values() => {
+                    let domain = camera.value_domain();
+                    let values = domain.from_inverse_depth(&plane);
+                    for (v, row) in pixels.chunks_exact(width).enumerate().step_by(ROW_STEP) {
+                        sums.add_row(
+                            row,
+                            v,
+                            &intrinsics,
+                            &values,
+                            WIDER_BAND * band / domain.scale.abs(),
+                            domain.trusted,
+                            domain.scale,
+                        );
                     }
-                    let cell = &mut cell_row[cell_index];
-                    cell.n += sums.n;
-                    cell.r += sums.r;
-                    cell.rr += sums.rr;
-                    cell.u += sums.u;
-                    cell.v += sums.v;
+                }
+                InlierBand::InverseDepth(band) => {
+                    camera.inverse_depth_into(pixels, image);
+                    for (v, row) in image.w.chunks_exact(width).enumerate() {
+                        sums.add_row(
+                            row,
+                            v,
+                            &intrinsics,
+                            &plane,
+                            WIDER_BAND * band,
+                            (f32::MIN, f32::MAX),
+                            1.0,
+                        );
+                    }
+                }
+                // The paper's fit: its band is in σ(z) of metres, point by point.
+                InlierBand::Sigmas(_) => {
+                    camera.inverse_depth_into(pixels, image);
+                    for (v, row) in image.w.chunks_exact(width).enumerate() {
+                        let held: Vec<f32> = row
+                            .iter()
+                            .enumerate()
+                            .map(|(u, &w)| {
+                                let held = camera
+                                    .point_at(u, v, pixels[v * width + u])
+                                    .is_some_and(|p| fit.holds(&p));
+                                if held {
+                                    w
+                                } else {
+                                    f32::INFINITY
+                                }
+                            })
+                            .collect();
+                        sums.add_row(
+                            &held,
+                            v,
+                            &intrinsics,
+                            &plane,
+                            f64::INFINITY,
+                            (f32::MIN, f32::MAX),
+                            1.0,
+                        );
+                    }
                 }
             }
         }
+        let Sums {
+            cells,
+            mut moments,
+            rhs,
+            ..
+        } = sums;
+        moments[(1, 0)] = moments[(0, 1)];
+        moments[(2, 0)] = moments[(0, 2)];
+        moments[(2, 1)] = moments[(1, 2)];
         Self {
             columns,
             rows,
