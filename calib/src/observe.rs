@@ -99,6 +99,10 @@ pub struct ObserveSettings {
     pub slip_threshold_m: f64,
     pub body_pose_source: BodyPoseSource,
     pub depth_range: DepthRange,
+    /// Whether each pose's ground residuals are summed for the depth
+    /// pattern: a calibration estimates one, a check against a calibration
+    /// takes the calibration's and needs none.
+    pub ground_residuals: bool,
 }
 
 impl Default for ObserveSettings {
@@ -108,6 +112,7 @@ impl Default for ObserveSettings {
             slip_threshold_m: 0.010,
             body_pose_source: BodyPoseSource::Feet,
             depth_range: DepthRange::default(),
+            ground_residuals: true,
         }
     }
 }
@@ -333,12 +338,14 @@ impl PoseObserver {
             inliers: Some(fit.inliers),
             set_aside: body.set_aside.clone(),
             note: body.note.clone(),
-            ground_residuals: Some(std::sync::Arc::new(GroundResiduals::of(
-                frames,
-                &self.camera,
-                &fit,
-                buffers.residual_image(),
-            ))),
+            ground_residuals: self.settings.ground_residuals.then(|| {
+                std::sync::Arc::new(GroundResiduals::of(
+                    frames,
+                    &self.camera,
+                    &fit,
+                    buffers.residual_image(),
+                ))
+            }),
         };
         Ok((observation, fit))
     }

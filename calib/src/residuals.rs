@@ -286,9 +286,4 @@ impl GroundResiduals {
             },
         }
     }
-
-    /// Ground readings summed.
-    pub fn readings(&self) -> f64 {
-        self.cells.iter().map(|c| c.n).sum()
-    }
 }

@@ -203,11 +203,6 @@ impl DepthCamera {
         camera
     }
 
-    /// Whether a depth pattern is taken out of the readings.
-    pub fn corrects_depth(&self) -> bool {
-        self.correction.is_some()
-    }
-
     /// Converts a frame to inverse depth (`1/z`, the Kinect's noise domain)
     /// into `image`, reusing its memory.
     pub fn inverse_depth_into(&self, pixels: &[u16], image: &mut InverseDepthImage) {

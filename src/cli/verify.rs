@@ -89,6 +89,8 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
         let mut pose_settings = crate::calib::observe::ObserveSettings::default();
         pose_settings.plane.method = config.calibration.ground_fit;
         pose_settings.slip_threshold_m = config.calibration.slip_threshold_mm / 1000.0;
+        // A check takes the calibration's depth pattern; it estimates none.
+        pose_settings.ground_residuals = false;
         let observed = match crate::replay::observe_recording(
             &recording,
             Some(ground_prior(&calibration.mount)),

@@ -187,6 +187,7 @@ impl Plan {
         plan.calibrating = false;
         plan.nominal_mount = Some(crate::verify::ground_prior(&calibration.mount));
         plan.depth_correction = calibration.depth_correction.clone();
+        plan.pose.ground_residuals = false;
         if let Some(tilt) = calibration.tilt_deg {
             plan.tilt_deg = tilt;
         }
