@@ -521,12 +521,10 @@ fn bend(pose: &GroundResiduals, shape: &[f64], seen: &[bool], sigma: f64) -> Vec
         }
     }
     let mut plane = inverse * untruncated;
-    let Some(band) = pose
-        .fit_band
-        .filter(|b| *b > 0.0 && sigma.is_finite() && sigma > 0.0)
-    else {
+    let band = pose.fit_band;
+    if !(band.is_finite() && band > 0.0 && sigma.is_finite() && sigma > 0.0) {
         return plane;
-    };
+    }
     let beta = band / sigma;
     for _ in 0..6 {
         let (mut value, mut slope) = (Vector3::zeros(), Matrix3::zeros());
@@ -1013,7 +1011,7 @@ mod tests {
                     rhs,
                     intrinsics,
                     raw_per_inverse_depth: -1.0 / 0.003,
-                    fit_band: None,
+                    fit_band: f64::INFINITY,
                 }
             })
             .collect()

@@ -338,14 +338,12 @@ impl PoseObserver {
             inliers: Some(fit.inliers),
             set_aside: body.set_aside.clone(),
             note: body.note.clone(),
-            ground_residuals: self.settings.ground_residuals.then(|| {
-                std::sync::Arc::new(GroundResiduals::of(
-                    frames,
-                    &self.camera,
-                    &fit,
-                    buffers.residual_image(),
-                ))
-            }),
+            ground_residuals: self
+                .settings
+                .ground_residuals
+                .then(|| GroundResiduals::of(frames, &self.camera, &fit, buffers.residual_image()))
+                .flatten()
+                .map(std::sync::Arc::new),
         };
         Ok((observation, fit))
     }

@@ -52,8 +52,8 @@ pub struct GroundResiduals {
     /// Raw units per 1/m of inverse depth (the depth model's `1/b`).
     pub(crate) raw_per_inverse_depth: f64,
     /// The fit's own rejection band (1/m): the readings it took for the
-    /// ground lay within it of its plane. `None` for the paper's fit.
-    pub(crate) fit_band: Option<f64>,
+    /// ground lay within it of its plane.
+    pub(crate) fit_band: f64,
 }
 
 /// The sums as one pose's frames are read.
@@ -178,13 +178,20 @@ fn cell_sums<T: FitValue>(
 
 impl GroundResiduals {
     /// The residuals of `frames` from the ground `fit` found in them: the
-    /// readings the fit took for the ground, by its own band.
+    /// readings within twice the fit's own band. `None` for the paper's fit
+    /// (`--ground-fit paper`, kept to compare with): its band is in metres
+    /// point by point, and a pattern estimated through it is not one the
+    /// default fit would see (in the corridor it found one where there is
+    /// none).
     pub fn of(
         frames: &[&[u16]],
         camera: &DepthCamera,
         fit: &GroundFit,
         image: &mut InverseDepthImage,
-    ) -> Self {
+    ) -> Option<Self> {
+        let InlierBand::InverseDepth(band) = fit.band else {
+            return None;
+        };
         let intrinsics = *camera.intrinsics();
         let (width, height) = (intrinsics.width, intrinsics.height);
         let columns = width.div_ceil(CELL_PX);
@@ -200,66 +207,34 @@ impl GroundResiduals {
             if pixels.len() != width * height {
                 continue;
             }
-            match fit.band {
+            if camera.fits_raw_values() {
                 // Raw frames as the fit read them, in raw values: no pixel
                 // converted (the residuals scaled to 1/m by the cell).
-                InlierBand::InverseDepth(band) if camera.fits_raw_values() => {
-                    let domain = camera.value_domain();
-                    let values = domain.from_inverse_depth(&plane);
-                    for (v, row) in pixels.chunks_exact(width).enumerate().step_by(ROW_STEP) {
-                        sums.add_row(
-                            row,
-                            v,
-                            &intrinsics,
-                            &values,
-                            WIDER_BAND * band / domain.scale.abs(),
-                            domain.trusted,
-                            domain.scale,
-                        );
-                    }
+                let domain = camera.value_domain();
+                let values = domain.from_inverse_depth(&plane);
+                for (v, row) in pixels.chunks_exact(width).enumerate().step_by(ROW_STEP) {
+                    sums.add_row(
+                        row,
+                        v,
+                        &intrinsics,
+                        &values,
+                        WIDER_BAND * band / domain.scale.abs(),
+                        domain.trusted,
+                        domain.scale,
+                    );
                 }
-                InlierBand::InverseDepth(band) => {
-                    camera.inverse_depth_into(pixels, image);
-                    for (v, row) in image.w.chunks_exact(width).enumerate() {
-                        sums.add_row(
-                            row,
-                            v,
-                            &intrinsics,
-                            &plane,
-                            WIDER_BAND * band,
-                            (f32::MIN, f32::MAX),
-                            1.0,
-                        );
-                    }
-                }
-                // The paper's fit: its band is in σ(z) of metres, point by point.
-                InlierBand::Sigmas(_) => {
-                    camera.inverse_depth_into(pixels, image);
-                    for (v, row) in image.w.chunks_exact(width).enumerate() {
-                        let held: Vec<f32> = row
-                            .iter()
-                            .enumerate()
-                            .map(|(u, &w)| {
-                                let held = camera
-                                    .point_at(u, v, pixels[v * width + u])
-                                    .is_some_and(|p| fit.holds(&p));
-                                if held {
-                                    w
-                                } else {
-                                    f32::INFINITY
-                                }
-                            })
-                            .collect();
-                        sums.add_row(
-                            &held,
-                            v,
-                            &intrinsics,
-                            &plane,
-                            f64::INFINITY,
-                            (f32::MIN, f32::MAX),
-                            1.0,
-                        );
-                    }
+            } else {
+                camera.inverse_depth_into(pixels, image);
+                for (v, row) in image.w.chunks_exact(width).enumerate().step_by(ROW_STEP) {
+                    sums.add_row(
+                        row,
+                        v,
+                        &intrinsics,
+                        &plane,
+                        WIDER_BAND * band,
+                        (f32::MIN, f32::MAX),
+                        1.0,
+                    );
                 }
             }
         }
@@ -272,7 +247,7 @@ impl GroundResiduals {
         moments[(1, 0)] = moments[(0, 1)];
         moments[(2, 0)] = moments[(0, 2)];
         moments[(2, 1)] = moments[(1, 2)];
-        Self {
+        Some(Self {
             columns,
             rows,
             cells,
@@ -280,10 +255,7 @@ impl GroundResiduals {
             rhs,
             intrinsics,
             raw_per_inverse_depth: camera.raw_per_inverse_depth(),
-            fit_band: match fit.band {
-                InlierBand::InverseDepth(band) => Some(band),
-                InlierBand::Sigmas(_) => None,
-            },
-        }
+            fit_band: band,
+        })
     }
 }
