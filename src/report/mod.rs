@@ -192,7 +192,7 @@ fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static s
             "",
         ),
         "warp_max_mm" => (
-            "warp of the depth at 2 m that changes from pose to pose (RMS)",
+            "depth warp at 2 m, not corrected (RMS)",
             format!("≤ {} mm", num(l, 1)),
             format!("{} mm", num(m, 2)),
             "",
