@@ -496,7 +496,7 @@ mod tests {
 
     #[test]
     fn ids_cannot_escape_the_history() {
-        let (store, _) = temp_store("escape");
+        let (store, dir) = temp_store("escape");
         assert!(matches!(
             store.get("../active"),
             Err(StoreError::NotFound(_))
@@ -505,5 +505,6 @@ mod tests {
             store.activate("/etc/passwd", "x"),
             Err(StoreError::NotFound(_))
         ));
+        let _ = fs::remove_dir_all(&dir);
     }
 }

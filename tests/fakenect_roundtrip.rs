@@ -203,7 +203,7 @@ fn fakenect_plays_our_recording_into_fakenect_record_unchanged() {
 
     // Our recording: three poses of two frames, each frame followed by a tilt
     // state stamped with its timestamp, as record.c does.
-    let ours = tmp.0.join("ours");
+    let ours = tmp.path().join("ours");
     let mut writer = RecordingWriter::create(&ours, &source.session).unwrap();
     let mut t = 1_700_000_000.0;
     let mut states = Vec::new();
@@ -238,12 +238,12 @@ fn fakenect_plays_our_recording_into_fakenect_record_unchanged() {
 
     // Played by libfreenect's fakenect into libfreenect's fakenect-record,
     // which stops by itself at the end of the dump.
-    let rerecorded = tmp.0.join("rerecorded");
+    let rerecorded = tmp.path().join("rerecorded");
     replay_through_fakenect(
         &tools,
         &ours.join("kinect"),
         &rerecorded,
-        &tmp.0.join("fakenect-record.log"),
+        &tmp.path().join("fakenect-record.log"),
     );
     let theirs = read_dump(&rerecorded);
     assert!(
@@ -302,7 +302,7 @@ fn fakenect_plays_our_recording_into_fakenect_record_unchanged() {
     );
 
     // And the other way: fakenect-record's dump is a valid depth part.
-    let back = tmp.0.join("back");
+    let back = tmp.path().join("back");
     std::fs::create_dir(&back).unwrap();
     std::fs::copy(ours.join("session.json"), back.join("session.json")).unwrap();
     std::fs::rename(&rerecorded, back.join("kinect")).unwrap();

@@ -225,7 +225,7 @@ fn the_kinect_delivers_a_fakenect_dump_byte_for_byte() {
         return;
     };
     let tmp = TempDir::new("kinect-fakenect");
-    let dump_dir = tmp.0.join("dump");
+    let dump_dir = tmp.path().join("dump");
     make_dump(&dump_dir);
     let mut command = Command::new(std::env::current_exe().unwrap());
     command
@@ -340,9 +340,9 @@ fn capture_records_a_fakenect_dump_byte_for_byte() {
         return;
     };
     let tmp = TempDir::new("capture");
-    let dump_dir = tmp.0.join("dump");
+    let dump_dir = tmp.path().join("dump");
     let dump = make_dump(&dump_dir);
-    let out = tmp.0.join("recording");
+    let out = tmp.path().join("recording");
     let mut command = Command::new(env!("CARGO_BIN_EXE_groundcal"));
     command
         .arg("capture")
@@ -382,7 +382,7 @@ fn capture_records_a_fakenect_dump_byte_for_byte() {
 #[test]
 fn capture_without_libfreenect_exits_1_naming_the_package() {
     let tmp = TempDir::new("missing");
-    let out = tmp.0.join("recording");
+    let out = tmp.path().join("recording");
     let (code, _, stderr) = common::groundcal(&[
         "capture",
         "--freenect-lib",
@@ -407,7 +407,7 @@ fn capture_without_libfreenect_exits_1_naming_the_package() {
 #[test]
 fn capture_refuses_bad_arguments_with_exit_2() {
     let tmp = TempDir::new("usage");
-    let full = tmp.0.join("full");
+    let full = tmp.path().join("full");
     std::fs::create_dir_all(&full).unwrap();
     std::fs::write(full.join("keep.txt"), "mine").unwrap();
     let (code, _, stderr) =
@@ -422,7 +422,7 @@ fn capture_refuses_bad_arguments_with_exit_2() {
         "mine"
     );
 
-    let out = tmp.0.join("none");
+    let out = tmp.path().join("none");
     let (code, _, stderr) =
         common::groundcal(&["capture", "--frames", "0", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 2, "{stderr}");

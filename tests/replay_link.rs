@@ -10,7 +10,7 @@
 mod common;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use common::{groundcal_json, mount_of, shared, temp_dir};
 use groundcal::recording::Recording;
@@ -161,7 +161,7 @@ fn a_pose_id_beyond_the_link_is_refused_before_moving() {
 
 /// A copy of the shared sample (its frames linked, not copied) with
 /// `poses.jsonl`'s lines edited.
-fn sample_with_poses(tag: &str, edit: impl FnOnce(Vec<String>) -> Vec<String>) -> PathBuf {
+fn sample_with_poses(tag: &str, edit: impl FnOnce(Vec<String>) -> Vec<String>) -> common::TempDir {
     let sample = shared().join("data/sample-12");
     let dir = temp_dir(tag);
     std::fs::copy(sample.join("session.json"), dir.join("session.json")).unwrap();

@@ -6,7 +6,9 @@
 //! Other processes are this test binary run again in the writer's role
 //! (`writer_process`, which does nothing unless the environment asks for it).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+mod common;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Barrier};
@@ -20,10 +22,8 @@ use serde_json::{json, Value};
 /// store's directory, the two ids, and how many changes (0: until killed).
 const CHILD: &str = "GROUNDCAL_STORE_WRITER";
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("groundcal-store-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+fn temp_dir(tag: &str) -> common::TempDir {
+    common::temp_dir(&format!("store-{tag}"))
 }
 
 /// An accepted result with this α.

@@ -59,12 +59,53 @@ pub fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A fresh directory of its own under the system's temporary directory.
-pub fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("groundcal-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temporary directory");
-    dir
+/// A fresh directory of its own under the system's temporary directory,
+/// removed with everything in it when the guard drops, so a test run leaves
+/// nothing behind: the simulated recordings are tens of MB each, and a CI
+/// machine's disk ran out on what earlier tests had left.
+pub fn temp_dir(tag: &str) -> TempDir {
+    TempDir::new(tag)
+}
+
+/// A fresh directory of its own, removed on drop (see [`temp_dir`]).
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    pub fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("groundcal-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temporary directory");
+        Self(dir)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The `robot_from_sensor` of a result JSON (cli.md).
@@ -105,21 +146,6 @@ pub fn distance(
         sin.atan2(cos).to_degrees(),
         (pa.translation - pb.translation).norm() * 1e3,
     )
-}
-
-/// A fresh directory of its own (as [`temp_dir`]), removed on drop.
-pub struct TempDir(pub PathBuf);
-
-impl TempDir {
-    pub fn new(tag: &str) -> Self {
-        Self(temp_dir(tag))
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// A system package or tool a test needs is missing: under `CI=true` that is
