@@ -40,7 +40,7 @@ fn every_shipped_configuration_passes_check_config() {
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
-            let path = installed_copy(&path, &scratch.path());
+            let path = installed_copy(&path, scratch.path());
             let (code, stdout, stderr) = groundcal(&["check-config", path.to_str().unwrap()]);
             assert_eq!(code, 0, "{}: {stderr}", path.display());
             assert!(stdout.contains("valid"));
@@ -56,7 +56,7 @@ fn every_shipped_configuration_passes_check_config() {
 fn a_configuration_that_serves_without_a_readable_token_is_refused() {
     let scratch = common::TempDir::new("check-config-token");
     let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/groundcal.toml");
-    let config = installed_copy(&shipped, &scratch.path());
+    let config = installed_copy(&shipped, scratch.path());
     let token = scratch.path().join("token");
     for (what, setup) in [("missing", None), ("empty", Some(" \n"))] {
         match setup {

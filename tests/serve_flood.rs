@@ -135,7 +135,7 @@ fn a_flood_of_half_open_connections_does_not_lock_the_operator_out() {
         set_open_files_limit(me, (4 * FLOOD as u64).min(hard), hard);
     }
     let dir = common::TempDir::new("serve-flood");
-    let (mut server, address) = common::spawn_serve(&dir.path(), TOKEN, &[], &[]);
+    let (mut server, address) = common::spawn_serve(dir.path(), TOKEN, &[], &[]);
     let pid = server.id();
     set_open_files_limit(pid, u64::from(DESCRIPTORS), u64::from(DESCRIPTORS));
     assert_eq!(open_files_limit(pid).0, u64::from(DESCRIPTORS));
@@ -300,7 +300,7 @@ fn abort_gets_through(tag: &str, streams: usize, half_open: usize) {
     // The simulator at 50×: 52 poses still run for seconds, long enough to
     // flood, ask and abort while the body moves.
     let (mut server, address, robot, receipts) =
-        common::spawn_serve_towards_sim_robot(&dir.path(), TOKEN, &[]);
+        common::spawn_serve_towards_sim_robot(dir.path(), TOKEN, &[]);
     let pid = server.id();
     set_open_files_limit(pid, u64::from(DESCRIPTORS), u64::from(DESCRIPTORS));
     let stderr = server.stderr.take().unwrap();
