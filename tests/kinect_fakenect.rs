@@ -37,32 +37,9 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(60);
 /// Set in the re-run child: the fakenect library to open.
 const CHILD_LIB_ENV: &str = "GROUNDCAL_TEST_FAKENECT_CHILD_LIB";
 
-/// fakenect's library: in `$GROUNDCAL_FAKENECT_LIB_DIR`, else the usual places.
-fn find_fakenect_library() -> Option<PathBuf> {
-    let mut dirs = Vec::new();
-    if let Some(dir) = std::env::var_os("GROUNDCAL_FAKENECT_LIB_DIR") {
-        dirs.push(PathBuf::from(dir));
-    } else {
-        for lib in ["/usr/lib", "/usr/local/lib"] {
-            dirs.push(Path::new(lib).join("fakenect"));
-            if let Ok(entries) = std::fs::read_dir(lib) {
-                let mut arch: Vec<PathBuf> = entries
-                    .flatten()
-                    .map(|e| e.path().join("fakenect"))
-                    .collect();
-                arch.sort();
-                dirs.extend(arch);
-            }
-        }
-    }
-    dirs.into_iter()
-        .flat_map(|d| [d.join("libfreenect.so.0.5"), d.join("libfreenect.so")])
-        .find(|p| p.is_file())
-}
-
 /// fakenect's library, or `None` after a loud warning (a failure under CI).
 fn fakenect_library() -> Option<PathBuf> {
-    if let Some(lib) = find_fakenect_library() {
+    if let Some(lib) = groundcal_hal::kinect::find_fakenect_library() {
         return Some(lib);
     }
     let message = format!(

@@ -607,31 +607,97 @@ fn clear_above(value_above: f32, expected: f32, (limit, lo, hi): (f32, f32, f32)
     ((value_above - expected).abs() < limit) | (value_above < lo) | (value_above > hi)
 }
 
-/// The per-pixel loop of [`PixelGrid::moments_within`] over one row's
-/// `values` (with their column offsets `du`, `du2`): the pixels within `band`
-/// of `base + cu·du`. Written as independent lanes, which compilers turn into
-/// vector instructions of any width.
-///
-/// With `GUARDED`, a pixel counts only if its value in `above` (the row
-/// [`EdgeGuard::rows`] above, the same columns) lies within `guard.0` of
-/// `base_above + cu·du`, or outside the trusted values `guard.1..=guard.2`.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn row_sums<T: FitValue, const GUARDED: bool>(
-    values: &[T],
-    above: &[T],
-    du: &[f32],
-    du2: &[f32],
-    (base, base_above): (f32, f32),
+/// One row's pixels for the per-pixel loop: the values, the values
+/// [`EdgeGuard::rows`] above (the same columns; read only when guarded), and
+/// the column offsets `du` and `du²`, all of one length.
+#[derive(Clone, Copy)]
+struct RowPixels<'a, T> {
+    values: &'a [T],
+    above: &'a [T],
+    du: &'a [f32],
+    du2: &'a [f32],
+}
+
+/// What the per-pixel loop tests a row's pixels against: the plane's value
+/// at `du = 0` on this row (`base`) and on the row above (`base_above`), its
+/// slope along the row (`cu`), the band, and the edge guard's
+/// `(limit, lo, hi)`.
+#[derive(Clone, Copy)]
+struct RowTest {
+    base: f32,
+    base_above: f32,
     cu: f32,
     band: f32,
     guard: (f32, f32, f32),
-) -> RowSums {
-    let mut acc = [[0f32; LANES]; 6];
-    let n = values.len().min(du.len()).min(du2.len());
-    let n = if GUARDED { n.min(above.len()) } else { n };
+}
+
+/// Per-lane running sums: inliers, `Σu`, `Σu²`, `Σr`, `Σu·r`, `Σr²`.
+type LaneSums = [[f32; LANES]; 6];
+
+/// The per-pixel loop of [`PixelGrid::moments_within`] over one row: the
+/// pixels within `band` of `base + cu·du`.
+///
+/// With `GUARDED`, a pixel counts only if its value in `above` lies within
+/// `guard.0` of `base_above + cu·du`, or outside the trusted values
+/// `guard.1..=guard.2`.
+///
+/// The whole chunks of [`LANES`] pixels go through [`lane_sums`] (NEON on
+/// arm64), the rest one by one in f64.
+#[inline(always)]
+fn row_sums<T: FitValue, const GUARDED: bool>(row: RowPixels<'_, T>, test: &RowTest) -> RowSums {
+    let n = row.values.len().min(row.du.len()).min(row.du2.len());
+    let n = if GUARDED { n.min(row.above.len()) } else { n };
     let full = n / LANES * LANES;
-    // One chunk of lanes; `a`: the values above (ignored unless GUARDED).
+    let chunks = RowPixels {
+        values: &row.values[..full],
+        above: if GUARDED { &row.above[..full] } else { &[] },
+        du: &row.du[..full],
+        du2: &row.du2[..full],
+    };
+    #[cfg(target_arch = "aarch64")]
+    let acc = lane_sums_neon::<T, GUARDED>(chunks, test);
+    #[cfg(not(target_arch = "aarch64"))]
+    let acc = lane_sums::<T, GUARDED>(chunks, test);
+    let mut sums: RowSums = std::array::from_fn(|k| lane_sum(&acc[k]));
+    let RowTest {
+        base,
+        base_above,
+        cu,
+        band,
+        guard,
+    } = *test;
+    for k in full..n {
+        let (v, d, d2) = (row.values[k], row.du[k], row.du2[k]);
+        let r = v.to_f32() - (base + cu * d);
+        let clear = !GUARDED || clear_above(row.above[k].to_f32(), base_above + cu * d, guard);
+        if r.abs() < band && clear {
+            let (d, d2, r) = (f64::from(d), f64::from(d2), f64::from(r));
+            sums[0] += 1.0;
+            sums[1] += d;
+            sums[2] += d2;
+            sums[3] += r;
+            sums[4] += d * r;
+            sums[5] += r * r;
+        }
+    }
+    sums
+}
+
+/// The per-lane sums over whole chunks of [`LANES`] pixels, written as
+/// independent lanes, which compilers turn into vector instructions of any
+/// width (AVX2 where [`PixelGrid::moments_within`] finds it). This is the
+/// reference that [`lane_sums_neon`] matches bit for bit.
+#[inline(always)]
+#[cfg_attr(target_arch = "aarch64", allow(dead_code))]
+fn lane_sums<T: FitValue, const GUARDED: bool>(row: RowPixels<'_, T>, test: &RowTest) -> LaneSums {
+    let RowTest {
+        base,
+        base_above,
+        cu,
+        band,
+        guard,
+    } = *test;
+    let mut acc: LaneSums = [[0f32; LANES]; 6];
     let mut lanes = |v: &[T], a: &[T], d: &[f32], d2: &[f32]| {
         for l in 0..LANES {
             let r = v[l].to_f32() - (base + cu * d[l]);
@@ -649,12 +715,13 @@ fn row_sums<T: FitValue, const GUARDED: bool>(
             acc[5][l] += kept * kept;
         }
     };
-    let chunks = values[..full]
+    let chunks = row
+        .values
         .chunks_exact(LANES)
-        .zip(du[..full].chunks_exact(LANES))
-        .zip(du2[..full].chunks_exact(LANES));
+        .zip(row.du.chunks_exact(LANES))
+        .zip(row.du2.chunks_exact(LANES));
     if GUARDED {
-        for (((v, d), d2), a) in chunks.zip(above[..full].chunks_exact(LANES)) {
+        for (((v, d), d2), a) in chunks.zip(row.above.chunks_exact(LANES)) {
             lanes(v, a, d, d2);
         }
     } else {
@@ -662,26 +729,88 @@ fn row_sums<T: FitValue, const GUARDED: bool>(
             lanes(v, v, d, d2);
         }
     }
-    let mut sums: RowSums = std::array::from_fn(|k| lane_sum(&acc[k]));
-    for (k, ((v, &d), &d2)) in values[full..n]
-        .iter()
-        .zip(&du[full..n])
-        .zip(&du2[full..n])
-        .enumerate()
-    {
-        let r = v.to_f32() - (base + cu * d);
-        let clear = !GUARDED || clear_above(above[full + k].to_f32(), base_above + cu * d, guard);
-        if r.abs() < band && clear {
-            let (d, d2, r) = (f64::from(d), f64::from(d2), f64::from(r));
-            sums[0] += 1.0;
-            sums[1] += d;
-            sums[2] += d2;
-            sums[3] += r;
-            sums[4] += d * r;
-            sums[5] += r * r;
+    acc
+}
+
+/// [`lane_sums`] in NEON, four vectors of four lanes: the same operations
+/// in the same order (a multiply then an add, never fused, as Rust's scalar
+/// `a + b * c` is), so the sums are bit-identical to the reference's on
+/// every input, NaN and infinities included (a comparison with NaN is false
+/// in both). NEON is part of every arm64 processor (and of the target's
+/// baseline), so no run-time check is needed.
+#[cfg(target_arch = "aarch64")]
+#[inline(always)]
+fn lane_sums_neon<T: FitValue, const GUARDED: bool>(
+    row: RowPixels<'_, T>,
+    test: &RowTest,
+) -> LaneSums {
+    use std::arch::aarch64::*;
+    const VECTORS: usize = LANES / 4;
+    let RowTest {
+        base,
+        base_above,
+        cu,
+        band,
+        guard: (limit, lo, hi),
+    } = *test;
+    // SAFETY: NEON is in the aarch64 target's baseline features; the loads
+    // and stores read and write `[f32; 4]`s that are in bounds by their type.
+    #[allow(unsafe_code)]
+    unsafe {
+        let zero = vdupq_n_f32(0.0);
+        let one = vdupq_n_f32(1.0);
+        let (base, base_above, cu) = (vdupq_n_f32(base), vdupq_n_f32(base_above), vdupq_n_f32(cu));
+        let (band, limit, lo, hi) = (
+            vdupq_n_f32(band),
+            vdupq_n_f32(limit),
+            vdupq_n_f32(lo),
+            vdupq_n_f32(hi),
+        );
+        let mut acc = [[zero; VECTORS]; 6];
+        let n = row.values.len() / LANES * LANES;
+        for start in (0..n).step_by(LANES) {
+            let mut value = [0f32; LANES];
+            let mut value_above = [0f32; LANES];
+            for l in 0..LANES {
+                value[l] = row.values[start + l].to_f32();
+                if GUARDED {
+                    value_above[l] = row.above[start + l].to_f32();
+                }
+            }
+            for q in 0..VECTORS {
+                let at = start + 4 * q;
+                let d = vld1q_f32(row.du[at..at + 4].as_ptr());
+                let d2 = vld1q_f32(row.du2[at..at + 4].as_ptr());
+                let v = vld1q_f32(value[4 * q..4 * q + 4].as_ptr());
+                let r = vsubq_f32(v, vaddq_f32(base, vmulq_f32(cu, d)));
+                let mut inside = vcltq_f32(vabsq_f32(r), band);
+                if GUARDED {
+                    let a = vld1q_f32(value_above[4 * q..4 * q + 4].as_ptr());
+                    let off = vsubq_f32(a, vaddq_f32(base_above, vmulq_f32(cu, d)));
+                    let clear = vorrq_u32(
+                        vorrq_u32(vcltq_f32(vabsq_f32(off), limit), vcltq_f32(a, lo)),
+                        vcgtq_f32(a, hi),
+                    );
+                    inside = vandq_u32(inside, clear);
+                }
+                let counted = vbslq_f32(inside, one, zero);
+                let kept = vbslq_f32(inside, r, zero);
+                acc[0][q] = vaddq_f32(acc[0][q], counted);
+                acc[1][q] = vaddq_f32(acc[1][q], vmulq_f32(counted, d));
+                acc[2][q] = vaddq_f32(acc[2][q], vmulq_f32(counted, d2));
+                acc[3][q] = vaddq_f32(acc[3][q], kept);
+                acc[4][q] = vaddq_f32(acc[4][q], vmulq_f32(kept, d));
+                acc[5][q] = vaddq_f32(acc[5][q], vmulq_f32(kept, kept));
+            }
         }
+        let mut out: LaneSums = [[0f32; LANES]; 6];
+        for (sums, vectors) in out.iter_mut().zip(&acc) {
+            for (q, vector) in vectors.iter().enumerate() {
+                vst1q_f32(sums[4 * q..4 * q + 4].as_mut_ptr(), *vector);
+            }
+        }
+        out
     }
-    sums
 }
 
 impl PixelGrid {
@@ -805,30 +934,42 @@ impl PixelGrid {
             }
             let values = &frame.values[row * frame.width + start..row * frame.width + end];
             let base = (plane.c0 + plane.cv * dv) as f32;
+            let du = &self.du[start..end];
+            let du2 = &self.du2[start..end];
             let sums = match guard.filter(|g| g.rows > 0 && row >= g.rows) {
                 Some(g) => {
                     let up = row - g.rows;
-                    row_sums::<T, true>(
+                    let pixels = RowPixels {
                         values,
-                        &frame.values[up * frame.width + start..up * frame.width + end],
-                        &self.du[start..end],
-                        &self.du2[start..end],
-                        (base, (plane.c0 + plane.cv * self.dv(up)) as f32),
-                        plane.cu as f32,
-                        band as f32,
-                        (g.limit as f32, domain.trusted.0, domain.trusted.1),
-                    )
+                        above: &frame.values[up * frame.width + start..up * frame.width + end],
+                        du,
+                        du2,
+                    };
+                    let test = RowTest {
+                        base,
+                        base_above: (plane.c0 + plane.cv * self.dv(up)) as f32,
+                        cu: plane.cu as f32,
+                        band: band as f32,
+                        guard: (g.limit as f32, domain.trusted.0, domain.trusted.1),
+                    };
+                    row_sums::<T, true>(pixels, &test)
                 }
-                None => row_sums::<T, false>(
-                    values,
-                    &[],
-                    &self.du[start..end],
-                    &self.du2[start..end],
-                    (base, base),
-                    plane.cu as f32,
-                    band as f32,
-                    (0.0, 0.0, 0.0),
-                ),
+                None => {
+                    let pixels = RowPixels {
+                        values,
+                        above: &[],
+                        du,
+                        du2,
+                    };
+                    let test = RowTest {
+                        base,
+                        base_above: base,
+                        cu: plane.cu as f32,
+                        band: band as f32,
+                        guard: (0.0, 0.0, 0.0),
+                    };
+                    row_sums::<T, false>(pixels, &test)
+                }
             };
             total.add_row(dv, &sums);
         }
@@ -871,6 +1012,107 @@ fn erf(x: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Random rows for the lane loops: raw readings around a plane (some far
+    /// off, some untrusted), of a length that leaves a remainder.
+    #[cfg(target_arch = "aarch64")]
+    fn random_rows(seed: u64) -> Vec<(Vec<u16>, Vec<u16>, Vec<f32>, RowTest)> {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        (0..200)
+            .map(|_| {
+                let n = rng.gen_range(0..700);
+                let base: f32 = rng.gen_range(500.0..1000.0);
+                let cu: f32 = rng.gen_range(-0.5..0.5);
+                let du: Vec<f32> = (0..n).map(|u| u as f32 - 319.5).collect();
+                let reading = |rng: &mut rand_chacha::ChaCha8Rng, d: f32| -> u16 {
+                    match rng.gen_range(0..10) {
+                        0 => 2047,
+                        1 => rng.gen_range(0..2047),
+                        _ => (base + cu * d + rng.gen_range(-4.0f32..4.0)).round() as u16,
+                    }
+                };
+                let values = du.iter().map(|&d| reading(&mut rng, d)).collect();
+                let above = du.iter().map(|&d| reading(&mut rng, d)).collect();
+                let test = RowTest {
+                    base,
+                    base_above: base - rng.gen_range(0.0..3.0),
+                    cu,
+                    band: rng.gen_range(0.5..6.0),
+                    guard: (rng.gen_range(0.5..6.0), 400.0, 1090.0),
+                };
+                (values, above, du, test)
+            })
+            .collect()
+    }
+
+    /// The NEON loop gives the reference loop's sums bit for bit, guarded
+    /// and not, on raw readings and on metric ones with infinities and NaN.
+    #[cfg(target_arch = "aarch64")]
+    #[test]
+    fn the_neon_loop_matches_the_reference_bit_for_bit() {
+        fn same<T: FitValue>(pixels: RowPixels<'_, T>, test: &RowTest) {
+            let full = pixels.values.len() / LANES * LANES;
+            let pixels = RowPixels {
+                values: &pixels.values[..full],
+                above: &pixels.above[..full],
+                du: &pixels.du[..full],
+                du2: &pixels.du2[..full],
+            };
+            let bits = |sums: LaneSums| sums.map(|lane| lane.map(f32::to_bits));
+            assert_eq!(
+                bits(lane_sums::<T, true>(pixels, test)),
+                bits(lane_sums_neon::<T, true>(pixels, test))
+            );
+            assert_eq!(
+                bits(lane_sums::<T, false>(pixels, test)),
+                bits(lane_sums_neon::<T, false>(pixels, test))
+            );
+        }
+        let mut compared = 0;
+        for (values, above, du, test) in random_rows(24) {
+            let du2: Vec<f32> = du.iter().map(|d| d * d).collect();
+            same(
+                RowPixels {
+                    values: &values,
+                    above: &above,
+                    du: &du,
+                    du2: &du2,
+                },
+                &test,
+            );
+            // The same readings as metric values, untrusted ones infinite and
+            // one in seven NaN.
+            let metric = |raw: &[u16]| -> Vec<f32> {
+                raw.iter()
+                    .enumerate()
+                    .map(|(k, &r)| match (r, k % 7) {
+                        (2047, _) => f32::INFINITY,
+                        (_, 3) => f32::NAN,
+                        (r, _) => f32::from(r) * 1e-3,
+                    })
+                    .collect()
+            };
+            let scaled = RowTest {
+                base: test.base * 1e-3,
+                base_above: test.base_above * 1e-3,
+                cu: test.cu * 1e-3,
+                band: test.band * 1e-3,
+                guard: (test.guard.0 * 1e-3, 0.4, 1.09),
+            };
+            same(
+                RowPixels {
+                    values: &metric(&values),
+                    above: &metric(&above),
+                    du: &du,
+                    du2: &du2,
+                },
+                &scaled,
+            );
+            compared += values.len();
+        }
+        assert!(compared > 50_000, "{compared} pixels compared");
+    }
     use crate::sensor::DepthModel;
 
     fn intrinsics() -> Intrinsics {

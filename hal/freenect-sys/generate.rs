@@ -48,7 +48,27 @@ pub fn find_header() -> Result<PathBuf, String> {
 /// are modules of constants, so a value the header does not list is no
 /// undefined behaviour.
 pub fn generate(header: &Path) -> Result<String, String> {
-    let bindings = bindgen::Builder::default()
+    generate_for(header, None)
+}
+
+/// Another target's C ABI, for clang: its triple and the sysroot holding its
+/// C library's headers.
+pub struct CrossTarget<'a> {
+    pub clang_triple: &'a str,
+    pub sysroot: &'a Path,
+}
+
+/// The text bindgen makes from `header` for the host, or for `cross`: the
+/// same configuration, clang told the other target, so that the layout
+/// assertions it writes are that target's sizes and alignments.
+pub fn generate_for(header: &Path, cross: Option<&CrossTarget<'_>>) -> Result<String, String> {
+    let mut builder = bindgen::Builder::default();
+    if let Some(cross) = cross {
+        builder = builder
+            .clang_arg(format!("--target={}", cross.clang_triple))
+            .clang_arg(format!("--sysroot={}", cross.sysroot.display()));
+    }
+    let bindings = builder
         .header(header.to_string_lossy())
         .allowlist_function("freenect_.*")
         .allowlist_type("freenect_.*")

@@ -51,6 +51,39 @@ use groundcal_calib::depth::{DepthModel, Intrinsics};
 /// `libfreenect.so`. The dynamic loader searches its usual directories.
 pub const DEFAULT_LIBRARIES: &[&str] = freenect_sys::DEFAULT_SONAMES;
 
+/// Where libfreenect's fakenect build (the library that plays a dump back)
+/// may be installed for this program's own architecture, most likely first:
+/// `$GROUNDCAL_FAKENECT_LIB_DIR` when set, else Debian's multiarch directory
+/// (`libfreenect0.5` is co-installable, so an arm64 program on an x86-64
+/// machine must not pick the x86-64 library), then the plain ones.
+pub fn fakenect_library_candidates() -> Vec<PathBuf> {
+    let dirs: Vec<PathBuf> = match std::env::var_os("GROUNDCAL_FAKENECT_LIB_DIR") {
+        Some(dir) => vec![PathBuf::from(dir)],
+        None => {
+            let multiarch = format!("{}-linux-gnu", std::env::consts::ARCH);
+            ["/usr/lib", "/usr/local/lib"]
+                .iter()
+                .flat_map(|lib| {
+                    [
+                        Path::new(lib).join(&multiarch).join("fakenect"),
+                        Path::new(lib).join("fakenect"),
+                    ]
+                })
+                .collect()
+        }
+    };
+    dirs.into_iter()
+        .flat_map(|dir| DEFAULT_LIBRARIES.iter().map(move |name| dir.join(name)))
+        .collect()
+}
+
+/// The first of [`fakenect_library_candidates`] that exists.
+pub fn find_fakenect_library() -> Option<PathBuf> {
+    fakenect_library_candidates()
+        .into_iter()
+        .find(|path| path.is_file())
+}
+
 /// The tilt motor's range, degrees either side of level.
 pub const MAX_TILT_DEG: f64 = 27.0;
 

@@ -165,21 +165,7 @@ const CHILD_LIB_ENV: &str = "GROUNDCAL_HAL_TEST_FAKENECT_LIB";
 
 /// fakenect's library, or `None` after a loud warning (a failure under CI).
 fn fakenect_library() -> Option<std::path::PathBuf> {
-    let mut dirs = Vec::new();
-    if let Some(dir) = std::env::var_os("GROUNDCAL_FAKENECT_LIB_DIR") {
-        dirs.push(std::path::PathBuf::from(dir));
-    } else {
-        for lib in ["/usr/lib", "/usr/local/lib"] {
-            dirs.push(Path::new(lib).join("fakenect"));
-            if let Ok(entries) = std::fs::read_dir(lib) {
-                dirs.extend(entries.flatten().map(|e| e.path().join("fakenect")));
-            }
-        }
-    }
-    let found = dirs
-        .into_iter()
-        .flat_map(|d| [d.join("libfreenect.so.0.5"), d.join("libfreenect.so")])
-        .find(|p| p.is_file());
+    let found = super::find_fakenect_library();
     if found.is_none() {
         let message = format!(
             "libfreenect's fakenect library is not installed: install the Debian package \
