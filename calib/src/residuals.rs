@@ -167,24 +167,13 @@ fn cell_sums<T: FitValue>(
     let r = f32x8::select(keep, r, zero);
     let k = k * one;
     (
-        lanes_sum(one),
-        lanes_sum(r),
-        lanes_sum(r * r),
-        lanes_sum(k),
-        lanes_sum(k * k),
-        lanes_sum(k * r),
+        one.reduce_add(),
+        r.reduce_add(),
+        (r * r).reduce_add(),
+        k.reduce_add(),
+        (k * k).reduce_add(),
+        (k * r).reduce_add(),
     )
-}
-
-/// The sum of the eight lanes, pairwise in a fixed order. `wide`'s
-/// `reduce_add` adds them in whatever order suits the processor's
-/// instructions (x86-64's shuffles and NEON's pairwise adds differ), which
-/// made the pattern's plane part differ between the two in the 8th digit;
-/// in this order both give the same bits.
-#[inline(always)]
-fn lanes_sum(v: f32x8) -> f32 {
-    let a = v.to_array();
-    ((a[0] + a[4]) + (a[2] + a[6])) + ((a[1] + a[5]) + (a[3] + a[7]))
 }
 
 impl GroundResiduals {
