@@ -42,39 +42,87 @@ pub fn is_temporary(file_name: &str) -> bool {
     file_name.starts_with('.') && file_name.contains(TEMPORARY_MARK)
 }
 
-/// Writes `bytes` to `path` atomically and durably (see the module), creating
-/// the directory if needed. On failure the temporary file is removed and the
-/// old file, if any, is untouched.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
-    static WRITES: AtomicU64 = AtomicU64::new(0);
-    let dir = match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => dir,
-        _ => Path::new("."),
-    };
-    fs::create_dir_all(dir).map_err(failed(dir, "create the directory"))?;
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
-    let temporary = dir.join(format!(
-        ".{name}{TEMPORARY_MARK}{}-{}",
-        std::process::id(),
-        WRITES.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut file = OpenOptions::new()
+/// A file being written whole or not at all (see the module), for outputs
+/// written piece by piece (an MCAP file of a whole session): write to
+/// [`AtomicFile::file`], then [`AtomicFile::commit`]. Dropped without a
+/// commit, it removes what it wrote and leaves the old file, if any.
+pub struct AtomicFile {
+    path: PathBuf,
+    dir: PathBuf,
+    temporary: PathBuf,
+    file: File,
+    committed: bool,
+}
+
+impl AtomicFile {
+    /// Starts a write of `path`, creating its directory if needed.
+    pub fn create(path: &Path) -> Result<Self, FileError> {
+        static WRITES: AtomicU64 = AtomicU64::new(0);
+        let dir = match path.parent() {
+            Some(dir) if !dir.as_os_str().is_empty() => dir,
+            _ => Path::new("."),
+        };
+        fs::create_dir_all(dir).map_err(failed(dir, "create the directory"))?;
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
+        let temporary = dir.join(format!(
+            ".{name}{TEMPORARY_MARK}{}-{}",
+            std::process::id(),
+            WRITES.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = OpenOptions::new()
             .write(true)
             .create_new(true)
             .open(&temporary)
             .map_err(failed(&temporary, "create"))?;
-        file.write_all(bytes).map_err(failed(&temporary, "write"))?;
-        file.sync_all().map_err(failed(&temporary, "sync"))?;
-        fs::rename(&temporary, path).map_err(failed(path, "replace"))?;
-        File::open(dir)
-            .and_then(|d| d.sync_all())
-            .map_err(failed(dir, "sync the directory"))
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&temporary);
+        Ok(Self {
+            path: path.to_path_buf(),
+            dir: dir.to_path_buf(),
+            temporary,
+            file,
+            committed: false,
+        })
     }
-    result
+
+    /// The temporary file to write to.
+    pub fn file(&mut self) -> &mut File {
+        &mut self.file
+    }
+
+    /// The error of a write to [`AtomicFile::file`], naming the file.
+    pub fn write_error(&self, source: std::io::Error) -> FileError {
+        failed(&self.temporary, "write")(source)
+    }
+
+    /// Syncs the file and puts it in place of the old one.
+    pub fn commit(mut self) -> Result<(), FileError> {
+        self.file
+            .sync_all()
+            .map_err(failed(&self.temporary, "sync"))?;
+        fs::rename(&self.temporary, &self.path).map_err(failed(&self.path, "replace"))?;
+        self.committed = true;
+        File::open(&self.dir)
+            .and_then(|d| d.sync_all())
+            .map_err(failed(&self.dir, "sync the directory"))
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = fs::remove_file(&self.temporary);
+        }
+    }
+}
+
+/// Writes `bytes` to `path` atomically and durably (see the module), creating
+/// the directory if needed. On failure the temporary file is removed and the
+/// old file, if any, is untouched.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
+    let mut file = AtomicFile::create(path)?;
+    file.file()
+        .write_all(bytes)
+        .map_err(|e| file.write_error(e))?;
+    file.commit()
 }
 
 /// Why a bounded read failed.

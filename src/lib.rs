@@ -40,6 +40,7 @@ pub mod design;
 pub mod export;
 pub mod files;
 pub mod hardware;
+pub mod mcap_session;
 pub mod output;
 pub mod recording;
 pub mod replay;

@@ -95,6 +95,10 @@ enum Command {
         /// Write a self-contained HTML report (index.html) into this directory.
         #[arg(long, value_name = "DIR")]
         report: Option<PathBuf>,
+        /// Write the session as an MCAP file (ROS 2 messages) for Foxglove and
+        /// ros2 bag: the frames, the body and feet, the mount, the ground found.
+        #[arg(long, value_name = "FILE")]
+        mcap: Option<PathBuf>,
         /// Worker threads (default: every core). The result does not depend on it.
         #[arg(long)]
         threads: Option<usize>,
@@ -334,6 +338,7 @@ fn run(args: Args) -> ExitStatus {
             json,
             nominal_mount,
             report,
+            mcap,
             threads,
             ground_fit,
             config,
@@ -370,10 +375,16 @@ fn run(args: Args) -> ExitStatus {
                 noise,
                 verify,
                 depth_scale: depth_scale.unwrap_or(configured_scale),
+                ground_points: mcap.is_some(),
                 ..Default::default()
             };
             options.pose.plane.method = ground_fit;
-            cli::replay::run(&dir, json, report.as_deref(), &options)
+            let outputs = cli::replay::Outputs {
+                json,
+                report: report.as_deref(),
+                mcap: mcap.as_deref(),
+            };
+            cli::replay::run(&dir, &outputs, &options)
         }
         Command::Calibrate {
             config,

@@ -7,9 +7,12 @@
 //! every step is deterministic, so the result is bit-identical from run to run
 //! and for any number of threads.
 
+use nalgebra::Vector3;
 use rayon::prelude::*;
 
 use crate::calib::calibrate::CalibrationSettings;
+use crate::calib::geometry::Transform;
+use crate::calib::ground_view;
 use crate::calib::observe::{BodyEstimate, ObserveSettings, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::quality::Gates;
@@ -40,6 +43,9 @@ pub struct ReplayOptions {
     pub verify: crate::calib::verify::VerifySettings,
     /// The depth scale, estimated (the default) or given.
     pub depth_scale: crate::calib::solve::DepthScaleSetting,
+    /// Keep, per pose, the readings the fit took for the ground (one per
+    /// 8 × 8 pixels of the first frame), for `--mcap`.
+    pub ground_points: bool,
 }
 
 /// The outcome of a replay.
@@ -52,6 +58,11 @@ pub struct Replay {
     pub input_digest: String,
     /// Depth frames read.
     pub frames: usize,
+    /// Per pose of the recording, in its order: the body pose from the feet.
+    pub ground_from_robot: Vec<Option<Transform>>,
+    /// Per pose: the readings taken for the ground, in the sensor frame
+    /// (when [`ReplayOptions::ground_points`] asked for them).
+    pub ground_points: Vec<Option<Vec<Vector3<f64>>>>,
 }
 
 /// A worker's memory, reused from pose to pose: a pose's frames take a few
@@ -73,6 +84,7 @@ struct PoseOutcome {
     index: u32,
     observation: Result<Observation, String>,
     frame_digests: Vec<[u8; 32]>,
+    ground_points: Option<Vec<Vector3<f64>>>,
 }
 
 fn process_pose(
@@ -81,12 +93,14 @@ fn process_pose(
     pose: &crate::recording::poses::PoseRecord,
     body: &Result<BodyEstimate, String>,
     buffers: &mut WorkerBuffers,
+    keep_ground_points: bool,
 ) -> Result<PoseOutcome, InputError> {
     let poses_path = recording.dir.join("poses.jsonl");
     let failed = |reason: String| PoseOutcome {
         index: pose.index,
         observation: Err(reason),
         frame_digests: Vec::new(),
+        ground_points: None,
     };
     if pose.depth_frames.is_empty() {
         return Ok(failed(
@@ -114,13 +128,22 @@ fn process_pose(
         frame_digests.push(*blake3::hash(file).as_bytes());
     }
     let frames: Vec<&[u16]> = buffers.pixels[..count].iter().map(Vec::as_slice).collect();
-    let observation = processor
-        .observe(pose.index, body, &frames, &mut buffers.fit)
+    let fitted = processor
+        .observe_with_fit(pose.index, body, &frames, &mut buffers.fit)
         .map_err(|e| format!("no ground found: {e}"));
+    let ground_points = match (&fitted, keep_ground_points) {
+        (Ok((_, fit)), true) => Some(ground_view::ground_points(
+            frames[0],
+            processor.camera(),
+            fit,
+        )),
+        _ => None,
+    };
     Ok(PoseOutcome {
         index: pose.index,
-        observation,
+        observation: fitted.map(|(observation, _)| observation),
         frame_digests,
+        ground_points,
     })
 }
 
@@ -133,6 +156,8 @@ pub struct ObservedRecording {
     pub frames: usize,
     /// A note when no mount tells which plane is the ground.
     pub prior_note: Option<String>,
+    /// Per pose, the readings taken for the ground (when asked for).
+    pub ground_points: Vec<Option<Vec<Vector3<f64>>>>,
 }
 
 /// Per pose of a recording, the body pose from the feet, the ground from the
@@ -144,6 +169,7 @@ pub fn observe_recording(
     settings: ObserveSettings,
     threads: Option<usize>,
     correction: Option<&crate::calib::distortion::DepthCorrection>,
+    keep_ground_points: bool,
 ) -> Result<ObservedRecording, InputError> {
     let session = &recording.session;
     let session_path = recording.dir.join("session.json");
@@ -176,7 +202,14 @@ pub fn observe_recording(
             .with_max_len(1)
             .map(|(pose, body)| {
                 BUFFERS.with_borrow_mut(|buffers| {
-                    process_pose(recording, &processor, pose, body, buffers)
+                    process_pose(
+                        recording,
+                        &processor,
+                        pose,
+                        body,
+                        buffers,
+                        keep_ground_points,
+                    )
                 })
             })
             .collect()
@@ -212,12 +245,14 @@ pub fn observe_recording(
     let input_digest = hasher.finalize().to_hex().to_string();
 
     let mut poses = Vec::with_capacity(outcomes.len());
-    for ((outcome, record), body) in outcomes.into_iter().zip(&recording.poses).zip(&bodies) {
+    let mut ground_points = Vec::with_capacity(outcomes.len());
+    for ((mut outcome, record), body) in outcomes.into_iter().zip(&recording.poses).zip(&bodies) {
         let states = record
             .accelerometer
             .iter()
             .map(|name| recording.read_tilt_state(name).map(|raw| raw.state()))
             .collect::<Result<Vec<_>, InputError>>()?;
+        ground_points.push(outcome.ground_points.take());
         poses.push(VisitedPose {
             index: outcome.index,
             ground_from_robot: body.as_ref().ok().map(|b| b.ground_from_robot),
@@ -230,6 +265,7 @@ pub fn observe_recording(
         input_digest,
         frames,
         prior_note: processor.prior_note(),
+        ground_points,
     })
 }
 
@@ -238,7 +274,14 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     let session = &recording.session;
     let nominal = options.nominal_mount.or(session.nominal_mount);
     // A replay finds the depth pattern afresh, as the calibration did.
-    let observed = observe_recording(recording, nominal, options.pose, options.threads, None)?;
+    let observed = observe_recording(
+        recording,
+        nominal,
+        options.pose,
+        options.threads,
+        None,
+        options.ground_points,
+    )?;
     let mut observations = Vec::new();
     let mut failed = Vec::new();
     for pose in &observed.poses {
@@ -312,5 +355,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         result,
         input_digest: observed.input_digest,
         frames: observed.frames,
+        ground_from_robot: observed.poses.iter().map(|p| p.ground_from_robot).collect(),
+        ground_points: observed.ground_points,
     })
 }

@@ -8,6 +8,7 @@
 //! fit's own rejection band ([`GroundFit::holds`]), so the colours are the
 //! fit's choice, not a second opinion.
 
+use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::plane::GroundFit;
@@ -35,26 +36,17 @@ impl GroundView {
     /// The picture of `frame` (raw values of `camera`'s encoding), coloured
     /// by `fit` when a ground was found, or with the reason it was not.
     pub fn of(frame: &[u16], camera: &DepthCamera, fit: Result<&GroundFit, &str>) -> Self {
-        let intrinsics = camera.intrinsics();
-        let image_width = intrinsics.width;
-        let rows = (frame.len() / image_width.max(1)).min(intrinsics.height);
-        let width = image_width / CELL_PIXELS;
-        let height = rows / CELL_PIXELS;
+        let (width, height) = cells(frame, camera);
         let mut depth_cm = Vec::with_capacity(width * height);
         let mut ground = Vec::with_capacity(width * height);
-        for row in 0..height {
-            let v = row * CELL_PIXELS + CELL_PIXELS / 2;
-            for column in 0..width {
-                let u = column * CELL_PIXELS + CELL_PIXELS / 2;
-                let point = camera.point_at(u, v, frame[v * image_width + u]);
-                let cm = point.map_or(0.0, |p| (p.x * 100.0).round().clamp(1.0, 65535.0));
-                depth_cm.push(cm as u16);
-                let on_ground = match (point, fit) {
-                    (Some(p), Ok(fit)) => fit.holds(&p),
-                    _ => false,
-                };
-                ground.push(u8::from(on_ground));
-            }
+        for point in cell_readings(frame, camera) {
+            let cm = point.map_or(0.0, |p| (p.x * 100.0).round().clamp(1.0, 65535.0));
+            depth_cm.push(cm as u16);
+            let on_ground = match (point, fit) {
+                (Some(p), Ok(fit)) => fit.holds(&p),
+                _ => false,
+            };
+            ground.push(u8::from(on_ground));
         }
         GroundView {
             width,
@@ -74,4 +66,36 @@ impl GroundView {
     pub fn cells_with_depth(&self) -> usize {
         self.depth_cm.iter().filter(|d| **d > 0).count()
     }
+}
+
+/// Cells across and down in `frame`.
+fn cells(frame: &[u16], camera: &DepthCamera) -> (usize, usize) {
+    let image_width = camera.intrinsics().width;
+    let rows = (frame.len() / image_width.max(1)).min(camera.intrinsics().height);
+    (image_width / CELL_PIXELS, rows / CELL_PIXELS)
+}
+
+/// Each cell's centre reading, row by row, in the sensor frame (metres).
+fn cell_readings<'a>(
+    frame: &'a [u16],
+    camera: &'a DepthCamera,
+) -> impl Iterator<Item = Option<Vector3<f64>>> + 'a {
+    let image_width = camera.intrinsics().width;
+    let (width, height) = cells(frame, camera);
+    (0..height).flat_map(move |row| {
+        let v = row * CELL_PIXELS + CELL_PIXELS / 2;
+        (0..width).map(move |column| {
+            let u = column * CELL_PIXELS + CELL_PIXELS / 2;
+            camera.point_at(u, v, frame[v * image_width + u])
+        })
+    })
+}
+
+/// The readings of the picture's ground cells as points of the sensor frame
+/// (metres): the ground the fit found, one reading per cell, for a 3D view.
+pub fn ground_points(frame: &[u16], camera: &DepthCamera, fit: &GroundFit) -> Vec<Vector3<f64>> {
+    cell_readings(frame, camera)
+        .flatten()
+        .filter(|p| fit.holds(p))
+        .collect()
 }

@@ -7,15 +7,26 @@ use crate::recording::Recording;
 use crate::replay::{replay, ReplayOptions};
 use crate::report::{write_report, Provenance};
 
+/// What a replay writes besides its result.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Outputs<'a> {
+    /// One JSON document on stdout.
+    pub json: bool,
+    /// The HTML report's directory.
+    pub report: Option<&'a Path>,
+    /// The session as an MCAP file.
+    pub mcap: Option<&'a Path>,
+}
+
 /// Runs the command; the result goes to stdout, messages to stderr, and the
-/// HTML report to `report_dir` if given.
-pub fn run(
-    dir: &Path,
-    json: bool,
-    report_dir: Option<&Path>,
-    options: &ReplayOptions,
-) -> ExitStatus {
+/// HTML report and the MCAP file where `outputs` say.
+pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus {
+    let (json, report_dir) = (outputs.json, outputs.report);
     match crate::tilts::read_tilts_file(dir) {
+        Ok(Some(_)) if outputs.mcap.is_some() => {
+            eprintln!("groundcal replay: {}: a recording at several tilts cannot be written as one MCAP file yet; replay each tilt's directory with --mcap", dir.display());
+            return ExitStatus::BadInput;
+        }
         Ok(Some(tilts)) => return replay_tilts(dir, &tilts, json, options),
         Ok(None) => {}
         Err(e) => {
@@ -46,6 +57,23 @@ pub fn run(
                 // The error names the file and what failed on it.
                 eprintln!("groundcal replay: cannot write the report: {e}");
                 return ExitStatus::RuntimeFailure;
+            }
+        }
+    }
+    if let Some(path) = outputs.mcap {
+        match crate::mcap_session::write_replay(path, &recording, &outcome) {
+            Ok(summary) => eprintln!(
+                "groundcal replay: MCAP written to {} ({} messages, {:.1} MB)",
+                path.display(),
+                summary.messages.values().sum::<u64>(),
+                summary.bytes as f64 / 1e6
+            ),
+            Err(e) => {
+                eprintln!("groundcal replay: {e}");
+                return match e {
+                    crate::mcap_session::McapError::Input(_) => ExitStatus::BadInput,
+                    _ => ExitStatus::RuntimeFailure,
+                };
             }
         }
     }

@@ -97,6 +97,7 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
             pose_settings,
             None,
             calibration.depth_correction.as_deref(),
+            false,
         ) {
             Ok(o) => o,
             Err(e) => {

@@ -1,0 +1,128 @@
+//! The session as an MCAP file, read back by the MCAP project's own Python
+//! packages (`mcap`, `mcap-ros2-support`; tests/mcap/check_session.py), not
+//! by groundcal's code: every message decodes with its schema, the counts
+//! match the recording, the 16UC1 images are the depth model applied to the
+//! raw frames, and the TF chain gives the calibrated mount.
+
+mod common;
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use common::{groundcal, prerequisite_missing, root, shared, temp_dir};
+
+/// The Python with the MCAP packages: `target/mcap-python` (scripts/test
+/// makes it), or `GROUNDCAL_MCAP_PYTHON`.
+fn mcap_python(test: &str) -> Option<PathBuf> {
+    let python = std::env::var_os("GROUNDCAL_MCAP_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target/mcap-python/bin/python"));
+    let works = Command::new(&python)
+        .args(["-c", "import mcap, mcap_ros2"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if works {
+        return Some(python);
+    }
+    prerequisite_missing(
+        test,
+        &format!(
+            "{} cannot import mcap and mcap_ros2; scripts/test installs them: \
+             python3 -m venv target/mcap-python && target/mcap-python/bin/pip install -r tests/mcap/requirements.txt",
+            python.display()
+        ),
+    );
+    None
+}
+
+fn check_with_python(
+    python: &PathBuf,
+    mcap: &std::path::Path,
+    recording: &std::path::Path,
+    result: &std::path::Path,
+) -> serde_json::Value {
+    let out = Command::new(python)
+        .arg(root().join("tests/mcap/check_session.py"))
+        .args([mcap, recording, result])
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "the independent reader refused the file:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("check_session.py prints one JSON object")
+}
+
+#[test]
+fn the_samples_replay_as_mcap_reads_back_in_the_mcap_projects_own_reader() {
+    let test = "the_samples_replay_as_mcap_reads_back_in_the_mcap_projects_own_reader";
+    let Some(python) = mcap_python(test) else {
+        return;
+    };
+    let work = temp_dir("mcap-sample");
+    let sample = shared().join("data/sample-12");
+    let mcap = work.join("sample-12.mcap");
+    let (code, stdout, stderr) = groundcal(&[
+        "replay",
+        sample.to_str().unwrap(),
+        "--json",
+        "--mcap",
+        mcap.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "replay with --mcap: {stderr}");
+    assert!(stderr.contains("MCAP written to"), "{stderr}");
+    let result = work.join("result.json");
+    std::fs::write(&result, &stdout).unwrap();
+    let report = check_with_python(&python, &mcap, &sample, &result);
+    let counts = &report["counts"];
+    let frames: usize = std::fs::read_to_string(sample.join("poses.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|line| {
+            serde_json::from_str::<serde_json::Value>(line).unwrap()["depth_frames"]
+                .as_array()
+                .unwrap()
+                .len()
+        })
+        .sum();
+    assert!(frames > 0);
+    assert_eq!(report["frames"], frames, "{report}");
+    assert_eq!(report["images_compared"], frames, "{report}");
+    assert_eq!(counts["/tf"], 12, "{report}");
+    assert_eq!(counts["/groundcal/pose_fit"], 12, "{report}");
+    assert_eq!(counts["/groundcal/ground/inliers"], 12, "{report}");
+    assert_eq!(report["planes_compared"], 12, "{report}");
+    assert!(report["mount_error"].as_f64().unwrap() < 1e-6, "{report}");
+    assert!(report["chunks"].as_u64().unwrap() > 1, "{report}");
+    // Nothing else was left in the directory: no temporary file.
+    let mut names: Vec<String> = std::fs::read_dir(&*work)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["result.json", "sample-12.mcap"]);
+}
+
+#[test]
+fn an_mcap_that_cannot_be_written_leaves_nothing_and_says_where() {
+    let work = temp_dir("mcap-unwritable");
+    let sample = shared().join("data/sample-12");
+    // A directory where the file should go.
+    let target = work.join("taken.mcap");
+    std::fs::create_dir(&target).unwrap();
+    let (code, _, stderr) = groundcal(&[
+        "replay",
+        sample.to_str().unwrap(),
+        "--mcap",
+        target.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(stderr.contains("taken.mcap"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(&*work).unwrap().collect();
+    assert_eq!(
+        left.len(),
+        1,
+        "only the directory that was in the way: {left:?}"
+    );
+}
