@@ -25,7 +25,6 @@ use crate::calib::sensor::{DepthModel, Intrinsics};
 use crate::export::{base_link_from_camera_optical, base_link_from_robot, quaternion_xyzw};
 use crate::files::{AtomicFile, FileError};
 use crate::output::{PlaneJson, ResultJson};
-use crate::recording::dump::parse_entry_name;
 use crate::recording::{InputError, Recording};
 use crate::replay::Replay;
 use groundcal_ros::msg::{
@@ -248,13 +247,20 @@ impl<W: Write + Seek> SessionWriter<W> {
         let session = &recording.session;
         let intrinsics = session.kinect.intrinsics;
         let millimetres = millimetre_table(&session.kinect.depth_model);
+        // The capture times of INDEX.txt's names, parsed when the recording
+        // was opened (every frame a pose names is there).
+        let times: std::collections::HashMap<&str, f64> = recording
+            .index
+            .iter()
+            .map(|entry| (entry.name.as_str(), entry.time))
+            .collect();
         let stamps: Vec<Vec<u64>> = recording
             .poses
             .iter()
             .map(|pose| {
                 pose.depth_frames
                     .iter()
-                    .map(|name| parse_entry_name(name).map_or(0, |e| seconds_to_nanos(e.time)))
+                    .map(|name| times.get(name.as_str()).map_or(0, |&t| seconds_to_nanos(t)))
                     .collect()
             })
             .collect();

@@ -97,15 +97,6 @@ impl CdrWriter {
         self.bytes.extend_from_slice(value);
     }
 
-    /// A `uint8[]` of `u16` values, little-endian (a 16-bit image).
-    pub fn u16_sequence_as_bytes(&mut self, values: impl ExactSizeIterator<Item = u16>) {
-        self.length(2 * values.len());
-        self.bytes.reserve(2 * values.len());
-        for value in values {
-            self.bytes.extend_from_slice(&value.to_le_bytes());
-        }
-    }
-
     /// A `float64[]`.
     pub fn f64_sequence(&mut self, values: &[f64]) {
         self.length(values.len());
