@@ -143,6 +143,10 @@ enum Command {
         /// Write everything as a recording into this new directory, as it goes.
         #[arg(long, value_name = "DIR")]
         record: Option<PathBuf>,
+        /// Also write the session as an MCAP file (ROS 2 messages) for
+        /// Foxglove and ros2 bag, once the calibration is solved.
+        #[arg(long, value_name = "FILE")]
+        record_mcap: Option<PathBuf>,
         /// One JSON document on stdout (progress stays on stderr).
         #[arg(long)]
         json: bool,
@@ -390,6 +394,7 @@ fn run(args: Args) -> ExitStatus {
             config,
             hardware,
             record,
+            record_mcap,
             json,
             ground_fit,
             depth_scale,
@@ -399,6 +404,7 @@ fn run(args: Args) -> ExitStatus {
                 config,
                 selection: hardware.into(),
                 record,
+                record_mcap,
                 json,
                 ground_fit,
                 depth_scale,

@@ -126,3 +126,68 @@ fn an_mcap_that_cannot_be_written_leaves_nothing_and_says_where() {
         "only the directory that was in the way: {left:?}"
     );
 }
+
+#[test]
+fn a_live_simulated_calibration_writes_its_session_as_mcap() {
+    let test = "a_live_simulated_calibration_writes_its_session_as_mcap";
+    let Some(python) = mcap_python(test) else {
+        return;
+    };
+    let work = temp_dir("mcap-live");
+    let config = common::sim_config(&work, &[]);
+    let (recording, mcap) = (work.join("rec"), work.join("live.mcap"));
+    let (code, stdout, stderr) = groundcal(&[
+        "calibrate",
+        "--config",
+        config.to_str().unwrap(),
+        "--record",
+        recording.to_str().unwrap(),
+        "--record-mcap",
+        mcap.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "calibrate with --record-mcap: {stderr}");
+    assert!(stderr.contains("MCAP written to"), "{stderr}");
+    let result = work.join("result.json");
+    std::fs::write(&result, &stdout).unwrap();
+    let report = check_with_python(&python, &mcap, &recording, &result);
+    let poses = serde_json::from_str::<serde_json::Value>(&stdout).unwrap()["poses"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert_eq!(poses, 52);
+    let counts = &report["counts"];
+    // Two frames a pose (config/sim.toml), each compared with the depth model.
+    assert_eq!(report["frames"], 2 * poses, "{report}");
+    assert_eq!(report["images_compared"], 2 * poses, "{report}");
+    for topic in ["/tf", "/groundcal/pose_fit", "/groundcal/ground/inliers"] {
+        assert_eq!(counts[topic], poses, "{topic}: {report}");
+    }
+    assert_eq!(report["planes_compared"], poses, "{report}");
+    assert!(report["mount_error"].as_f64().unwrap() < 1e-6, "{report}");
+}
+
+#[test]
+fn record_mcap_alone_keeps_no_recording_behind() {
+    let work = temp_dir("mcap-live-alone");
+    let config = common::sim_config(&work, &[]);
+    let mcap = work.join("alone.mcap");
+    let (code, _, stderr) = groundcal(&[
+        "calibrate",
+        "--config",
+        config.to_str().unwrap(),
+        "--record-mcap",
+        mcap.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!stderr.contains("recording written"), "{stderr}");
+    let size = std::fs::metadata(&mcap).expect("the MCAP file").len();
+    assert!(size > 1_000_000, "{size} bytes");
+    let mut names: Vec<String> = std::fs::read_dir(&*work)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| !name.ends_with(".toml") && !name.starts_with("token"))
+        .collect();
+    names.sort();
+    assert_eq!(names, ["alone.mcap"], "the temporary recording is gone");
+}

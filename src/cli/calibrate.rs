@@ -18,6 +18,8 @@ pub struct CalibrateOptions {
     pub config: Option<PathBuf>,
     pub selection: Selection,
     pub record: Option<PathBuf>,
+    /// Also write the session as an MCAP file, once solved.
+    pub record_mcap: Option<PathBuf>,
     pub json: bool,
     /// Overrides `calibration.ground_fit`.
     pub ground_fit: Option<GroundFitMethod>,
@@ -227,11 +229,18 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             _ => None,
         };
         if tilts.len() < 2 {
+            // The MCAP file is written from the session's recording: the
+            // one asked for, or a temporary one beside the file.
+            let recording = match (&options.record, &options.record_mcap) {
+                (Some(dir), _) => Some(RecordingDir::Kept(dir.clone())),
+                (None, Some(mcap)) => Some(RecordingDir::temporary_beside(mcap)),
+                (None, None) => None,
+            };
             let plan = match Plan::from_config(
                 &config,
                 schedule,
                 replay.as_ref(),
-                options.record.clone(),
+                recording.as_ref().map(|r| r.path().to_path_buf()),
             ) {
                 Ok(p) => p,
                 Err(e) => {
@@ -239,12 +248,31 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
                     return ExitStatus::BadInput;
                 }
             };
-            return match calibrate_once(&mut sensor, &mut controller, &plan).await {
-                Ok(result) => finish("calibrate", &result, options.json),
-                Err(status) => status,
+            let temporary = matches!(recording, Some(RecordingDir::Temporary(_)));
+            let result = match calibrate_once(&mut sensor, &mut controller, &plan, !temporary).await {
+                Ok(result) => result,
+                Err(status) => return status,
+            };
+            let written = match (&options.record_mcap, &recording) {
+                (Some(mcap), Some(recording)) => {
+                    write_mcap(mcap, recording.path(), &result, &config)
+                }
+                _ => Ok(()),
+            };
+            let status = finish("calibrate", &result, options.json);
+            return match written {
+                Ok(()) => status,
+                Err(e) => {
+                    eprintln!("groundcal calibrate: {e}");
+                    ExitStatus::RuntimeFailure
+                }
             };
         }
         // Once per tilt, the same schedule; then the motor's model.
+        if options.record_mcap.is_some() {
+            eprintln!("groundcal calibrate: --record-mcap: a calibration at several tilts cannot be written as one MCAP file yet; --record DIR, then replay each tilt's directory with --mcap");
+            return ExitStatus::BadInput;
+        }
         if replay.is_some() {
             eprintln!("groundcal calibrate: --tilts needs a live or simulated sensor, not a played-back one (replay a recording made at several tilts instead)");
             return ExitStatus::BadInput;
@@ -277,7 +305,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
                 k + 1,
                 tilts.len()
             );
-            match calibrate_once(&mut sensor, &mut controller, &plan).await {
+            match calibrate_once(&mut sensor, &mut controller, &plan, true).await {
                 Ok(result) => results.push((*tilt, result)),
                 Err(status) => return status,
             }
@@ -293,12 +321,76 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
     })
 }
 
+/// Where a calibration is recorded: the directory asked for, or a temporary
+/// one (for `--record-mcap` alone) removed when dropped.
+enum RecordingDir {
+    Kept(PathBuf),
+    Temporary(PathBuf),
+}
+
+impl RecordingDir {
+    /// A new directory's name beside `file`, on its file system.
+    fn temporary_beside(file: &Path) -> Self {
+        let name = file
+            .file_name()
+            .map_or_else(|| "session".into(), |n| n.to_string_lossy().into_owned());
+        let dir = file.with_file_name(format!(".{name}.recording-{}", std::process::id()));
+        RecordingDir::Temporary(dir)
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            RecordingDir::Kept(dir) | RecordingDir::Temporary(dir) => dir,
+        }
+    }
+}
+
+impl Drop for RecordingDir {
+    fn drop(&mut self) {
+        if let RecordingDir::Temporary(dir) = self {
+            // Best effort: it may never have been created.
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
+}
+
+/// The calibrated session as an MCAP file: the recording's frames and body
+/// poses, the live result, and the ground each pose's fit took (fitted again
+/// from the recording with the live run's settings).
+fn write_mcap(
+    path: &Path,
+    recording_dir: &Path,
+    result: &crate::output::ResultJson,
+    config: &Config,
+) -> Result<(), String> {
+    let recording = crate::recording::Recording::open(recording_dir).map_err(|e| e.to_string())?;
+    let mut options = crate::replay::ReplayOptions {
+        depth_scale: config.calibration.depth_scale,
+        ground_points: true,
+        ..Default::default()
+    };
+    options.pose.plane.method = config.calibration.ground_fit;
+    let mut replayed = crate::replay::replay(&recording, &options).map_err(|e| e.to_string())?;
+    replayed.result = result.clone();
+    let summary = crate::mcap_session::write_replay(path, &recording, &replayed)
+        .map_err(|e| e.to_string())?;
+    eprintln!(
+        "groundcal calibrate: MCAP written to {} ({} messages, {:.1} MB)",
+        path.display(),
+        summary.messages.values().sum::<u64>(),
+        summary.bytes as f64 / 1e6
+    );
+    Ok(())
+}
+
 /// One calibration session with its progress; the result, or the exit
-/// status of why there is none (said on stderr).
+/// status of why there is none (said on stderr). `announce_recording` says
+/// where the recording went (not for a temporary one).
 async fn calibrate_once(
     sensor: &mut hardware::Sensor,
     controller: &mut hardware::Controller,
     plan: &Plan,
+    announce_recording: bool,
 ) -> Result<crate::output::ResultJson, ExitStatus> {
     let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
     let progress = show_progress(receiver, "calibrate");
@@ -307,7 +399,7 @@ async fn calibrate_once(
     let aborted = progress.await.ok().flatten();
     match outcome {
         Ok(outcome) => {
-            if let Some(dir) = &outcome.recording {
+            if let Some(dir) = outcome.recording.as_ref().filter(|_| announce_recording) {
                 eprintln!(
                     "groundcal calibrate: recording written to {}",
                     dir.display()
