@@ -171,6 +171,8 @@ struct SessionWriter<W: Write + Seek> {
     channels: BTreeMap<&'static str, Channel>,
     /// The last stamp written, nanoseconds: poses without frames take it.
     last_stamp: u64,
+    /// One message's CDR, its memory reused (an image is 600 kB).
+    encoded: Vec<u8>,
 }
 
 impl<W: Write + Seek> SessionWriter<W> {
@@ -180,12 +182,17 @@ impl<W: Write + Seek> SessionWriter<W> {
             .library(format!("groundcal {}", env!("CARGO_PKG_VERSION")))
             .compression(None)
             .chunk_size(Some(CHUNK_BYTES))
+            // Every chunk carries the CRC of its records; a second CRC over
+            // the whole data section (optional in MCAP: 0) would read every
+            // byte again for nothing a reader lacks.
+            .calculate_data_section_crc(false)
             .create(sink)?;
         Ok(Self {
             mcap,
             result,
             channels: BTreeMap::new(),
             last_stamp: 0,
+            encoded: Vec::new(),
         })
     }
 
@@ -221,6 +228,20 @@ impl<W: Write + Seek> SessionWriter<W> {
         stamp: u64,
         message: &M,
     ) -> Result<(), mcap::McapError> {
+        let mut encoded = std::mem::take(&mut self.encoded);
+        message.encode_into(&mut encoded);
+        let written = self.write_encoded::<M>(topic, stamp, &encoded);
+        self.encoded = encoded;
+        written
+    }
+
+    /// A message of type `M` already encoded.
+    fn write_encoded<M: Message>(
+        &mut self,
+        topic: &'static str,
+        stamp: u64,
+        encoded: &[u8],
+    ) -> Result<(), mcap::McapError> {
         let id = self.channel::<M>(topic)?;
         let sequence = match self.channels.get_mut(topic) {
             Some(channel) => {
@@ -236,7 +257,24 @@ impl<W: Write + Seek> SessionWriter<W> {
             publish_time: stamp,
         };
         self.last_stamp = self.last_stamp.max(stamp);
-        self.mcap.write_to_known_channel(&header, &message.encode())
+        self.mcap.write_to_known_channel(&header, encoded)
+    }
+
+    /// A 16-bit depth image, encoded straight from its pixels.
+    fn write_depth(
+        &mut self,
+        topic: &'static str,
+        header: &Header,
+        (width, height): (u32, u32),
+        encoding: &str,
+        pixels: impl ExactSizeIterator<Item = u16>,
+    ) -> Result<(), mcap::McapError> {
+        let mut encoded = std::mem::take(&mut self.encoded);
+        msg::encode_u16_image(header, width, height, encoding, pixels, &mut encoded);
+        let stamp = header.stamp.nanos().unwrap_or(0);
+        let written = self.write_encoded::<Image>(topic, stamp, &encoded);
+        self.encoded = encoded;
+        written
     }
 
     fn write_recording(
@@ -303,21 +341,13 @@ impl<W: Write + Seek> SessionWriter<W> {
             for (name, &stamp) in pose.depth_frames.iter().zip(pose_stamps) {
                 recording.read_depth_frame_into(name, &mut file, &mut pixels)?;
                 let header = Header::new(stamp, frame::OPTICAL);
-                let (width, height) = (intrinsics.width as u32, intrinsics.height as u32);
-                self.write(
-                    topic::DEPTH_RAW,
-                    stamp,
-                    &Image::u16(header.clone(), width, height, "mono16", &pixels),
-                )?;
-                let depth: Vec<u16> = pixels
+                let size = (intrinsics.width as u32, intrinsics.height as u32);
+                let raw = pixels.iter().copied();
+                self.write_depth(topic::DEPTH_RAW, &header, size, "mono16", raw)?;
+                let depth = pixels
                     .iter()
-                    .map(|&raw| millimetres[usize::from(raw.min(2047))])
-                    .collect();
-                self.write(
-                    topic::DEPTH_MM,
-                    stamp,
-                    &Image::u16(header.clone(), width, height, "16UC1", &depth),
-                )?;
+                    .map(|&raw| millimetres[usize::from(raw.min(2047))]);
+                self.write_depth(topic::DEPTH_MM, &header, size, "16UC1", depth)?;
                 self.write(topic::CAMERA_INFO, stamp, &camera_info(header, &intrinsics))?;
             }
             let end = pose_stamps.last().copied().unwrap_or(start);

@@ -40,6 +40,15 @@ impl CdrWriter {
         Self { bytes }
     }
 
+    /// A writer that encodes into `buffer`, emptied first: its memory is
+    /// reused from message to message (a session writes a few hundred
+    /// images of 600 kB each).
+    pub fn reusing(mut buffer: Vec<u8>) -> Self {
+        buffer.clear();
+        buffer.extend_from_slice(&CDR_LE);
+        Self { bytes: buffer }
+    }
+
     /// The encoded message, header included.
     pub fn finish(self) -> Vec<u8> {
         self.bytes
@@ -95,6 +104,17 @@ impl CdrWriter {
     pub fn byte_sequence(&mut self, value: &[u8]) {
         self.length(value.len());
         self.bytes.extend_from_slice(value);
+    }
+
+    /// A `uint8[]` holding `values` as little-endian 16-bit words (an
+    /// image's pixels, written from them without a copy in between).
+    pub fn u16_le_byte_sequence(&mut self, values: impl ExactSizeIterator<Item = u16>) {
+        self.length(2 * values.len());
+        let start = self.bytes.len();
+        self.bytes.resize(start + 2 * values.len(), 0);
+        for (bytes, value) in self.bytes[start..].chunks_exact_mut(2).zip(values) {
+            bytes.copy_from_slice(&value.to_le_bytes());
+        }
     }
 
     /// A `float64[]`.

@@ -47,9 +47,16 @@ pub trait Message: Cdr {
 
     /// The message in CDR, header included.
     fn encode(&self) -> Vec<u8> {
-        let mut w = CdrWriter::new();
+        let mut buffer = Vec::new();
+        self.encode_into(&mut buffer);
+        buffer
+    }
+
+    /// [`Message::encode`] into `buffer`, emptied first (its memory reused).
+    fn encode_into(&self, buffer: &mut Vec<u8>) {
+        let mut w = CdrWriter::reusing(std::mem::take(buffer));
         self.write(&mut w);
-        w.finish()
+        *buffer = w.finish();
     }
 
     /// A message from CDR; bytes left over are an error (a message of some
@@ -198,6 +205,29 @@ impl Image {
             data,
         }
     }
+}
+
+/// A 16-bit single-channel image (`mono16`, `16UC1`) encoded straight from
+/// its pixels into `buffer` (emptied first): the bytes of
+/// `Image::u16(…).encode()` without the image's own copy of the pixels.
+/// `pixels` gives them row by row, `width × height` of them.
+pub fn encode_u16_image(
+    header: &Header,
+    width: u32,
+    height: u32,
+    encoding: &str,
+    pixels: impl ExactSizeIterator<Item = u16>,
+    buffer: &mut Vec<u8>,
+) {
+    let mut w = CdrWriter::reusing(std::mem::take(buffer));
+    header.write(&mut w);
+    w.u32(height);
+    w.u32(width);
+    w.string(encoding);
+    w.bool(false);
+    w.u32(2 * width);
+    w.u16_le_byte_sequence(pixels);
+    *buffer = w.finish();
 }
 
 impl Cdr for Image {
@@ -662,6 +692,20 @@ mod tests {
             inliers: 120_345,
             reason: "θ 4.1σ: an outlier".into(),
         });
+    }
+
+    #[test]
+    fn an_image_encoded_from_its_pixels_is_the_images_own_bytes() {
+        let header = Header::new(12_345_678_901, "camera_depth_optical_frame");
+        let pixels = [1u16, 2, 3, 500, 0, 65535, 7, 2047, 8, 9];
+        let whole = Image::u16(header.clone(), 5, 2, "16UC1", &pixels).encode();
+        // A used, larger buffer: emptied, then reused.
+        let mut buffer = vec![0xAA; 4096];
+        encode_u16_image(&header, 5, 2, "16UC1", pixels.iter().copied(), &mut buffer);
+        assert_eq!(buffer, whole);
+        let mut again = Vec::new();
+        Image::u16(header, 5, 2, "16UC1", &pixels).encode_into(&mut again);
+        assert_eq!(again, whole);
     }
 
     #[test]
