@@ -16,6 +16,8 @@
 //! - [`output`]: the result document of `shared/spec/cli.md`, written and read back;
 //! - [`report`]: the offline calibration report, one self-contained HTML page;
 //! - [`export`]: the result in ROS's frames (URDF, `static_transform_publisher`, JSON);
+//! - [`mcap_session`]: a session as an MCAP file for Foxglove and ROS 2;
+//! - [`bag`]: ROS 2 bags (MCAP) from other robots' stacks as input;
 //!
 //! Running a calibration:
 //! - [`replay`]: a recording solved offline;
@@ -33,6 +35,7 @@
 /// The calibration math, its own crate (`calib/`): no I/O.
 pub use groundcal_calib as calib;
 
+pub mod bag;
 pub mod cli;
 pub mod config;
 pub mod depth_image;

@@ -41,6 +41,57 @@ impl From<HardwareArgs> for groundcal::hardware::Selection {
     }
 }
 
+/// What to read from a ROS 2 bag (`replay BAG.mcap`).
+#[derive(Debug, clap::Args)]
+struct BagArgs {
+    /// A bag's depth images (sensor_msgs/msg/Image, 16UC1 or 32FC1).
+    #[arg(long, value_name = "TOPIC", default_value = "/camera/depth/image_raw")]
+    depth_topic: String,
+    /// A bag's intrinsics (sensor_msgs/msg/CameraInfo).
+    #[arg(
+        long,
+        value_name = "TOPIC",
+        default_value = "/camera/depth/camera_info"
+    )]
+    camera_info_topic: String,
+    /// A bag's body frame in /tf (REP 103 axes).
+    #[arg(long, value_name = "FRAME", default_value = "base_link")]
+    body_frame: String,
+    /// A bag's six foot frames in /tf, foot 1 first (conventions.md's order).
+    #[arg(
+        long,
+        value_name = "F1,..,F6",
+        default_value = "foot_1,foot_2,foot_3,foot_4,foot_5,foot_6"
+    )]
+    foot_frames: String,
+}
+
+impl BagArgs {
+    fn options(self) -> Result<groundcal::bag::BagOptions, String> {
+        let feet: Vec<String> = self
+            .foot_frames
+            .split(',')
+            .map(|f| f.trim().to_string())
+            .collect();
+        let foot_frames: [String; 6] = feet.try_into().map_err(|feet: Vec<String>| {
+            format!(
+                "--foot-frames: six frames, foot 1 first, separated by commas; found {}",
+                feet.len()
+            )
+        })?;
+        if foot_frames.iter().any(String::is_empty) {
+            return Err("--foot-frames: a frame's name is empty".into());
+        }
+        Ok(groundcal::bag::BagOptions {
+            depth_topic: self.depth_topic,
+            camera_info_topic: self.camera_info_topic,
+            body_frame: self.body_frame,
+            foot_frames,
+            ..Default::default()
+        })
+    }
+}
+
 #[derive(Debug, Parser)]
 #[command(
     name = "groundcal",
@@ -78,13 +129,15 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Solve a recording (session.json, poses.jsonl, kinect/) offline.
+    /// Solve a recording (session.json, poses.jsonl, kinect/) offline, or a ROS 2 bag (MCAP).
     #[command(
-        after_help = "Example:\n  groundcal replay ../shared/data/sample-12 --report /tmp/report --config /etc/groundcal/groundcal.toml"
+        after_help = "A ROS 2 bag (an .mcap file) from another robot's stack: depth from sensor_msgs/Image (16UC1 mm or 32FC1 m), intrinsics from CameraInfo, the feet from /tf; still poses are found from the feet (docs/export.md).\n\nExamples:\n  groundcal replay ../shared/data/sample-12 --report /tmp/report --config /etc/groundcal/groundcal.toml\n  groundcal replay session.mcap --depth-topic /kinect/depth/image_raw --foot-frames lf_foot,lm_foot,lh_foot,rh_foot,rm_foot,rf_foot"
     )]
     Replay {
-        /// The recording's directory.
+        /// The recording's directory, or a ROS 2 bag's .mcap file.
         dir: PathBuf,
+        #[command(flatten)]
+        bag: BagArgs,
         /// One JSON document on stdout.
         #[arg(long)]
         json: bool,
@@ -339,6 +392,7 @@ fn run(args: Args) -> ExitStatus {
         }
         Command::Replay {
             dir,
+            bag,
             json,
             nominal_mount,
             report,
@@ -388,6 +442,12 @@ fn run(args: Args) -> ExitStatus {
                 report: report.as_deref(),
                 mcap: mcap.as_deref(),
             };
+            if groundcal::bag::is_mcap_file(&dir) {
+                return match bag.options() {
+                    Ok(bag) => cli::replay::run_bag(&dir, &bag, &outputs, &options),
+                    Err(e) => usage_error(e),
+                };
+            }
             cli::replay::run(&dir, &outputs, &options)
         }
         Command::Calibrate {

@@ -254,14 +254,28 @@ impl PoseObserver {
         nominal: Option<NominalMount>,
         settings: ObserveSettings,
     ) -> Result<Self, String> {
+        Self::for_encoding(
+            DepthEncoding::Raw11(model),
+            intrinsics,
+            home_feet_mm,
+            nominal,
+            settings,
+        )
+    }
+
+    /// [`PoseObserver::new`] for frames of any encoding (metric depth from
+    /// another robot's bag).
+    pub fn for_encoding(
+        encoding: DepthEncoding,
+        intrinsics: Intrinsics,
+        home_feet_mm: &[[f64; 3]],
+        nominal: Option<NominalMount>,
+        settings: ObserveSettings,
+    ) -> Result<Self, String> {
         let home = feet_from_mm(home_feet_mm)?;
         let ground_frame =
             GroundFrame::from_home_feet(&home).map_err(|e| format!("home stance: {e}"))?;
-        let camera = DepthCamera::new(
-            DepthEncoding::Raw11(model),
-            intrinsics,
-            settings.depth_range,
-        );
+        let camera = DepthCamera::new(encoding, intrinsics, settings.depth_range);
         Ok(Self {
             camera,
             ground_frame,

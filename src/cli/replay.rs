@@ -80,6 +80,45 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
     finish("replay", &outcome.result, json)
 }
 
+/// A ROS 2 bag: its still poses found and calibrated, as a recording's.
+pub fn run_bag(
+    path: &Path,
+    bag_options: &crate::bag::BagOptions,
+    outputs: &Outputs,
+    options: &ReplayOptions,
+) -> ExitStatus {
+    if outputs.mcap.is_some() {
+        eprintln!("groundcal replay: {}: --mcap writes a groundcal recording's session; a bag is MCAP already", path.display());
+        return ExitStatus::BadInput;
+    }
+    let outcome = match crate::bag::read_bag(path, bag_options).and_then(|bag| {
+        eprintln!(
+            "groundcal replay: {}: {} depth images, {} still poses with frames",
+            path.display(),
+            bag.images_seen,
+            bag.poses.len()
+        );
+        crate::bag::replay_bag(&bag, options)
+    }) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("groundcal replay: {e}");
+            return ExitStatus::BadInput;
+        }
+    };
+    if let Some(report_dir) = outputs.report {
+        let provenance = Provenance::now(&path.display().to_string(), outcome.input_digest.clone());
+        match write_report(report_dir, &outcome.result, &provenance) {
+            Ok(file) => eprintln!("groundcal replay: report written to {}", file.display()),
+            Err(e) => {
+                eprintln!("groundcal replay: cannot write the report: {e}");
+                return ExitStatus::RuntimeFailure;
+            }
+        }
+    }
+    finish("replay", &outcome.result, outputs.json)
+}
+
 /// A recording made at several tilts (`tilts.json`): each tilt's recording
 /// replayed, then the motor's model, as `calibrate --tilts` made it.
 fn replay_tilts(

@@ -164,6 +164,30 @@ pub fn prerequisite_missing(test: &str, message: &str) {
     );
 }
 
+/// The Python with the MCAP packages: `target/mcap-python` (scripts/test
+/// makes it), or `GROUNDCAL_MCAP_PYTHON`.
+pub fn mcap_python(test: &str) -> Option<PathBuf> {
+    let python = std::env::var_os("GROUNDCAL_MCAP_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root().join("target/mcap-python/bin/python"));
+    let works = Command::new(&python)
+        .args(["-c", "import mcap, mcap_ros2"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if works {
+        return Some(python);
+    }
+    prerequisite_missing(
+        test,
+        &format!(
+            "{} cannot import mcap and mcap_ros2; scripts/test installs them: \
+             python3 -m venv target/mcap-python && target/mcap-python/bin/pip install -r tests/mcap/requirements.txt",
+            python.display()
+        ),
+    );
+    None
+}
+
 /// Runs `node tests/browser/SCRIPT ARGS…` (Playwright driving Chromium);
 /// asserts it succeeded and returns the JSON line it printed.
 pub fn run_browser_script(script: &str, args: &[&OsStr]) -> serde_json::Value {

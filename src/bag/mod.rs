@@ -1,0 +1,141 @@
+//! ROS 2 bags (MCAP) as input: `groundcal replay BAG.mcap` calibrates from a
+//! bag another robot's stack recorded (docs/export.md, "ROS 2 bags as
+//! input").
+//!
+//! - [`stream`]: the messages of an MCAP file, record by record, chunks
+//!   decompressed one at a time;
+//! - [`session`]: the bag's intrinsics, home stance and still poses;
+//! - [`replay_bag`]: their observations, solved as a recording's are.
+
+pub mod session;
+pub mod stream;
+
+use rayon::prelude::*;
+
+use crate::calib::calibrate::CalibrationSettings;
+use crate::calib::depth::DepthEncoding;
+use crate::calib::geometry::PoseDegMm;
+use crate::calib::observe::{BodyPoseSource, PoseObserver};
+use crate::calib::plane::FitBuffers;
+use crate::output::{ResultJson, SetupJson};
+use crate::replay::{Replay, ReplayOptions};
+pub use session::{read_bag, BagError, BagOptions, BagSession};
+
+/// Whether `path` is an MCAP file (its magic), not a recording's directory.
+pub fn is_mcap_file(path: &std::path::Path) -> bool {
+    use std::io::Read;
+    let mut magic = [0u8; 8];
+    path.is_file()
+        && std::fs::File::open(path)
+            .and_then(|mut f| f.read_exact(&mut magic))
+            .is_ok()
+        && &magic == stream::MAGIC
+}
+
+/// Calibrates from a bag's still poses, as `replay` does from a recording:
+/// the body pose from the feet, the ground from the frames, the solve and
+/// its gates (`options`'s, else the built-in ones).
+pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, BagError> {
+    let fail = |what: String| BagError {
+        path: bag.path.display().to_string(),
+        what,
+    };
+    let nominal = options.nominal_mount.or(bag.nominal_mount);
+    // A bag gives the feet, not what was commanded.
+    let mut settings = options.pose;
+    settings.body_pose_source = BodyPoseSource::Feet;
+    let observer = PoseObserver::for_encoding(
+        DepthEncoding::Metric {
+            metres_per_unit: bag.units.metres_per_unit(),
+        },
+        bag.intrinsics,
+        &bag.home_feet_mm,
+        nominal,
+        settings,
+    )
+    .map_err(|e| fail(format!("the home stance's feet: {e}")))?;
+    let mut feet = observer.feet_tracker();
+    let bodies: Vec<_> = bag
+        .poses
+        .iter()
+        .map(|pose| feet.body_pose(&PoseDegMm::from_values([0.0; 6]), &pose.feet_body_mm))
+        .collect();
+    let work = || {
+        bag.poses
+            .par_iter()
+            .zip(&bodies)
+            .with_max_len(1)
+            .map(|(pose, body)| {
+                let body = body
+                    .as_ref()
+                    .map_err(|e| format!("pose {}: feet: {e}", pose.index))?;
+                let frames: Vec<&[u16]> = pose.frames.iter().map(Vec::as_slice).collect();
+                observer
+                    .observe(pose.index, body, &frames, &mut FitBuffers::default())
+                    .map_err(|e| format!("no ground found: {e}"))
+            })
+            .collect::<Vec<_>>()
+    };
+    let fits = match options.threads {
+        Some(threads) => rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .map_err(|e| fail(format!("cannot start worker threads: {e}")))?
+            .install(work),
+        None => work(),
+    };
+    let mut observations = Vec::new();
+    let mut failed = Vec::new();
+    for (pose, fit) in bag.poses.iter().zip(fits) {
+        match fit {
+            Ok(observation) => observations.push(observation),
+            Err(reason) => failed.push((pose.index, reason)),
+        }
+    }
+    let (gates, gates_from) = match options.gates {
+        Some(gates) => (gates, "config"),
+        None => (options.calibration.gates, "built-in"),
+    };
+    let solve = match options.noise {
+        Some(noise) => noise.solve_settings(),
+        None => options.calibration.solve,
+    };
+    let solve = crate::calib::solve::SolveSettings {
+        depth_scale: options.depth_scale,
+        ..solve
+    };
+    let settings = CalibrationSettings { gates, solve };
+    let mut result =
+        ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
+    // The motor's tilt is not in a bag: not claimed.
+    result.kinect_tilt_deg = None;
+    let mut notes = bag.notes.clone();
+    notes.extend(observer.prior_note());
+    result.notes.splice(0..0, notes);
+    let frames_per_pose = bag.poses.iter().map(|p| p.frames.len() as u32).max();
+    result.setup = Some(SetupJson {
+        robot: None,
+        schedule: None,
+        poses: Some(bag.poses.len()),
+        frames_per_pose,
+        depth_model: None,
+        intrinsics: Some(bag.intrinsics),
+        nominal_mount: nominal,
+        nominal_mount_from: match (options.nominal_mount, bag.nominal_mount) {
+            (Some(_), _) => Some("flag".into()),
+            (None, Some(_)) => Some("bag's TF".into()),
+            (None, None) => None,
+        },
+        gates_from: Some(gates_from.into()),
+    });
+    Ok(Replay {
+        result,
+        input_digest: bag.digest.clone(),
+        frames: bag.poses.iter().map(|p| p.frames.len()).sum(),
+        ground_from_robot: bodies
+            .iter()
+            .map(|b| b.as_ref().ok().map(|b| b.ground_from_robot))
+            .collect(),
+        ground_points: vec![None; bag.poses.len()],
+    })
+}

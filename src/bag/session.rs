@@ -1,0 +1,598 @@
+//! A ROS 2 bag (MCAP) made by another robot's stack, turned into what a
+//! calibration needs: the depth camera's intrinsics, the feet in the body at
+//! the home stance, and per still pose its feet and its depth frames.
+//!
+//! - Depth: `sensor_msgs/msg/Image`, `16UC1` millimetres (REP 118) or
+//!   `32FC1` metres; 0, NaN and ∞ are no reading. Both are fitted in
+//!   inverse depth as metric frames are (`DepthEncoding::Metric`).
+//! - Intrinsics: the first `sensor_msgs/msg/CameraInfo` (its `K`).
+//! - The feet: `/tf` and `/tf_static`, the body frame to each foot's frame
+//!   through whatever links lie between (a hexapod's URDF chain), at each
+//!   moment; REP 103 axes, turned to groundcal's body frame.
+//! - Still poses: the spans in which no foot moves in the body by more than
+//!   `still_mm` for at least `still_s` (the body moves with the feet planted,
+//!   so a body that moves moves every foot in its frame). The first still
+//!   span is the home stance (its feet fix the ground frame); each still span
+//!   with depth frames is a pose, with its last `frames_per_pose` frames.
+//! - The nominal mount: the body → camera transform in the TF tree, when
+//!   there is one (the robot's own guess tells which plane is the ground).
+//!
+//! The file is read twice: the first pass reads the transforms, the camera
+//! info and the images' headers; the second only the frames chosen.
+
+use std::collections::{BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+
+use super::stream::{for_each_message, Limits, ReadError, StreamMessage};
+use crate::calib::geometry::{PoseDegMm, Transform};
+use crate::calib::observe::NominalMount;
+use crate::calib::sensor::Intrinsics;
+use crate::export::{base_link_from_robot, robot_from_sensor_from_ros};
+use groundcal_ros::msg::{CameraInfo, Cdr, Header, Image, Message, TfMessage};
+use groundcal_ros::CdrReader;
+
+/// What to read from a bag, and how still is still.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BagOptions {
+    /// The depth images' topic.
+    pub depth_topic: String,
+    /// Their CameraInfo's topic.
+    pub camera_info_topic: String,
+    /// The body's frame (groundcal's robot frame in REP 103 axes).
+    pub body_frame: String,
+    /// The six feet's frames, foot 1 first (conventions.md's order).
+    pub foot_frames: [String; 6],
+    /// A pose is still while no foot moves in the body by more than this (mm)…
+    pub still_mm: f64,
+    /// …for at least this long (s).
+    pub still_s: f64,
+    /// The last frames of each still span that are fitted.
+    pub frames_per_pose: usize,
+    pub limits: Limits,
+}
+
+impl Default for BagOptions {
+    fn default() -> Self {
+        Self {
+            depth_topic: "/camera/depth/image_raw".into(),
+            camera_info_topic: "/camera/depth/camera_info".into(),
+            body_frame: crate::export::PARENT_FRAME.into(),
+            foot_frames: std::array::from_fn(|k| format!("foot_{}", k + 1)),
+            still_mm: 0.5,
+            still_s: 0.3,
+            frames_per_pose: 3,
+            limits: Limits::default(),
+        }
+    }
+}
+
+/// The TF topics, both always read.
+const TF_TOPICS: [&str; 2] = ["/tf", "/tf_static"];
+
+/// How the depth values are stored once read: millimetres for `16UC1`,
+/// tenths of a millimetre for `32FC1` (to 6.55 m; farther is beyond the
+/// trusted range and counts as no reading).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepthUnits {
+    Millimetres,
+    TenthsOfMillimetre,
+}
+
+impl DepthUnits {
+    pub fn metres_per_unit(self) -> f64 {
+        match self {
+            DepthUnits::Millimetres => 1e-3,
+            DepthUnits::TenthsOfMillimetre => 1e-4,
+        }
+    }
+}
+
+/// One still pose of the bag.
+#[derive(Debug, Clone)]
+pub struct BagPose {
+    /// From 1, in time order.
+    pub index: u32,
+    /// The still span, nanoseconds.
+    pub start: u64,
+    pub end: u64,
+    /// The feet in groundcal's body frame (mm), averaged over the span.
+    pub feet_body_mm: [[f64; 3]; 6],
+    /// The frames' stamps and values (in [`BagSession::units`]).
+    pub stamps: Vec<u64>,
+    pub frames: Vec<Vec<u16>>,
+}
+
+/// A bag, read.
+#[derive(Debug, Clone)]
+pub struct BagSession {
+    pub path: PathBuf,
+    pub intrinsics: Intrinsics,
+    pub units: DepthUnits,
+    /// The images' frame (their `header.frame_id`).
+    pub camera_frame: String,
+    pub home_feet_mm: [[f64; 3]; 6],
+    pub poses: Vec<BagPose>,
+    /// From the TF tree's body → camera transform, when it has one.
+    pub nominal_mount: Option<NominalMount>,
+    /// What the operator should know (lens distortion ignored, frames left out).
+    pub notes: Vec<String>,
+    /// Depth images on the depth topic.
+    pub images_seen: usize,
+    /// BLAKE3 of the bytes of the file up to the end of its data (hex).
+    pub digest: String,
+}
+
+/// A reader that hashes what passes through it.
+struct Hashing<R> {
+    inner: R,
+    hasher: blake3::Hasher,
+}
+
+impl<R: std::io::Read> std::io::Read for Hashing<R> {
+    fn read(&mut self, buffer: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buffer)?;
+        self.hasher.update(&buffer[..n]);
+        Ok(n)
+    }
+}
+
+/// Why a bag could not be used; names the file and what was wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{path}: {what}")]
+pub struct BagError {
+    pub path: String,
+    pub what: String,
+}
+
+/// The transforms of the TF tree: per child frame, its parent and the
+/// transform at each stamp (`/tf_static`'s hold at every moment).
+#[derive(Debug, Default)]
+struct TfTree {
+    edges: HashMap<String, TfEdge>,
+}
+
+#[derive(Debug)]
+struct TfEdge {
+    parent: String,
+    /// (stamp, parent_from_child), in stamp order once sorted.
+    samples: Vec<(u64, Isometry3<f64>)>,
+}
+
+impl TfTree {
+    fn add(&mut self, message: &TfMessage, is_static: bool) {
+        for t in &message.transforms {
+            let [x, y, z, w] = t.transform.rotation;
+            let rotation = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
+            let [tx, ty, tz] = t.transform.translation;
+            let pose = Isometry3::from_parts(Translation3::new(tx, ty, tz), rotation);
+            let stamp = if is_static {
+                0
+            } else {
+                t.header.stamp.nanos().unwrap_or(0)
+            };
+            let edge = self
+                .edges
+                .entry(t.child_frame_id.clone())
+                .or_insert_with(|| TfEdge {
+                    parent: t.header.frame_id.clone(),
+                    samples: Vec::new(),
+                });
+            // A frame that changes parent keeps its first (TF forbids it).
+            if edge.parent == t.header.frame_id {
+                edge.samples.push((stamp, pose));
+            }
+        }
+    }
+
+    fn sort(&mut self) {
+        for edge in self.edges.values_mut() {
+            edge.samples.sort_by_key(|(stamp, _)| *stamp);
+        }
+    }
+
+    /// The child frames on the way from `frame` up to `ancestor`, `frame`
+    /// first; `None` when `ancestor` is not above it.
+    fn chain(&self, frame: &str, ancestor: &str) -> Option<Vec<&str>> {
+        let mut chain = Vec::new();
+        let (mut at, mut edge) = match self.edges.get_key_value(frame) {
+            Some((key, edge)) => (key.as_str(), Some(edge)),
+            None if frame == ancestor => return Some(chain),
+            None => return None,
+        };
+        while at != ancestor {
+            let here = edge?;
+            chain.push(at);
+            at = here.parent.as_str();
+            edge = self.edges.get(at);
+            if chain.len() > 64 {
+                return None; // a loop
+            }
+        }
+        Some(chain)
+    }
+
+    /// `ancestor_from_frame` at `stamp` along `chain` (each edge's latest
+    /// transform at or before it, or its first).
+    fn at(&self, chain: &[&str], stamp: u64) -> Isometry3<f64> {
+        let mut pose = Isometry3::identity();
+        for child in chain.iter().rev() {
+            let samples = &self.edges[*child].samples;
+            let k = samples.partition_point(|(s, _)| *s <= stamp);
+            pose *= samples[k.saturating_sub(1)].1;
+        }
+        pose
+    }
+
+    /// Every stamp at which one of the chains changes.
+    fn stamps(&self, chains: &[Vec<&str>]) -> BTreeSet<u64> {
+        chains
+            .iter()
+            .flatten()
+            .flat_map(|child| self.edges[*child].samples.iter().map(|(s, _)| *s))
+            .collect()
+    }
+}
+
+/// A depth image's header, size and encoding (the first pass does not copy
+/// its pixels).
+struct ImageHead {
+    stamp: u64,
+    frame_id: String,
+    width: u32,
+    height: u32,
+    encoding: String,
+}
+
+fn image_head(data: &[u8]) -> Result<ImageHead, String> {
+    let mut r = CdrReader::new(data).map_err(|e| e.to_string())?;
+    let header = Header::read(&mut r).map_err(|e| e.to_string())?;
+    let height = r.u32("height").map_err(|e| e.to_string())?;
+    let width = r.u32("width").map_err(|e| e.to_string())?;
+    let encoding = r.string("encoding").map_err(|e| e.to_string())?;
+    Ok(ImageHead {
+        stamp: header.stamp.nanos().unwrap_or(0),
+        frame_id: header.frame_id,
+        width,
+        height,
+        encoding,
+    })
+}
+
+/// An image's depth values in `units`, row by row; 0 for no reading.
+fn depth_values(image: &Image, units: DepthUnits) -> Result<Vec<u16>, String> {
+    let (width, height) = (image.width as usize, image.height as usize);
+    let bytes_per_pixel = match image.encoding.as_str() {
+        "16UC1" => 2,
+        "32FC1" => 4,
+        other => {
+            return Err(format!(
+                "a depth image encoded \"{other}\": groundcal reads 16UC1 (mm) and 32FC1 (m)"
+            ))
+        }
+    };
+    let step = image.step as usize;
+    if step < width * bytes_per_pixel || image.data.len() < step * height {
+        return Err(format!(
+            "a {width}×{height} {} image of {} bytes with rows of {step}: too short",
+            image.encoding,
+            image.data.len()
+        ));
+    }
+    let mut values = Vec::with_capacity(width * height);
+    for row in image.data.chunks_exact(step).take(height) {
+        for pixel in row[..width * bytes_per_pixel].chunks_exact(bytes_per_pixel) {
+            let value = match (bytes_per_pixel, image.is_bigendian) {
+                (2, false) => f64::from(u16::from_le_bytes([pixel[0], pixel[1]])) * 1e-3,
+                (2, true) => f64::from(u16::from_be_bytes([pixel[0], pixel[1]])) * 1e-3,
+                (_, false) => {
+                    f64::from(f32::from_le_bytes([pixel[0], pixel[1], pixel[2], pixel[3]]))
+                }
+                (_, true) => {
+                    f64::from(f32::from_be_bytes([pixel[0], pixel[1], pixel[2], pixel[3]]))
+                }
+            };
+            let unit = (value / units.metres_per_unit()).round();
+            values.push(if unit.is_finite() && (1.0..=65535.0).contains(&unit) {
+                unit as u16
+            } else {
+                0
+            });
+        }
+    }
+    Ok(values)
+}
+
+/// The feet in groundcal's body frame (mm) from `body_from_foot`s.
+fn feet_in_body(tree: &TfTree, chains: &[Vec<&str>], stamp: u64) -> [[f64; 3]; 6] {
+    let robot_from_base_link = base_link_from_robot().transpose();
+    std::array::from_fn(|k| {
+        let p = tree.at(&chains[k], stamp).translation.vector;
+        let p = robot_from_base_link * p * 1e3;
+        [p.x, p.y, p.z]
+    })
+}
+
+fn largest_move(a: &[[f64; 3]; 6], b: &[[f64; 3]; 6]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| Vector3::from(*a).metric_distance(&Vector3::from(*b)))
+        .fold(0.0, f64::max)
+}
+
+/// A span of moments in which no foot moved by more than `still_mm` from
+/// where it was at the span's first moment.
+struct Span {
+    start: u64,
+    end: u64,
+    feet_sum: [[f64; 3]; 6],
+    moments: usize,
+    first: [[f64; 3]; 6],
+}
+
+/// Reads a bag and finds its still poses.
+pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagError> {
+    let fail = |what: String| BagError {
+        path: path.display().to_string(),
+        what,
+    };
+    let open = || std::fs::File::open(path).map_err(|e| fail(format!("cannot open: {e}")));
+    let wanted = |topic: &str| {
+        topic == options.depth_topic
+            || topic == options.camera_info_topic
+            || TF_TOPICS.contains(&topic)
+    };
+    let stream_failed = |e: ReadError<String>| match e {
+        ReadError::Stream(e) => fail(e.to_string()),
+        ReadError::Stopped(what) => fail(what),
+    };
+
+    // First pass: transforms, camera info, the images' heads.
+    let mut tree = TfTree::default();
+    let mut camera_info: Option<CameraInfo> = None;
+    let mut heads: Vec<ImageHead> = Vec::new();
+    let check_type = |m: &StreamMessage<'_>, name: &str| -> Result<(), String> {
+        if m.encoding != "cdr" || (!m.schema.is_empty() && m.schema != name) {
+            return Err(format!(
+                "{}: a message of type \"{}\" encoded \"{}\" where {name} in CDR was expected",
+                m.topic, m.schema, m.encoding
+            ));
+        }
+        Ok(())
+    };
+    let mut hashing = Hashing {
+        inner: std::io::BufReader::new(open()?),
+        hasher: blake3::Hasher::new(),
+    };
+    for_each_message(
+        &mut hashing,
+        options.limits,
+        wanted,
+        |m| -> Result<(), String> {
+            if TF_TOPICS.contains(&m.topic) {
+                check_type(&m, TfMessage::NAME)?;
+                let message = TfMessage::decode(m.data)
+                    .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
+                tree.add(&message, m.topic == "/tf_static");
+            } else if m.topic == options.camera_info_topic {
+                check_type(&m, CameraInfo::NAME)?;
+                if camera_info.is_none() {
+                    camera_info = Some(
+                        CameraInfo::decode(m.data)
+                            .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?,
+                    );
+                }
+            } else {
+                check_type(&m, Image::NAME)?;
+                heads.push(
+                    image_head(m.data)
+                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?,
+                );
+            }
+            Ok(())
+        },
+    )
+    .map_err(stream_failed)?;
+    tree.sort();
+
+    let Some(info) = camera_info else {
+        return Err(fail(format!(
+            "no CameraInfo on {} (give the topic with --camera-info-topic)",
+            options.camera_info_topic
+        )));
+    };
+    let Some(first) = heads.first() else {
+        return Err(fail(format!(
+            "no depth image on {} (give the topic with --depth-topic)",
+            options.depth_topic
+        )));
+    };
+    let intrinsics = Intrinsics {
+        fx: info.k[0],
+        fy: info.k[4],
+        cx: info.k[2],
+        cy: info.k[5],
+        width: info.width as usize,
+        height: info.height as usize,
+    };
+    if !(intrinsics.fx > 0.0
+        && intrinsics.fy > 0.0
+        && intrinsics.cx.is_finite()
+        && intrinsics.cy.is_finite())
+        || intrinsics.width == 0
+        || intrinsics.height == 0
+    {
+        return Err(fail(format!(
+            "{}: K = {:?} for {}×{} is not a camera",
+            options.camera_info_topic, info.k, info.width, info.height
+        )));
+    }
+    let mut notes = Vec::new();
+    if info.d.iter().any(|&d| d != 0.0) {
+        notes.push(format!(
+            "{} gives lens distortion ({}, D = {:?}); the depth images are taken as they are, as a Kinect's are",
+            options.camera_info_topic, info.distortion_model, info.d
+        ));
+    }
+    let units = match first.encoding.as_str() {
+        "16UC1" => DepthUnits::Millimetres,
+        "32FC1" => DepthUnits::TenthsOfMillimetre,
+        other => {
+            return Err(fail(format!(
+                "{}: images encoded \"{other}\": groundcal reads 16UC1 (mm) and 32FC1 (m)",
+                options.depth_topic
+            )))
+        }
+    };
+    let camera_frame = first.frame_id.clone();
+    for head in &heads {
+        if head.encoding != first.encoding
+            || head.width as usize != intrinsics.width
+            || head.height as usize != intrinsics.height
+        {
+            return Err(fail(format!(
+                "{}: an image at {} ns is {}×{} {}, where the first is {} and CameraInfo says {}×{}",
+                options.depth_topic,
+                head.stamp,
+                head.width,
+                head.height,
+                head.encoding,
+                first.encoding,
+                intrinsics.width,
+                intrinsics.height
+            )));
+        }
+    }
+
+    // The feet over time.
+    let mut chains = Vec::with_capacity(6);
+    for foot in &options.foot_frames {
+        chains.push(tree.chain(foot, &options.body_frame).ok_or_else(|| {
+            fail(format!(
+                "no TF path from {} to {foot} in /tf and /tf_static (give the frames with --body-frame and --foot-frames)",
+                options.body_frame
+            ))
+        })?);
+    }
+    let mut moments = tree.stamps(&chains);
+    moments.extend(heads.iter().map(|h| h.stamp));
+    let mut spans: Vec<Span> = Vec::new();
+    for &moment in &moments {
+        let feet = feet_in_body(&tree, &chains, moment);
+        match spans.last_mut() {
+            Some(span) if largest_move(&span.first, &feet) <= options.still_mm => {
+                span.end = moment;
+                span.moments += 1;
+                for (sum, foot) in span.feet_sum.iter_mut().zip(&feet) {
+                    for (s, f) in sum.iter_mut().zip(foot) {
+                        *s += f;
+                    }
+                }
+            }
+            _ => spans.push(Span {
+                start: moment,
+                end: moment,
+                feet_sum: feet,
+                moments: 1,
+                first: feet,
+            }),
+        }
+    }
+    let still_ns = (options.still_s * 1e9) as u64;
+    let mut still = spans
+        .into_iter()
+        .filter(|s| s.end - s.start >= still_ns)
+        .map(|s| {
+            let n = s.moments as f64;
+            let feet = s.feet_sum.map(|f| f.map(|x| x / n));
+            (s.start, s.end, feet)
+        });
+    let Some(home) = still.next() else {
+        return Err(fail(format!(
+            "the feet never stay still (within {} mm for {} s) in the body: no home stance",
+            options.still_mm, options.still_s
+        )));
+    };
+    let home_feet_mm = home.2;
+    let mut poses = Vec::new();
+    for (start, end, feet_body_mm) in std::iter::once(home).chain(still) {
+        let mut stamps: Vec<u64> = heads
+            .iter()
+            .map(|h| h.stamp)
+            .filter(|s| (start..=end).contains(s))
+            .collect();
+        stamps.sort_unstable();
+        stamps.dedup();
+        if stamps.is_empty() {
+            continue;
+        }
+        let keep = stamps.len().saturating_sub(options.frames_per_pose.max(1));
+        stamps.drain(..keep);
+        poses.push(BagPose {
+            index: poses.len() as u32 + 1,
+            start,
+            end,
+            feet_body_mm,
+            stamps,
+            frames: Vec::new(),
+        });
+    }
+    if poses.is_empty() {
+        return Err(fail(format!(
+            "no depth image on {} was taken while the feet stood still",
+            options.depth_topic
+        )));
+    }
+
+    // Second pass: the chosen frames.
+    let chosen: HashMap<u64, usize> = poses
+        .iter()
+        .enumerate()
+        .flat_map(|(k, pose)| pose.stamps.iter().map(move |&s| (s, k)))
+        .collect();
+    for_each_message(
+        std::io::BufReader::new(open()?),
+        options.limits,
+        |topic| topic == options.depth_topic,
+        |m| -> Result<(), String> {
+            let head = image_head(m.data).map_err(|e| format!("{}: {e}", m.topic))?;
+            let Some(&k) = chosen.get(&head.stamp) else {
+                return Ok(());
+            };
+            let pose = &mut poses[k];
+            if pose.frames.len() >= pose.stamps.len() {
+                return Ok(()); // two images of one stamp: the first
+            }
+            let image = Image::decode(m.data)
+                .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
+            let values = depth_values(&image, units)
+                .map_err(|e| format!("{} at {} ns: {e}", m.topic, head.stamp))?;
+            pose.frames.push(values);
+            Ok(())
+        },
+    )
+    .map_err(stream_failed)?;
+
+    let nominal_mount = tree.chain(&camera_frame, &options.body_frame).map(|chain| {
+        let base_link_from_optical = tree.at(&chain, heads[0].stamp);
+        let transform = Transform::from_parts(
+            base_link_from_optical.translation,
+            base_link_from_optical.rotation.to_rotation_matrix(),
+        );
+        let mount = PoseDegMm::from_params(&robot_from_sensor_from_ros(&transform));
+        NominalMount::from_values(mount.values())
+    });
+    Ok(BagSession {
+        path: path.to_path_buf(),
+        intrinsics,
+        units,
+        camera_frame,
+        home_feet_mm,
+        poses,
+        nominal_mount,
+        notes,
+        images_seen: heads.len(),
+        digest: hashing.hasher.finalize().to_hex().to_string(),
+    })
+}
