@@ -167,3 +167,48 @@ fn record_mcap_alone_keeps_no_recording_behind() {
     names.sort();
     assert_eq!(names, ["alone.mcap"], "the temporary recording is gone");
 }
+
+/// The session as Foxglove's layout shows it (docs/foxglove-layout.json):
+/// read by Foxglove's own libraries (@mcap/core's indexed reader through the
+/// summary and indexes, @foxglove/rosmsg2-serialization), drawn in headless
+/// Chromium by tests/browser/mcap-preview.mjs (not Foxglove itself). The
+/// ground the camera saw, through the mount and the body pose, lands where
+/// the feet stand. Screenshots in `target/test-screenshots/mcap-preview*.png`.
+#[test]
+fn the_session_reads_in_foxgloves_own_libraries_and_shows_the_ground_under_the_feet() {
+    let test = "the_session_reads_in_foxgloves_own_libraries_and_shows_the_ground_under_the_feet";
+    if !common::browser_ready(test) {
+        return;
+    }
+    let work = temp_dir("mcap-preview");
+    let mcap = work.join("sample-12.mcap");
+    let sample = shared().join("data/sample-12");
+    let (code, _, stderr) = groundcal(&[
+        "replay",
+        sample.to_str().unwrap(),
+        "--mcap",
+        mcap.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let shots = root().join("target/test-screenshots");
+    std::fs::create_dir_all(&shots).unwrap();
+    let shot = shots.join("mcap-preview.png");
+    let seen = common::run_browser_script(
+        "mcap-preview.mjs",
+        &[
+            mcap.as_os_str(),
+            shot.as_os_str(),
+            std::ffi::OsStr::new("3"),
+        ],
+    );
+    assert_eq!(seen["problems"], serde_json::json!([]), "{seen}");
+    let counts = &seen["counts"];
+    assert_eq!(counts["/camera/depth/image_raw"], 24, "{seen}");
+    assert_eq!(counts["/groundcal/pose_fit"], 12, "{seen}");
+    assert_eq!(seen["pose"], 3);
+    assert_eq!(seen["drawn"]["feet"], 6);
+    assert!(seen["drawn"]["inliers"].as_u64().unwrap() > 1000, "{seen}");
+    for path in [shot.clone(), shots.join("mcap-preview-desktop.png")] {
+        assert!(std::fs::metadata(&path).unwrap().len() > 20_000, "{path:?}");
+    }
+}

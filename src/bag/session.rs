@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use super::stream::{for_each_message, Limits, ReadError, StreamMessage};
+use super::stream::{Limits, McapStream, ReadError, StreamMessage};
 use crate::calib::geometry::{PoseDegMm, Transform};
 use crate::calib::observe::NominalMount;
 use crate::calib::sensor::Intrinsics;
@@ -238,6 +238,8 @@ impl TfTree {
 /// A depth image's header, size and encoding (the first pass does not copy
 /// its pixels).
 struct ImageHead {
+    /// The chunk it is in, if any.
+    chunk: Option<u64>,
     stamp: u64,
     frame_id: String,
     width: u32,
@@ -252,6 +254,7 @@ fn image_head(data: &[u8]) -> Result<ImageHead, String> {
     let width = r.u32("width").map_err(|e| e.to_string())?;
     let encoding = r.string("encoding").map_err(|e| e.to_string())?;
     Ok(ImageHead {
+        chunk: None,
         stamp: header.stamp.nanos().unwrap_or(0),
         frame_id: header.frame_id,
         width,
@@ -281,6 +284,20 @@ fn depth_values(image: &Image, units: DepthUnits) -> Result<Vec<u16>, String> {
         ));
     }
     let mut values = Vec::with_capacity(width * height);
+    if image.encoding == "16UC1" && units == DepthUnits::Millimetres {
+        // As they are: millimetres, 0 for no reading.
+        for row in image.data.chunks_exact(step).take(height) {
+            values.extend(row[..2 * width].chunks_exact(2).map(|pixel| {
+                let pixel = [pixel[0], pixel[1]];
+                if image.is_bigendian {
+                    u16::from_be_bytes(pixel)
+                } else {
+                    u16::from_le_bytes(pixel)
+                }
+            }));
+        }
+        return Ok(values);
+    }
     for row in image.data.chunks_exact(step).take(height) {
         for pixel in row[..width * bytes_per_pixel].chunks_exact(bytes_per_pixel) {
             let value = match (bytes_per_pixel, image.is_bigendian) {
@@ -365,35 +382,37 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         inner: std::io::BufReader::new(open()?),
         hasher: blake3::Hasher::new(),
     };
-    for_each_message(
-        &mut hashing,
-        options.limits,
-        wanted,
-        |m| -> Result<(), String> {
-            if TF_TOPICS.contains(&m.topic) {
-                check_type(&m, TfMessage::NAME)?;
-                let message = TfMessage::decode(m.data)
-                    .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
-                tree.add(&message, m.topic == "/tf_static");
-            } else if m.topic == options.camera_info_topic {
-                check_type(&m, CameraInfo::NAME)?;
-                if camera_info.is_none() {
-                    camera_info = Some(
-                        CameraInfo::decode(m.data)
-                            .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?,
-                    );
+    let mut stream = McapStream::new(options.limits);
+    stream
+        .read(
+            &mut hashing,
+            wanted,
+            |_| false,
+            |m| -> Result<(), String> {
+                if TF_TOPICS.contains(&m.topic) {
+                    check_type(&m, TfMessage::NAME)?;
+                    let message = TfMessage::decode(m.data)
+                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
+                    tree.add(&message, m.topic == "/tf_static");
+                } else if m.topic == options.camera_info_topic {
+                    check_type(&m, CameraInfo::NAME)?;
+                    if camera_info.is_none() {
+                        camera_info = Some(
+                            CameraInfo::decode(m.data)
+                                .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?,
+                        );
+                    }
+                } else {
+                    check_type(&m, Image::NAME)?;
+                    let mut head = image_head(m.data)
+                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
+                    head.chunk = m.chunk;
+                    heads.push(head);
                 }
-            } else {
-                check_type(&m, Image::NAME)?;
-                heads.push(
-                    image_head(m.data)
-                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?,
-                );
-            }
-            Ok(())
-        },
-    )
-    .map_err(stream_failed)?;
+                Ok(())
+            },
+        )
+        .map_err(stream_failed)?;
     tree.sort();
 
     let Some(info) = camera_info else {
@@ -551,28 +570,35 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         .enumerate()
         .flat_map(|(k, pose)| pose.stamps.iter().map(move |&s| (s, k)))
         .collect();
-    for_each_message(
-        std::io::BufReader::new(open()?),
-        options.limits,
-        |topic| topic == options.depth_topic,
-        |m| -> Result<(), String> {
-            let head = image_head(m.data).map_err(|e| format!("{}: {e}", m.topic))?;
-            let Some(&k) = chosen.get(&head.stamp) else {
-                return Ok(());
-            };
-            let pose = &mut poses[k];
-            if pose.frames.len() >= pose.stamps.len() {
-                return Ok(()); // two images of one stamp: the first
-            }
-            let image = Image::decode(m.data)
-                .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
-            let values = depth_values(&image, units)
-                .map_err(|e| format!("{} at {} ns: {e}", m.topic, head.stamp))?;
-            pose.frames.push(values);
-            Ok(())
-        },
-    )
-    .map_err(stream_failed)?;
+    // Only the chunks that hold a chosen image are decompressed again.
+    let needed: BTreeSet<u64> = heads
+        .iter()
+        .filter(|h| chosen.contains_key(&h.stamp))
+        .filter_map(|h| h.chunk)
+        .collect();
+    stream
+        .read(
+            std::io::BufReader::new(open()?),
+            |topic| topic == options.depth_topic,
+            |chunk| !needed.contains(&chunk),
+            |m| -> Result<(), String> {
+                let head = image_head(m.data).map_err(|e| format!("{}: {e}", m.topic))?;
+                let Some(&k) = chosen.get(&head.stamp) else {
+                    return Ok(());
+                };
+                let pose = &mut poses[k];
+                if pose.frames.len() >= pose.stamps.len() {
+                    return Ok(()); // two images of one stamp: the first
+                }
+                let image = Image::decode(m.data)
+                    .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
+                let values = depth_values(&image, units)
+                    .map_err(|e| format!("{} at {} ns: {e}", m.topic, head.stamp))?;
+                pose.frames.push(values);
+                Ok(())
+            },
+        )
+        .map_err(stream_failed)?;
 
     let nominal_mount = tree.chain(&camera_frame, &options.body_frame).map(|chain| {
         let base_link_from_optical = tree.at(&chain, heads[0].stamp);

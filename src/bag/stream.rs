@@ -3,6 +3,12 @@
 //! them, or none), so that a bag of gigabytes takes the memory of one chunk.
 //! The summary at the end is not needed and not read.
 //!
+//! The four records a reader needs (Schema, Channel, Message, Chunk) are
+//! parsed here with every length checked against the record's own bytes:
+//! the `mcap` crate's parser reserves a string's declared length before
+//! reading it, so a record claiming a 4 GB topic name costs 4 GB (found by
+//! fuzzing, `fuzz/README.md`).
+//!
 //! Every length is checked before anything is allocated for it: a record or
 //! a chunk larger than [`Limits`] allow, a chunk that decompresses to another
 //! size or CRC than its header says, a message on a channel never declared
@@ -10,8 +16,6 @@
 
 use std::collections::HashMap;
 use std::io::Read;
-
-use mcap::records::{self, Record};
 
 /// MCAP's magic, at both ends of a file.
 pub const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
@@ -45,6 +49,8 @@ pub struct StreamMessage<'a> {
     /// Nanoseconds, as the file gives them.
     pub log_time: u64,
     pub data: &'a [u8],
+    /// The chunk it came in (counted from 0 in file order), if any.
+    pub chunk: Option<u64>,
 }
 
 /// Why the file could not be read, and where (bytes from its start; for a
@@ -77,102 +83,282 @@ struct Declarations {
     channels: HashMap<u16, ChannelInfo>,
 }
 
-/// Reads every message of an MCAP file from `source`, in file order, and
-/// hands those whose topic `wanted` accepts to `each` (which may stop the
-/// pass with its own error).
-pub fn for_each_message<R: Read, E>(
-    mut source: R,
+/// Reads the messages of MCAP files; the schemas and channels it has seen
+/// are kept from one pass over a file to the next, so that a second pass
+/// can skip chunks (and the declarations in them) it does not need.
+#[derive(Default)]
+pub struct McapStream {
     limits: Limits,
-    wanted: impl Fn(&str) -> bool,
-    mut each: impl FnMut(StreamMessage<'_>) -> Result<(), E>,
-) -> Result<StreamCounts, ReadError<E>> {
-    let mut magic = [0u8; 8];
-    read_exact(&mut source, &mut magic, 0, "the file's magic")?;
-    if &magic != MAGIC {
-        return Err(stream_error(
-            0,
-            "not an MCAP file (its first 8 bytes are not MCAP's magic)",
-        ));
+    declared: Declarations,
+}
+
+impl McapStream {
+    pub fn new(limits: Limits) -> Self {
+        Self {
+            limits,
+            declared: Declarations::default(),
+        }
     }
-    let mut offset = 8u64;
-    let mut declared = Declarations::default();
-    let mut counts = StreamCounts::default();
-    let mut body = Vec::new();
-    let mut chunk = Vec::new();
-    loop {
-        let mut opcode_and_length = [0u8; 9];
-        // The end: a file cut after a whole record still gives its messages
-        // (a bag whose recorder was killed has no summary).
-        let got = read_up_to(&mut source, &mut opcode_and_length, offset)?;
-        if got == 0 {
-            return Ok(counts);
-        }
-        if got < 9 {
+
+    /// Reads every message from `source`, in file order, and hands those
+    /// whose topic `wanted` accepts to `each` (which may stop the pass with
+    /// its own error). Chunks `skip_chunk` names (by their ordinal) are read
+    /// past without being decompressed.
+    pub fn read<R: Read, E>(
+        &mut self,
+        mut source: R,
+        wanted: impl Fn(&str) -> bool,
+        skip_chunk: impl Fn(u64) -> bool,
+        mut each: impl FnMut(StreamMessage<'_>) -> Result<(), E>,
+    ) -> Result<StreamCounts, ReadError<E>> {
+        let limits = self.limits;
+        let mut magic = [0u8; 8];
+        read_exact(&mut source, &mut magic, 0, "the file's magic")?;
+        if &magic != MAGIC {
             return Err(stream_error(
-                offset,
-                "the file ends inside a record's header",
+                0,
+                "not an MCAP file (its first 8 bytes are not MCAP's magic)",
             ));
         }
-        let opcode = opcode_and_length[0];
-        let mut length_bytes = [0u8; 8];
-        length_bytes.copy_from_slice(&opcode_and_length[1..]);
-        let length = u64::from_le_bytes(length_bytes);
-        if length > limits.record_bytes {
-            return Err(stream_error(
-                offset,
-                format!(
-                    "a record of {length} bytes (opcode 0x{opcode:02x}): more than the {} this reader takes",
-                    limits.record_bytes
-                ),
-            ));
-        }
-        let record_offset = offset;
-        // Grown as the bytes come: a length that claims more than the file
-        // holds costs no memory.
-        body.clear();
-        match (&mut source).take(length).read_to_end(&mut body) {
-            Ok(got) if got as u64 == length => {}
-            Ok(got) => {
-                return Err(stream_error(
-                    offset + 9,
-                    format!("the file ends inside a record ({got} of {length} bytes)"),
-                ))
+        let mut offset = 8u64;
+        let mut counts = StreamCounts::default();
+        let mut body = Vec::new();
+        let mut chunk = Vec::new();
+        loop {
+            let mut opcode_and_length = [0u8; 9];
+            // The end: a file cut after a whole record still gives its
+            // messages (a bag whose recorder was killed has no summary).
+            let got = read_up_to(&mut source, &mut opcode_and_length, offset)?;
+            if got == 0 {
+                return Ok(counts);
             }
-            Err(e) => return Err(stream_error(offset + 9, format!("cannot read: {e}"))),
-        }
-        offset += 9 + length;
-        let record = mcap::read::parse_record(opcode, &body)
-            .map_err(|e| stream_error(record_offset, format!("record 0x{opcode:02x}: {e}")))?;
-        match record {
-            Record::Chunk { header, data } => {
+            if got < 9 {
+                return Err(stream_error(
+                    offset,
+                    "the file ends inside a record's header",
+                ));
+            }
+            let opcode = opcode_and_length[0];
+            let mut length_bytes = [0u8; 8];
+            length_bytes.copy_from_slice(&opcode_and_length[1..]);
+            let length = u64::from_le_bytes(length_bytes);
+            if length > limits.record_bytes {
+                return Err(stream_error(
+                    offset,
+                    format!(
+                        "a record of {length} bytes (opcode 0x{opcode:02x}): more than the {} this reader takes",
+                        limits.record_bytes
+                    ),
+                ));
+            }
+            let record_offset = offset;
+            // Grown as the bytes come: a length that claims more than the
+            // file holds costs no memory.
+            body.clear();
+            match (&mut source).take(length).read_to_end(&mut body) {
+                Ok(got) if got as u64 == length => {}
+                Ok(got) => {
+                    return Err(stream_error(
+                        offset + 9,
+                        format!("the file ends inside a record ({got} of {length} bytes)"),
+                    ))
+                }
+                Err(e) => return Err(stream_error(offset + 9, format!("cannot read: {e}"))),
+            }
+            offset += 9 + length;
+            if opcode == op::CHUNK {
+                let ordinal = counts.chunks;
                 counts.chunks += 1;
-                decompress(&header, &data, limits, &mut chunk)
-                    .map_err(|what| stream_error(record_offset, what))?;
-                for inner in mcap::read::LinearReader::sans_magic(&chunk) {
-                    let inner = inner.map_err(|e| {
-                        stream_error(record_offset, format!("a record in the chunk: {e}"))
-                    })?;
-                    dispatch(
-                        inner,
-                        record_offset,
-                        &mut declared,
-                        &wanted,
-                        &mut each,
-                        &mut counts,
-                    )?;
+                if skip_chunk(ordinal) {
+                    continue;
                 }
             }
-            Record::DataEnd(_) => return Ok(counts),
-            other => dispatch(
-                other,
-                record_offset,
-                &mut declared,
-                &wanted,
-                &mut each,
-                &mut counts,
-            )?,
+            let record = parse(opcode, &body).map_err(|what| {
+                stream_error(record_offset, format!("record 0x{opcode:02x}: {what}"))
+            })?;
+            let mut context = Dispatch {
+                declared: &mut self.declared,
+                wanted: &wanted,
+                each: &mut each,
+                counts: &mut counts,
+                offset: record_offset,
+                chunk: None,
+            };
+            match record {
+                Parsed::Chunk(header, data) => {
+                    decompress(&header, data, limits, &mut chunk)
+                        .map_err(|what| stream_error(record_offset, what))?;
+                    context.chunk = Some(context.counts.chunks - 1);
+                    let mut inner = chunk.as_slice();
+                    while !inner.is_empty() {
+                        let (opcode, body, rest) = split_record(inner).map_err(|what| {
+                            stream_error(record_offset, format!("a record in the chunk: {what}"))
+                        })?;
+                        inner = rest;
+                        let record = parse(opcode, body).map_err(|what| {
+                            stream_error(
+                                record_offset,
+                                format!("a record 0x{opcode:02x} in the chunk: {what}"),
+                            )
+                        })?;
+                        if matches!(record, Parsed::Chunk(..)) {
+                            return Err(stream_error(record_offset, "a chunk inside a chunk"));
+                        }
+                        context.dispatch(record)?;
+                    }
+                }
+                Parsed::DataEnd => return Ok(counts),
+                other => context.dispatch(other)?,
+            }
         }
     }
+}
+
+/// The records a reader of messages needs; the others are passed over.
+enum Parsed<'a> {
+    Schema {
+        id: u16,
+        name: String,
+    },
+    Channel {
+        id: u16,
+        info: ChannelInfo,
+    },
+    Message {
+        channel: u16,
+        log_time: u64,
+        data: &'a [u8],
+    },
+    Chunk(ChunkHeader, &'a [u8]),
+    DataEnd,
+    Other,
+}
+
+/// What a chunk's header says of its records.
+struct ChunkHeader {
+    uncompressed_size: u64,
+    uncompressed_crc: u32,
+    compression: String,
+}
+
+/// MCAP's opcodes (the specification's table).
+mod op {
+    pub const SCHEMA: u8 = 0x03;
+    pub const CHANNEL: u8 = 0x04;
+    pub const MESSAGE: u8 = 0x05;
+    pub const CHUNK: u8 = 0x06;
+    pub const DATA_END: u8 = 0x0F;
+}
+
+/// A record's fields, read in order, each checked against what is left.
+struct Fields<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> Fields<'a> {
+    fn take(&mut self, count: u64, what: &str) -> Result<&'a [u8], String> {
+        if count > self.bytes.len() as u64 {
+            return Err(format!(
+                "{what} of {count} bytes, where the record has {} left",
+                self.bytes.len()
+            ));
+        }
+        let (taken, rest) = self.bytes.split_at(count as usize);
+        self.bytes = rest;
+        Ok(taken)
+    }
+
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N], String> {
+        let mut out = [0u8; N];
+        out.copy_from_slice(self.take(N as u64, what)?);
+        Ok(out)
+    }
+
+    fn u16(&mut self, what: &str) -> Result<u16, String> {
+        self.array(what).map(u16::from_le_bytes)
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        self.array(what).map(u32::from_le_bytes)
+    }
+
+    fn u64(&mut self, what: &str) -> Result<u64, String> {
+        self.array(what).map(u64::from_le_bytes)
+    }
+
+    fn string(&mut self, what: &str) -> Result<String, String> {
+        let length = self.u32(what)?;
+        let bytes = self.take(u64::from(length), what)?;
+        String::from_utf8(bytes.to_vec()).map_err(|_| format!("{what} is not UTF-8"))
+    }
+}
+
+fn parse(opcode: u8, body: &[u8]) -> Result<Parsed<'_>, String> {
+    let mut f = Fields { bytes: body };
+    Ok(match opcode {
+        op::SCHEMA => Parsed::Schema {
+            id: f.u16("the schema's id")?,
+            name: f.string("the schema's name")?,
+        },
+        op::CHANNEL => Parsed::Channel {
+            id: f.u16("the channel's id")?,
+            info: ChannelInfo {
+                schema_id: f.u16("the channel's schema id")?,
+                topic: f.string("the channel's topic")?,
+                encoding: f.string("the channel's message encoding")?,
+            },
+        },
+        op::MESSAGE => {
+            let channel = f.u16("the message's channel")?;
+            f.u32("the message's sequence")?;
+            let log_time = f.u64("the message's log time")?;
+            f.u64("the message's publish time")?;
+            Parsed::Message {
+                channel,
+                log_time,
+                data: f.bytes,
+            }
+        }
+        op::CHUNK => {
+            f.u64("the chunk's first message time")?;
+            f.u64("the chunk's last message time")?;
+            let uncompressed_size = f.u64("the chunk's uncompressed size")?;
+            let uncompressed_crc = f.u32("the chunk's CRC")?;
+            let compression = f.string("the chunk's compression")?;
+            let length = f.u64("the chunk's records")?;
+            let data = f.take(length, "the chunk's records")?;
+            Parsed::Chunk(
+                ChunkHeader {
+                    uncompressed_size,
+                    uncompressed_crc,
+                    compression,
+                },
+                data,
+            )
+        }
+        op::DATA_END => Parsed::DataEnd,
+        _ => Parsed::Other,
+    })
+}
+
+/// The first record of `bytes` (inside a chunk): its opcode, its body and
+/// what follows it.
+fn split_record(bytes: &[u8]) -> Result<(u8, &[u8], &[u8]), String> {
+    let mut f = Fields { bytes };
+    let [opcode] = f.array::<1>("an opcode")?;
+    let length = f.u64("a record's length")?;
+    let body = f.take(length, "a record")?;
+    Ok((opcode, body, f.bytes))
+}
+
+/// [`McapStream::read`] of one file, from the start, every chunk read.
+pub fn for_each_message<R: Read, E>(
+    source: R,
+    limits: Limits,
+    wanted: impl Fn(&str) -> bool,
+    each: impl FnMut(StreamMessage<'_>) -> Result<(), E>,
+) -> Result<StreamCounts, ReadError<E>> {
+    McapStream::new(limits).read(source, wanted, |_| false, each)
 }
 
 /// A stream's error, or the one `each` stopped it with.
@@ -189,69 +375,69 @@ fn stream_error<E>(offset: u64, what: impl Into<String>) -> ReadError<E> {
     })
 }
 
-fn dispatch<E>(
-    record: Record<'_>,
+/// Where a record goes: declarations are kept, messages handed on.
+struct Dispatch<'a, W, F> {
+    declared: &'a mut Declarations,
+    wanted: &'a W,
+    each: &'a mut F,
+    counts: &'a mut StreamCounts,
     offset: u64,
-    declared: &mut Declarations,
-    wanted: &impl Fn(&str) -> bool,
-    each: &mut impl FnMut(StreamMessage<'_>) -> Result<(), E>,
-    counts: &mut StreamCounts,
-) -> Result<(), ReadError<E>> {
-    match record {
-        Record::Schema { header, .. } => {
-            declared.schemas.insert(header.id, header.name);
-        }
-        Record::Channel(records::Channel {
-            id,
-            schema_id,
-            topic,
-            message_encoding,
-            ..
-        }) => {
-            declared.channels.insert(
-                id,
-                ChannelInfo {
-                    topic,
-                    schema_id,
-                    encoding: message_encoding,
-                },
-            );
-        }
-        Record::Message { header, data } => {
-            let Some(channel) = declared.channels.get(&header.channel_id) else {
-                return Err(stream_error(
-                    offset,
-                    format!(
-                        "a message on channel {}, which no Channel record declared before it",
-                        header.channel_id
-                    ),
-                ));
-            };
-            if !wanted(&channel.topic) {
-                return Ok(());
+    chunk: Option<u64>,
+}
+
+impl<W: Fn(&str) -> bool, F> Dispatch<'_, W, F> {
+    fn dispatch<E>(&mut self, record: Parsed<'_>) -> Result<(), ReadError<E>>
+    where
+        F: FnMut(StreamMessage<'_>) -> Result<(), E>,
+    {
+        match record {
+            Parsed::Schema { id, name } => {
+                self.declared.schemas.insert(id, name);
             }
-            counts.messages += 1;
-            let schema = declared
-                .schemas
-                .get(&channel.schema_id)
-                .map_or("", String::as_str);
-            each(StreamMessage {
-                topic: &channel.topic,
-                schema,
-                encoding: &channel.encoding,
-                log_time: header.log_time,
-                data: &data,
-            })
-            .map_err(ReadError::Stopped)?;
+            Parsed::Channel { id, info } => {
+                self.declared.channels.insert(id, info);
+            }
+            Parsed::Message {
+                channel: channel_id,
+                log_time,
+                data,
+            } => {
+                let Some(channel) = self.declared.channels.get(&channel_id) else {
+                    return Err(stream_error(
+                        self.offset,
+                        format!(
+                            "a message on channel {channel_id}, which no Channel record declared before it"
+                        ),
+                    ));
+                };
+                if !(self.wanted)(&channel.topic) {
+                    return Ok(());
+                }
+                self.counts.messages += 1;
+                let schema = self
+                    .declared
+                    .schemas
+                    .get(&channel.schema_id)
+                    .map_or("", String::as_str);
+                (self.each)(StreamMessage {
+                    topic: &channel.topic,
+                    schema,
+                    encoding: &channel.encoding,
+                    log_time,
+                    data,
+                    chunk: self.chunk,
+                })
+                .map_err(ReadError::Stopped)?;
+            }
+            Parsed::Chunk(..) | Parsed::DataEnd | Parsed::Other => {}
         }
-        _ => {}
+        Ok(())
     }
-    Ok(())
 }
 
 /// A chunk's records into `out`, checked against its header's size and CRC.
 fn decompress(
-    header: &records::ChunkHeader,
+    header: &ChunkHeader,
     data: &[u8],
     limits: Limits,
     out: &mut Vec<u8>,
@@ -339,4 +525,95 @@ fn read_up_to<R: Read, E>(
         }
     }
     Ok(got)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record as MCAP frames it: opcode, length, body.
+    fn record(opcode: u8, body: &[u8]) -> Vec<u8> {
+        let mut bytes = vec![opcode];
+        bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(body);
+        bytes
+    }
+
+    fn messages(file: &[u8]) -> Result<Vec<(String, String, u64, Vec<u8>)>, StreamError> {
+        let mut seen = Vec::new();
+        for_each_message(
+            file,
+            Limits::default(),
+            |_| true,
+            |m| -> Result<(), ()> {
+                seen.push((m.topic.into(), m.schema.into(), m.log_time, m.data.to_vec()));
+                Ok(())
+            },
+        )
+        .map_err(|e| match e {
+            ReadError::Stream(e) => e,
+            ReadError::Stopped(()) => unreachable!(),
+        })?;
+        Ok(seen)
+    }
+
+    #[test]
+    fn the_python_writers_bags_read_alike_uncompressed_zstd_and_lz4() {
+        let read = |name: &str| {
+            let path = format!(
+                "{}/fuzz/corpus/mcap_bag/tiny-{name}.mcap",
+                env!("CARGO_MANIFEST_DIR")
+            );
+            messages(&std::fs::read(path).unwrap()).unwrap()
+        };
+        let plain = read("none");
+        let topics: Vec<&str> = plain.iter().map(|m| m.0.as_str()).collect();
+        assert_eq!(
+            topics,
+            [
+                "/tf",
+                "/camera/depth/image_raw",
+                "/camera/depth/camera_info"
+            ]
+        );
+        assert_eq!(plain[1].1, "sensor_msgs/msg/Image");
+        assert_eq!(plain[1].2, 6);
+        assert_eq!(read("zstd"), plain);
+        assert_eq!(read("lz4"), plain);
+    }
+
+    #[test]
+    fn a_length_beyond_the_record_is_an_error_not_an_allocation() {
+        // A channel whose topic claims 4 GB (the mcap crate's parser would
+        // reserve them first).
+        let mut body = Vec::new();
+        body.extend_from_slice(&1u16.to_le_bytes());
+        body.extend_from_slice(&1u16.to_le_bytes());
+        body.extend_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+        body.extend_from_slice(b"/tf");
+        let mut file = MAGIC.to_vec();
+        file.extend(record(op::CHANNEL, &body));
+        let e = messages(&file).unwrap_err();
+        assert_eq!(e.offset, 8);
+        assert!(
+            e.what.contains("the channel's topic of 4294967280 bytes"),
+            "{e}"
+        );
+        // A record longer than the file: named, nothing reserved for it.
+        let mut file = MAGIC.to_vec();
+        file.push(op::MESSAGE);
+        file.extend_from_slice(&(400u64 << 20).to_le_bytes());
+        let e = messages(&file).unwrap_err();
+        assert!(
+            e.what
+                .contains("ends inside a record (0 of 419430400 bytes)"),
+            "{e}"
+        );
+        // A message on a channel never declared.
+        let mut body = vec![7, 0];
+        body.extend_from_slice(&[0; 20]);
+        let mut file = MAGIC.to_vec();
+        file.extend(record(op::MESSAGE, &body));
+        assert!(messages(&file).unwrap_err().what.contains("channel 7"));
+    }
 }
