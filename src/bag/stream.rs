@@ -539,7 +539,10 @@ mod tests {
         bytes
     }
 
-    fn messages(file: &[u8]) -> Result<Vec<(String, String, u64, Vec<u8>)>, StreamError> {
+    /// A message as the tests compare them: topic, schema, log time, data.
+    type Seen = (String, String, u64, Vec<u8>);
+
+    fn messages(file: &[u8]) -> Result<Vec<Seen>, StreamError> {
         let mut seen = Vec::new();
         for_each_message(
             file,
