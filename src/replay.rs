@@ -48,6 +48,32 @@ pub struct ReplayOptions {
     pub ground_points: bool,
 }
 
+impl ReplayOptions {
+    /// The solve's settings and where the gates came from: these options'
+    /// gates and noise, else the input's own (`stored`, a recording's live
+    /// run's), else the built-in ones.
+    pub fn settings(
+        &self,
+        stored_gates: Option<Gates>,
+        stored_noise: Option<crate::calib::plan::NoiseModel>,
+    ) -> (CalibrationSettings, &'static str) {
+        let (gates, gates_from) = match (self.gates, stored_gates) {
+            (Some(gates), _) => (gates, "config"),
+            (None, Some(gates)) => (gates, "recording"),
+            (None, None) => (self.calibration.gates, "built-in"),
+        };
+        let solve = match self.noise.or(stored_noise) {
+            Some(noise) => noise.solve_settings(),
+            None => self.calibration.solve,
+        };
+        let solve = crate::calib::solve::SolveSettings {
+            depth_scale: self.depth_scale,
+            ..solve
+        };
+        (CalibrationSettings { gates, solve }, gates_from)
+    }
+}
+
 /// The outcome of a replay.
 #[derive(Debug, Clone)]
 pub struct Replay {
@@ -290,20 +316,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             Err(reason) => failed.push((pose.index, reason.clone())),
         }
     }
-    let (gates, gates_from) = match (options.gates, session.gates) {
-        (Some(gates), _) => (gates, "config"),
-        (None, Some(gates)) => (gates, "recording"),
-        (None, None) => (options.calibration.gates, "built-in"),
-    };
-    let solve = match options.noise.or(session.noise) {
-        Some(noise) => noise.solve_settings(),
-        None => options.calibration.solve,
-    };
-    let solve = crate::calib::solve::SolveSettings {
-        depth_scale: options.depth_scale,
-        ..solve
-    };
-    let settings = CalibrationSettings { gates, solve };
+    let (settings, gates_from) = options.settings(session.gates, session.noise);
     let mut result = ResultJson::from_poses(
         &observations,
         &failed,

@@ -18,20 +18,32 @@ use serde_json::Value;
 use common::MOUNT_KEYS as KEYS;
 use common::SIM_MOUNT as TRUTH;
 
-/// Writes `out` from `recording` with the Python writer; its counts.
-fn make_bag(python: &Path, recording: &Path, out: &Path, extra: &[&str]) -> Value {
-    let made = Command::new(python)
+/// Starts writing `out` from `recording` with the Python writer.
+fn start_bag(python: &Path, recording: &Path, out: &Path, extra: &[&str]) -> std::process::Child {
+    Command::new(python)
         .arg(root().join("tests/mcap/make_bag.py"))
         .args([recording, out])
         .args(extra)
-        .output()
-        .expect("python runs");
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("python runs")
+}
+
+/// Waits for a bag's writer; its counts.
+fn finish_bag(writer: std::process::Child) -> Value {
+    let made = writer.wait_with_output().expect("python ends");
     assert!(
         made.status.success(),
         "make_bag.py: {}",
         String::from_utf8_lossy(&made.stderr)
     );
     serde_json::from_slice(&made.stdout).expect("make_bag.py prints its counts")
+}
+
+/// Writes `out` from `recording` with the Python writer; its counts.
+fn make_bag(python: &Path, recording: &Path, out: &Path, extra: &[&str]) -> Value {
+    finish_bag(start_bag(python, recording, out, extra))
 }
 
 /// The largest angle (°) and position (mm) errors against the simulator's mount.
@@ -62,14 +74,19 @@ fn a_bag_from_another_stack_is_calibrated_from_its_still_poses() {
         recording.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{stderr}");
-    for (encoding, compression) in [("16UC1", "zstd"), ("32FC1", "lz4")] {
+    // Both bags written at once (the writer is single-threaded Python).
+    let cases = [("16UC1", "zstd"), ("32FC1", "lz4")].map(|(encoding, compression)| {
         let bag = work.join(format!("{encoding}.mcap"));
-        let counts = make_bag(
+        let writer = start_bag(
             &python,
             &recording,
             &bag,
             &["--encoding", encoding, "--compression", compression],
         );
+        (encoding, compression, bag, writer)
+    });
+    for (encoding, compression, bag, writer) in cases {
+        let counts = finish_bag(writer);
         assert_eq!(counts["images"], 104, "{counts}");
         assert!(counts["stale_images"].as_u64().unwrap() > 200, "{counts}");
         let (code, out, stderr) = groundcal(&["replay", bag.to_str().unwrap(), "--json"]);

@@ -12,7 +12,6 @@ pub mod stream;
 
 use rayon::prelude::*;
 
-use crate::calib::calibrate::CalibrationSettings;
 use crate::calib::depth::DepthEncoding;
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::observe::{BodyPoseSource, PoseObserver};
@@ -92,19 +91,8 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             Err(reason) => failed.push((pose.index, reason)),
         }
     }
-    let (gates, gates_from) = match options.gates {
-        Some(gates) => (gates, "config"),
-        None => (options.calibration.gates, "built-in"),
-    };
-    let solve = match options.noise {
-        Some(noise) => noise.solve_settings(),
-        None => options.calibration.solve,
-    };
-    let solve = crate::calib::solve::SolveSettings {
-        depth_scale: options.depth_scale,
-        ..solve
-    };
-    let settings = CalibrationSettings { gates, solve };
+    // A bag stores no gates and no noise of a live run.
+    let (settings, gates_from) = options.settings(None, None);
     let mut result =
         ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
     // The motor's tilt is not in a bag: not claimed.

@@ -49,16 +49,8 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
         }
     };
     tracing::info!(frames = outcome.frames, digest = %outcome.input_digest, "replayed");
-    if let Some(report_dir) = report_dir {
-        let provenance = Provenance::now(&dir.display().to_string(), outcome.input_digest.clone());
-        match write_report(report_dir, &outcome.result, &provenance) {
-            Ok(path) => eprintln!("groundcal replay: report written to {}", path.display()),
-            Err(e) => {
-                // The error names the file and what failed on it.
-                eprintln!("groundcal replay: cannot write the report: {e}");
-                return ExitStatus::RuntimeFailure;
-            }
-        }
+    if let Err(status) = report(report_dir, dir, &outcome) {
+        return status;
     }
     if let Some(path) = outputs.mcap {
         match crate::mcap_session::write_replay(path, &recording, &outcome) {
@@ -78,6 +70,30 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
         }
     }
     finish("replay", &outcome.result, json)
+}
+
+/// The HTML report into `report_dir`, when asked for, with where the input
+/// came from; said on stderr.
+fn report(
+    report_dir: Option<&Path>,
+    input: &Path,
+    outcome: &crate::replay::Replay,
+) -> Result<(), ExitStatus> {
+    let Some(report_dir) = report_dir else {
+        return Ok(());
+    };
+    let provenance = Provenance::now(&input.display().to_string(), outcome.input_digest.clone());
+    match write_report(report_dir, &outcome.result, &provenance) {
+        Ok(path) => {
+            eprintln!("groundcal replay: report written to {}", path.display());
+            Ok(())
+        }
+        Err(e) => {
+            // The error names the file and what failed on it.
+            eprintln!("groundcal replay: cannot write the report: {e}");
+            Err(ExitStatus::RuntimeFailure)
+        }
+    }
 }
 
 /// A ROS 2 bag: its still poses found and calibrated, as a recording's.
@@ -106,15 +122,8 @@ pub fn run_bag(
             return ExitStatus::BadInput;
         }
     };
-    if let Some(report_dir) = outputs.report {
-        let provenance = Provenance::now(&path.display().to_string(), outcome.input_digest.clone());
-        match write_report(report_dir, &outcome.result, &provenance) {
-            Ok(file) => eprintln!("groundcal replay: report written to {}", file.display()),
-            Err(e) => {
-                eprintln!("groundcal replay: cannot write the report: {e}");
-                return ExitStatus::RuntimeFailure;
-            }
-        }
+    if let Err(status) = report(outputs.report, path, &outcome) {
+        return status;
     }
     finish("replay", &outcome.result, outputs.json)
 }

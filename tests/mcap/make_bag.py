@@ -146,15 +146,20 @@ def main():
     model = session["kinect"].get("depth_model", {"kind": "zero-plane"})
     millimetres = depth_mm_table(model)
 
+    # Per raw value: millimetres (16UC1), or metres (32FC1; for the
+    # inverse-linear model the exact depth, not rounded to the millimetre).
+    if args.encoding == "16UC1":
+        table, code = millimetres, "H"
+    elif model.get("kind") == "inverse-linear":
+        a, b = model["a"], model["b"]
+        table = [1.0 / (a + b * v) if v < 2047 and a + b * v > 0 else math.nan for v in range(2048)]
+        code = "f"
+    else:
+        table = [mm / 1e3 if mm else math.nan for mm in millimetres]
+        code = "f"
+
     def depth_bytes(raw):
-        if args.encoding == "16UC1":
-            return struct.pack(f"<{len(raw)}H", *[millimetres[min(v, 2047)] for v in raw])
-        metres = [millimetres[min(v, 2047)] / 1e3 if millimetres[min(v, 2047)] else math.nan for v in raw]
-        if model.get("kind") == "inverse-linear":
-            # The exact depth, not rounded to the millimetre.
-            a, b = model["a"], model["b"]
-            metres = [1.0 / (a + b * v) if v < 2047 and a + b * v > 0 else math.nan for v in raw]
-        return struct.pack(f"<{len(raw)}f", *metres)
+        return struct.pack(f"<{len(raw)}{code}", *[table[min(v, 2047)] for v in raw])
 
     compression = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
         args.compression
