@@ -183,7 +183,7 @@ const PAGE = `<!doctype html><html><head><meta charset="utf-8">
 <main>
   <section><h2>Depth image, <code>/camera/depth/image_raw</code> (16UC1)</h2>
     <canvas id="depth"></canvas>
-    <div class="bar" id="bar"></div><div class="scale"><span>0.4 m</span><span>depth</span><span>3.0 m</span></div>
+    <div class="bar" id="bar"></div><div class="scale"><span>0.5 m</span><span>depth (the trusted range)</span><span>5.0 m</span></div>
     <p>Black: no reading.</p></section>
   <section><h2>3D: ground, body, feet and sensor</h2>
     <canvas id="view" width="720" height="540"></canvas>
@@ -221,7 +221,7 @@ document.getElementById('fit').textContent =
   const context = canvas.getContext('2d');
   const picture = context.createImageData(width, height);
   for (let k = 0; k < depth.length; k++) {
-    const [r, g, b] = depth[k] ? turbo((depth[k] - 400) / 2600) : [0, 0, 0];
+    const [r, g, b] = depth[k] ? turbo((depth[k] - 500) / 4500) : [0, 0, 0];
     picture.data.set([r, g, b, 255], 4 * k);
   }
   context.putImageData(picture, 0, 0);
