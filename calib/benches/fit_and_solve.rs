@@ -8,12 +8,13 @@ use std::path::PathBuf;
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use groundcal_calib::calibrate::{calibrate, CalibrationSettings};
-use groundcal_calib::disparity::{EdgeGuard, Frame};
+use groundcal_calib::disparity::{EdgeGuard, Frame, InverseDepthImage};
 use groundcal_calib::geometry::{sensor_from_optical, PoseDegMm, PoseParams};
 use groundcal_calib::ground_view::GroundView;
 use groundcal_calib::plane::{
     fit_ground, search::find_ground, FitBuffers, GroundFitMethod, GroundPrior, PlaneFitSettings,
 };
+use groundcal_calib::residuals::GroundResiduals;
 use groundcal_calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use groundcal_calib::solve::{predict, Observation};
 use nalgebra::Vector3;
@@ -144,6 +145,30 @@ fn ground_fit(c: &mut Criterion) {
                     &mut buffers,
                 )
                 .unwrap()
+            })
+        },
+    );
+    // What the depth pattern's estimate takes from that pose while its
+    // frames are in memory: its residuals summed per 8 × 8 cell.
+    let fit = fit_ground(
+        &[&pixels, &second],
+        &camera,
+        &prior,
+        &settings,
+        &mut buffers,
+    )
+    .unwrap();
+    let mut image = InverseDepthImage::default();
+    c.bench_function(
+        "ground residuals per cell, one pose of two 640x480 raw frames",
+        |b| {
+            b.iter(|| {
+                GroundResiduals::of(
+                    &[black_box(&pixels), black_box(&second)],
+                    &camera,
+                    &fit,
+                    &mut image,
+                )
             })
         },
     );

@@ -4,7 +4,6 @@
 //! kept).
 
 use nalgebra::{Matrix3, Vector3};
-use wide::f32x8;
 
 use crate::depth::Intrinsics;
 use crate::disparity::{FitValue, InverseDepthImage, PixelPlane};
@@ -62,118 +61,203 @@ struct Sums {
     columns: usize,
     moments: Matrix3<f64>,
     rhs: Vector3<f64>,
+    /// Per cell of the band of rows being read: its readings' sums in eight
+    /// lanes, reduced once when the band is done rather than once a row
+    /// (the reductions across lanes were most of the pass's time).
+    band: Vec<CellLanes>,
+}
+
+/// One cell's sums over a band of rows, in eight f32 lanes (k is the pixel
+/// in the cell, 0–7; `dv` the row's `v − cy`), written as independent
+/// lanes that the compiler turns into vector instructions. Every lane sums
+/// at most a few dozen readings, where f32 loses nothing that matters
+/// (residuals of a few hundredths; `dv²` below 2²⁴).
+#[derive(Clone, Copy, Default)]
+struct CellLanes {
+    n: [f32; CELL_PX],
+    r: [f32; CELL_PX],
+    rr: [f32; CELL_PX],
+    k: [f32; CELL_PX],
+    kk: [f32; CELL_PX],
+    kr: [f32; CELL_PX],
+    n_dv: [f32; CELL_PX],
+    k_dv: [f32; CELL_PX],
+    n_dv2: [f32; CELL_PX],
+    r_dv: [f32; CELL_PX],
+}
+
+/// A lane array's sum, in a fixed order.
+fn lane_sum(lanes: &[f32; CELL_PX]) -> f64 {
+    let half: [f32; 4] = std::array::from_fn(|l| lanes[l] + lanes[l + 4]);
+    f64::from((half[0] + half[2]) + (half[1] + half[3]))
 }
 
 impl Sums {
-    /// One row's readings within `band` of `plane` (both in the row's value
-    /// units; trusted values only), the residuals times `to_inverse_depth`.
-    /// Each cell's 8 readings are summed in f32 without a branch (a
-    /// residual of a few hundredths, squared, loses nothing there), the
-    /// cells in f64.
-    #[allow(clippy::too_many_arguments)]
+    fn new(columns: usize, rows: usize) -> Self {
+        Self {
+            cells: vec![CellSums::default(); columns * rows],
+            columns,
+            moments: Matrix3::zeros(),
+            rhs: Vector3::zeros(),
+            band: vec![CellLanes::default(); columns],
+        }
+    }
+
+    /// Adds one row's readings within `band` of `plane` (both in the row's
+    /// value units; trusted values only) to the band's lanes, without a
+    /// branch. A last cell narrower than [`CELL_PX`] is padded with NaN,
+    /// which no comparison takes.
+    #[inline(always)]
     fn add_row<T: FitValue>(
         &mut self,
         row: &[T],
-        v: usize,
-        intrinsics: &Intrinsics,
+        dv: f64,
+        cx: f64,
         plane: &PixelPlane,
-        band: f64,
+        band: f32,
         trusted: (f32, f32),
-        to_inverse_depth: f64,
     ) {
-        let dv = v as f64 - intrinsics.cy;
-        let cell_row = (v / CELL_PX) * self.columns;
-        let (band, scale) = (band as f32, to_inverse_depth);
-        let (mut uu, mut ur) = (0.0f64, 0.0f64);
-        for (cell_index, chunk) in row.chunks(CELL_PX).enumerate() {
-            let first = (cell_index * CELL_PX) as f64 - intrinsics.cx;
-            // The plane at the cell's first pixel, and its step per pixel.
-            let start = (plane.c0 + plane.cv * dv + plane.cu * first) as f32;
-            let step = plane.cu as f32;
-            let (n, sr, srr, su, suu, sur) = if chunk.len() == CELL_PX {
-                cell_sums(chunk, start, step, band, trusted)
-            } else {
-                let mut sums = (0f32, 0f32, 0f32, 0f32, 0f32, 0f32);
-                for (k, value) in chunk.iter().enumerate() {
-                    let x = value.to_f32();
-                    let r = x - (start + step * k as f32);
-                    if r.abs() <= band && x >= trusted.0 && x <= trusted.1 {
-                        let k = k as f32;
-                        sums.0 += 1.0;
-                        sums.1 += r;
-                        sums.2 += r * r;
-                        sums.3 += k;
-                        sums.4 += k * k;
-                        sums.5 += k * r;
+        let cu = plane.cu as f32;
+        let (dv1, dv2) = (dv as f32, (dv * dv) as f32);
+        for (cell_index, (lanes, chunk)) in
+            self.band.iter_mut().zip(row.chunks(CELL_PX)).enumerate()
+        {
+            let x: [f32; CELL_PX] = match <&[T; CELL_PX]>::try_from(chunk) {
+                Ok(full) => full.map(|value| value.to_f32()),
+                Err(_) => {
+                    let mut x = [f32::NAN; CELL_PX];
+                    for (out, value) in x.iter_mut().zip(chunk) {
+                        *out = value.to_f32();
                     }
+                    x
                 }
-                sums
             };
+            // The plane at the cell's first pixel, then a step a pixel.
+            let first = (cell_index * CELL_PX) as f64 - cx;
+            let start = (plane.c0 + plane.cv * dv + plane.cu * first) as f32;
+            // Lane l of every sum at once: one vector instruction a sum.
+            #[allow(clippy::needless_range_loop)]
+            for l in 0..CELL_PX {
+                let k = l as f32;
+                let r = x[l] - (start + cu * k);
+                let keep = r.abs() <= band && x[l] >= trusted.0 && x[l] <= trusted.1;
+                let n = if keep { 1.0 } else { 0.0 };
+                let r = if keep { r } else { 0.0 };
+                lanes.n[l] += n;
+                lanes.r[l] += r;
+                lanes.rr[l] += r * r;
+                lanes.k[l] += k * n;
+                lanes.kk[l] += k * k * n;
+                lanes.kr[l] += k * r;
+                lanes.n_dv[l] += n * dv1;
+                lanes.k_dv[l] += k * n * dv1;
+                lanes.n_dv2[l] += n * dv2;
+                lanes.r_dv[l] += r * dv1;
+            }
+        }
+    }
+
+    /// Reduces the band's lanes into the cells of band row `band_row` and
+    /// the pose's moments (residuals times `to_inverse_depth`), and clears
+    /// them for the next band.
+    fn end_band(&mut self, band_row: usize, cx: f64, to_inverse_depth: f64) {
+        let scale = to_inverse_depth;
+        let cell_row = band_row * self.columns;
+        for (cell_index, lanes) in self.band.iter_mut().enumerate() {
+            let sum = |lane: [f32; CELL_PX]| lane_sum(&lane);
+            let n = sum(lanes.n);
             if n == 0.0 {
                 continue;
             }
+            let (sr, srr) = (sum(lanes.r) * scale, sum(lanes.rr) * scale * scale);
+            let (sk, skk, skr) = (sum(lanes.k), sum(lanes.kk), sum(lanes.kr) * scale);
+            let (n_dv, k_dv, n_dv2) = (sum(lanes.n_dv), sum(lanes.k_dv), sum(lanes.n_dv2));
+            let r_dv = sum(lanes.r_dv) * scale;
+            *lanes = CellLanes::default();
             // Offsets within the cell (k) back to u' = first + k.
-            let (n, sr, srr) = (
-                f64::from(n),
-                f64::from(sr) * scale,
-                f64::from(srr) * scale * scale,
-            );
-            let (su, suu, sur) = (f64::from(su), f64::from(suu), f64::from(sur) * scale);
-            let sum_u = first * n + su;
+            let first = (cell_index * CELL_PX) as f64 - cx;
+            let sum_u = first * n + sk;
             let cell = &mut self.cells[cell_row + cell_index];
             cell.n += n;
             cell.r += sr;
             cell.rr += srr;
             cell.u += sum_u;
-            cell.v += n * dv;
-            uu += first * first * n + 2.0 * first * su + suu;
-            ur += first * sr + sur;
+            cell.v += n_dv;
             self.moments[(0, 0)] += n;
             self.moments[(0, 1)] += sum_u;
-            self.moments[(0, 2)] += n * dv;
-            self.moments[(1, 2)] += sum_u * dv;
-            self.moments[(2, 2)] += n * dv * dv;
+            self.moments[(0, 2)] += n_dv;
+            self.moments[(1, 1)] += first * first * n + 2.0 * first * sk + skk;
+            self.moments[(1, 2)] += first * n_dv + k_dv;
+            self.moments[(2, 2)] += n_dv2;
             self.rhs[0] += sr;
-            self.rhs[2] += sr * dv;
+            self.rhs[1] += first * sr + skr;
+            self.rhs[2] += r_dv;
         }
-        self.moments[(1, 1)] += uu;
-        self.rhs[1] += ur;
+    }
+
+    /// Every [`ROW_STEP`]th row of each of `frames` (all of the same
+    /// size), band by band of [`CELL_PX`] rows, the frames' rows of a band
+    /// reduced together. Where the processor has AVX2, the same loop runs
+    /// eight lanes at a time (the same numbers in the same order: the sums
+    /// do not depend on the processor).
+    fn add_frames<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            #[allow(unsafe_code)]
+            unsafe {
+                self.add_frames_avx2(frames, pass)
+            };
+            return;
+        }
+        self.add_frames_lanes(frames, pass);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn add_frames_avx2<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
+        self.add_frames_lanes(frames, pass);
+    }
+
+    #[inline(always)]
+    fn add_frames_lanes<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
+        let Pass {
+            width,
+            intrinsics,
+            plane,
+            band,
+            trusted,
+            to_inverse_depth,
+        } = *pass;
+        let band_px = width * CELL_PX;
+        let bands = frames.first().map_or(0, |f| f.len().div_ceil(band_px));
+        for band_row in 0..bands {
+            for frame in frames {
+                let rows = &frame[band_row * band_px..frame.len().min((band_row + 1) * band_px)];
+                for (j, row) in rows.chunks_exact(width).enumerate().step_by(ROW_STEP) {
+                    let v = band_row * CELL_PX + j;
+                    let dv = v as f64 - intrinsics.cy;
+                    self.add_row(row, dv, intrinsics.cx, &plane, band, trusted);
+                }
+            }
+            self.end_band(band_row, intrinsics.cx, to_inverse_depth);
+        }
     }
 }
 
-/// One cell's 8 readings of a row in one vector: how many lie within
-/// `band` of the plane (`start` at the first, `step` a pixel) among the
-/// trusted ones, and their Σr, Σr², Σk, Σk², Σk·r (k the pixel in the cell).
-#[inline(always)]
-fn cell_sums<T: FitValue>(
-    chunk: &[T],
-    start: f32,
-    step: f32,
+/// What one pass over a pose's frames compares and sums.
+#[derive(Clone, Copy)]
+struct Pass {
+    width: usize,
+    intrinsics: Intrinsics,
+    /// The fit's plane in the frames' value units.
+    plane: PixelPlane,
+    /// The band about it, in the same units.
     band: f32,
+    /// The trusted values.
     trusted: (f32, f32),
-) -> (f32, f32, f32, f32, f32, f32) {
-    let mut values = [0f32; CELL_PX];
-    for (out, value) in values.iter_mut().zip(chunk) {
-        *out = value.to_f32();
-    }
-    let x = f32x8::from(values);
-    let k = f32x8::from([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
-    let r = x - (f32x8::splat(start) + f32x8::splat(step) * k);
-    let keep = r.abs().simd_le(f32x8::splat(band))
-        & x.simd_ge(f32x8::splat(trusted.0))
-        & x.simd_le(f32x8::splat(trusted.1));
-    let zero = f32x8::splat(0.0);
-    let one = f32x8::select(keep, f32x8::splat(1.0), zero);
-    let r = f32x8::select(keep, r, zero);
-    let k = k * one;
-    (
-        one.reduce_add(),
-        r.reduce_add(),
-        (r * r).reduce_add(),
-        k.reduce_add(),
-        (k * k).reduce_add(),
-        (k * r).reduce_add(),
-    )
+    /// Inverse depth (1/m) per value unit.
+    to_inverse_depth: f64,
 }
 
 impl GroundResiduals {
@@ -196,46 +280,38 @@ impl GroundResiduals {
         let (width, height) = (intrinsics.width, intrinsics.height);
         let columns = width.div_ceil(CELL_PX);
         let rows = height.div_ceil(CELL_PX);
-        let mut sums = Sums {
-            cells: vec![CellSums::default(); columns * rows],
-            columns,
-            moments: Matrix3::zeros(),
-            rhs: Vector3::zeros(),
-        };
+        let mut sums = Sums::new(columns, rows);
         let plane = PixelPlane::from_plane(&fit.plane, &intrinsics);
-        for pixels in frames {
-            if pixels.len() != width * height {
-                continue;
-            }
-            if camera.fits_raw_values() {
-                // Raw frames as the fit read them, in raw values: no pixel
-                // converted (the residuals scaled to 1/m by the cell).
-                let domain = camera.value_domain();
-                let values = domain.from_inverse_depth(&plane);
-                for (v, row) in pixels.chunks_exact(width).enumerate().step_by(ROW_STEP) {
-                    sums.add_row(
-                        row,
-                        v,
-                        &intrinsics,
-                        &values,
-                        WIDER_BAND * band / domain.scale.abs(),
-                        domain.trusted,
-                        domain.scale,
-                    );
-                }
-            } else {
+        let whole: Vec<&[u16]> = frames
+            .iter()
+            .copied()
+            .filter(|pixels| pixels.len() == width * height)
+            .collect();
+        if camera.fits_raw_values() {
+            // Raw frames as the fit read them, in raw values: no pixel
+            // converted (the residuals scaled to 1/m by the cell).
+            let domain = camera.value_domain();
+            let pass = Pass {
+                width,
+                intrinsics,
+                plane: domain.from_inverse_depth(&plane),
+                band: (WIDER_BAND * band / domain.scale.abs()) as f32,
+                trusted: domain.trusted,
+                to_inverse_depth: domain.scale,
+            };
+            sums.add_frames(&whole, &pass);
+        } else {
+            let pass = Pass {
+                width,
+                intrinsics,
+                plane,
+                band: (WIDER_BAND * band) as f32,
+                trusted: (f32::MIN, f32::MAX),
+                to_inverse_depth: 1.0,
+            };
+            for pixels in whole {
                 camera.inverse_depth_into(pixels, image);
-                for (v, row) in image.w.chunks_exact(width).enumerate().step_by(ROW_STEP) {
-                    sums.add_row(
-                        row,
-                        v,
-                        &intrinsics,
-                        &plane,
-                        WIDER_BAND * band,
-                        (f32::MIN, f32::MAX),
-                        1.0,
-                    );
-                }
+                sums.add_frames(&[&image.w[..]], &pass);
             }
         }
         let Sums {
