@@ -580,6 +580,17 @@ fn main() -> ExitCode {
         )
         .init();
     let args = Args::parse();
+    if matches!(
+        args.command,
+        Command::Plan { .. }
+            | Command::Solve { .. }
+            | Command::Replay { .. }
+            | Command::CheckConfig { .. }
+            | Command::Export { .. }
+            | Command::Plane { .. }
+    ) {
+        cli::ends_quietly_on_a_closed_pipe();
+    }
     ExitCode::from(run(args).code() as u8)
 }
 

@@ -323,3 +323,35 @@ fn replay_writes_a_self_contained_report() {
     assert!(html.contains(env!("CARGO_PKG_VERSION")));
     assert!(html.contains("sample-12"));
 }
+
+/// `groundcal replay --json | head`: the reader goes away before the result
+/// is printed. The command ends by SIGPIPE as `cat` would, without a panic
+/// and its backtrace (before, it panicked: "failed printing to stdout").
+#[cfg(unix)]
+#[test]
+fn a_reader_that_goes_away_ends_the_command_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::{Command, Stdio};
+    for args in [vec!["--json"], vec![]] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_groundcal"))
+            .arg("replay")
+            .arg(sample())
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("groundcal runs");
+        // The reading end closed before the replay (tens of milliseconds)
+        // has anything to print.
+        drop(child.stdout.take());
+        let out = child.wait_with_output().expect("groundcal ends");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        assert_eq!(
+            out.status.signal(),
+            Some(13),
+            "{args:?}: {:?} {stderr}",
+            out.status
+        );
+    }
+}

@@ -36,6 +36,26 @@ impl ExitStatus {
     }
 }
 
+/// A command that reads, prints and ends is ended quietly by the system
+/// when the reader of its output goes away (`groundcal replay --json |
+/// head`), as `cat` and `grep` are: SIGPIPE's default action, exit by
+/// signal 13 (status 141 in a shell). Rust's runtime ignores SIGPIPE, so
+/// that every print to a closed pipe would panic instead.
+///
+/// Not for the commands that drive hardware or serve (`calibrate`,
+/// `verify`, `capture`, `serve`, `sim-robot`): a closed pipe must never
+/// end them while the robot stands mid-schedule; their progress printer
+/// outlives a failed write.
+pub fn ends_quietly_on_a_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: `signal` with SIG_DFL installs no handler; it is called on
+    // the main thread before any other thread starts.
+    #[allow(unsafe_code)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Parses `X,Y,Z`-style lists of numbers from a flag.
 pub fn parse_numbers<const N: usize>(flag: &str, text: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -61,11 +81,12 @@ pub fn finish(command: &str, result: &crate::output::ResultJson, json: bool) -> 
     let printed = if json {
         print_json(result)
     } else {
-        print!("{}", for_terminal(&result.to_table(), false));
-        Ok(())
+        print_stdout(&for_terminal(&result.to_table(), false))
     };
     if let Err(e) = printed {
-        eprintln!("groundcal {command}: {e}");
+        // stderr may be gone with stdout: said if it can be, never a panic.
+        use std::io::Write;
+        let _ = writeln!(std::io::stderr(), "groundcal {command}: {e}");
         return ExitStatus::RuntimeFailure;
     }
     if result.accepted() {
@@ -95,6 +116,16 @@ pub fn for_terminal(text: &str, stderr: bool) -> String {
 pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), String> {
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| format!("cannot encode the result: {e}"))?;
-    println!("{text}");
-    Ok(())
+    print_stdout(&format!("{text}\n"))
+}
+
+/// Writes `text` on stdout; an error (the reader gone, a full disk) is
+/// returned, not a panic as `print!`'s would be.
+pub fn print_stdout(text: &str) -> Result<(), String> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+        .map_err(|e| format!("cannot print the result: {e}"))
 }
