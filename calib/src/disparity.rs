@@ -585,18 +585,20 @@ const LANES: usize = 16;
 /// Sums of one row: inliers, `Σu`, `Σu²`, `Σr`, `Σu·r`, `Σr²`.
 type RowSums = [f64; 6];
 
-/// The sum of the lanes, pairwise in a fixed order.
+/// The sum of `N` lanes (a power of two, at least 4), pairwise in a fixed
+/// order: halves folded until four are left, then `(0 + 2) + (1 + 3)`. The
+/// same order on every processor, so the sums are bit-identical.
 #[inline(always)]
-fn lane_sum(lanes: &[f32; LANES]) -> f64 {
-    let mut half = [0f32; LANES / 2];
-    for (i, h) in half.iter_mut().enumerate() {
-        *h = lanes[i] + lanes[i + LANES / 2];
+pub(crate) fn lane_sum<const N: usize>(lanes: &[f32; N]) -> f64 {
+    let mut values = *lanes;
+    let mut n = N;
+    while n > 4 {
+        n /= 2;
+        for i in 0..n {
+            values[i] += values[i + n];
+        }
     }
-    let mut quarter = [0f32; LANES / 4];
-    for (i, q) in quarter.iter_mut().enumerate() {
-        *q = half[i] + half[i + LANES / 4];
-    }
-    f64::from((quarter[0] + quarter[2]) + (quarter[1] + quarter[3]))
+    f64::from((values[0] + values[2]) + (values[1] + values[3]))
 }
 
 /// The edge guard's test of the pixel above: within `limit` of the plane

@@ -6,7 +6,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::depth::Intrinsics;
-use crate::disparity::{FitValue, InverseDepthImage, PixelPlane};
+use crate::disparity::{lane_sum, FitValue, InverseDepthImage, PixelPlane};
 use crate::plane::{GroundFit, InlierBand};
 use crate::sensor::DepthCamera;
 
@@ -58,7 +58,6 @@ pub struct GroundResiduals {
 /// The sums as one pose's frames are read.
 struct Sums {
     cells: Vec<CellSums>,
-    columns: usize,
     moments: Matrix3<f64>,
     rhs: Vector3<f64>,
     /// Per cell of the band of rows being read: its readings' sums in eight
@@ -86,17 +85,10 @@ struct CellLanes {
     r_dv: [f32; CELL_PX],
 }
 
-/// A lane array's sum, in a fixed order.
-fn lane_sum(lanes: &[f32; CELL_PX]) -> f64 {
-    let half: [f32; 4] = std::array::from_fn(|l| lanes[l] + lanes[l + 4]);
-    f64::from((half[0] + half[2]) + (half[1] + half[3]))
-}
-
 impl Sums {
     fn new(columns: usize, rows: usize) -> Self {
         Self {
             cells: vec![CellSums::default(); columns * rows],
-            columns,
             moments: Matrix3::zeros(),
             rhs: Vector3::zeros(),
             band: vec![CellLanes::default(); columns],
@@ -162,7 +154,7 @@ impl Sums {
     /// them for the next band.
     fn end_band(&mut self, band_row: usize, cx: f64, to_inverse_depth: f64) {
         let scale = to_inverse_depth;
-        let cell_row = band_row * self.columns;
+        let cell_row = band_row * self.band.len();
         for (cell_index, lanes) in self.band.iter_mut().enumerate() {
             let sum = |lane: [f32; CELL_PX]| lane_sum(&lane);
             let n = sum(lanes.n);
