@@ -152,6 +152,15 @@ pub fn parse_fakenect_pgm_into(
     Ok((header.width, header.height))
 }
 
+/// A fakenect dump's size and where its pixels start, from the first bytes of
+/// its file when they hold the whole header: `(width, height, offset)`. `None`
+/// for anything else, which [`parse_fakenect_pgm`] on the whole file explains;
+/// this lets a reader put the pixels straight into their buffer.
+pub fn fakenect_pixels_start(prefix: &[u8]) -> Option<(usize, usize, usize)> {
+    let header = parse_pgm_header(Path::new(""), prefix, false).ok()?;
+    (header.maxval == 65535).then_some((header.width, header.height, header.data_start))
+}
+
 /// Parses a standard binary PGM with 16-bit (big-endian) samples, as written for depth in mm.
 ///
 /// maxval <= 255 means 8-bit samples, which cannot be depth, so it is refused.

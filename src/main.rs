@@ -433,7 +433,10 @@ fn run(args: Args) -> ExitStatus {
                 noise,
                 verify,
                 depth_scale: depth_scale.unwrap_or(configured_scale),
-                ground_points: mcap.is_some(),
+                keep: groundcal::replay::AlsoKeep {
+                    ground_points: mcap.is_some(),
+                    input_digest: report.is_some(),
+                },
                 ..Default::default()
             };
             options.pose.plane.method = ground_fit;

@@ -43,9 +43,20 @@ pub struct ReplayOptions {
     pub verify: crate::calib::verify::VerifySettings,
     /// The depth scale, estimated (the default) or given.
     pub depth_scale: crate::calib::solve::DepthScaleSetting,
-    /// Keep, per pose, the readings the fit took for the ground (one per
-    /// 8 × 8 pixels of the first frame), for `--mcap`.
+    /// What to keep beyond the result.
+    pub keep: AlsoKeep,
+}
+
+/// What observing a recording keeps beyond its poses: each costs time, and
+/// only some outputs need it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct AlsoKeep {
+    /// Per pose, the readings the fit took for the ground (one per 8 × 8
+    /// pixels of the first frame), for `--mcap`.
     pub ground_points: bool,
+    /// The input's digest, for a report's provenance: BLAKE3 of every
+    /// frame's bytes, about a tenth of a replay's time (docs/performance.md).
+    pub input_digest: bool,
 }
 
 impl ReplayOptions {
@@ -78,10 +89,11 @@ impl ReplayOptions {
 #[derive(Debug, Clone)]
 pub struct Replay {
     pub result: ResultJson,
-    /// BLAKE3 of the text files' and every frame's BLAKE3, in order (hex).
-    /// (BLAKE3 rather than SHA-256: SHA-256 took a quarter of a replay's
-    /// time, BLAKE3 a third of that; docs/performance.md.)
-    pub input_digest: String,
+    /// BLAKE3 of the text files' and every frame's BLAKE3, in order (hex),
+    /// when [`AlsoKeep::input_digest`] asked for it. (BLAKE3 rather than
+    /// SHA-256: SHA-256 took a quarter of a replay's time, BLAKE3 a third of
+    /// that; docs/performance.md.)
+    pub input_digest: Option<String>,
     /// Depth frames read.
     pub frames: usize,
     /// Per pose of the recording, in its order: the body pose from the feet.
@@ -96,8 +108,7 @@ pub struct Replay {
 #[derive(Default)]
 struct WorkerBuffers {
     fit: FitBuffers,
-    /// Each frame's file and its pixels.
-    files: Vec<Vec<u8>>,
+    /// Each frame's pixels.
     pixels: Vec<Vec<u16>>,
 }
 
@@ -119,7 +130,7 @@ fn process_pose(
     pose: &crate::recording::poses::PoseRecord,
     body: &Result<BodyEstimate, String>,
     buffers: &mut WorkerBuffers,
-    keep_ground_points: bool,
+    keep: AlsoKeep,
 ) -> Result<PoseOutcome, InputError> {
     let poses_path = recording.dir.join("poses.jsonl");
     let failed = |reason: String| PoseOutcome {
@@ -141,23 +152,22 @@ fn process_pose(
         )
     })?;
     let count = pose.depth_frames.len();
-    buffers.files.resize_with(count, Vec::new);
     buffers.pixels.resize_with(count, Vec::new);
     let mut frame_digests = Vec::with_capacity(count);
-    for ((name, file), pixels) in pose
-        .depth_frames
-        .iter()
-        .zip(&mut buffers.files)
-        .zip(&mut buffers.pixels)
-    {
-        recording.read_depth_frame_into(name, file, pixels)?;
-        frame_digests.push(*blake3::hash(file).as_bytes());
+    for (name, pixels) in pose.depth_frames.iter().zip(&mut buffers.pixels) {
+        if keep.input_digest {
+            let mut digest = blake3::Hasher::new();
+            recording.read_depth_pixels_into(name, pixels, Some(&mut digest))?;
+            frame_digests.push(*digest.finalize().as_bytes());
+        } else {
+            recording.read_depth_pixels_into(name, pixels, None)?;
+        }
     }
     let frames: Vec<&[u16]> = buffers.pixels[..count].iter().map(Vec::as_slice).collect();
     let fitted = processor
         .observe_with_fit(pose.index, body, &frames, &mut buffers.fit)
         .map_err(|e| format!("no ground found: {e}"));
-    let ground_points = match (&fitted, keep_ground_points) {
+    let ground_points = match (&fitted, keep.ground_points) {
         (Ok((_, fit)), true) => Some(ground_view::ground_points(
             frames[0],
             processor.camera(),
@@ -176,8 +186,9 @@ fn process_pose(
 /// What a recording's poses gave, in pose order.
 pub struct ObservedRecording {
     pub poses: Vec<VisitedPose>,
-    /// BLAKE3 of the text files' and every frame's BLAKE3, in order (hex).
-    pub input_digest: String,
+    /// BLAKE3 of the text files' and every frame's BLAKE3, in order (hex),
+    /// when asked for.
+    pub input_digest: Option<String>,
     /// Depth frames read.
     pub frames: usize,
     /// A note when no mount tells which plane is the ground.
@@ -195,7 +206,7 @@ pub fn observe_recording(
     settings: ObserveSettings,
     threads: Option<usize>,
     correction: Option<&crate::calib::distortion::DepthCorrection>,
-    keep_ground_points: bool,
+    keep: AlsoKeep,
 ) -> Result<ObservedRecording, InputError> {
     let session = &recording.session;
     let session_path = recording.dir.join("session.json");
@@ -228,14 +239,7 @@ pub fn observe_recording(
             .with_max_len(1)
             .map(|(pose, body)| {
                 BUFFERS.with_borrow_mut(|buffers| {
-                    process_pose(
-                        recording,
-                        &processor,
-                        pose,
-                        body,
-                        buffers,
-                        keep_ground_points,
-                    )
+                    process_pose(recording, &processor, pose, body, buffers, keep)
                 })
             })
             .collect()
@@ -257,18 +261,17 @@ pub fn observe_recording(
     // The first error in pose order, whichever thread met it first.
     let outcomes: Vec<PoseOutcome> = gathered.into_iter().collect::<Result<_, _>>()?;
 
-    let mut hasher = blake3::Hasher::new();
-    for text in recording.text_files() {
-        hasher.update(blake3::hash(text).as_bytes());
-    }
-    let mut frames = 0;
-    for outcome in &outcomes {
-        for digest in &outcome.frame_digests {
-            hasher.update(digest);
-            frames += 1;
+    let frames = recording.poses.iter().map(|p| p.depth_frames.len()).sum();
+    let input_digest = keep.input_digest.then(|| {
+        let mut hasher = blake3::Hasher::new();
+        for text in recording.text_files() {
+            hasher.update(blake3::hash(text).as_bytes());
         }
-    }
-    let input_digest = hasher.finalize().to_hex().to_string();
+        for digest in outcomes.iter().flat_map(|o| &o.frame_digests) {
+            hasher.update(digest);
+        }
+        hasher.finalize().to_hex().to_string()
+    });
 
     let mut poses = Vec::with_capacity(outcomes.len());
     let mut ground_points = Vec::with_capacity(outcomes.len());
@@ -306,7 +309,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         options.pose,
         options.threads,
         None,
-        options.ground_points,
+        options.keep,
     )?;
     let mut observations = Vec::new();
     let mut failed = Vec::new();

@@ -24,7 +24,7 @@ use groundcal::calib::outcome::{position_words, rotation_words};
 use groundcal::output::ResultJson;
 use groundcal::recording::planes::read_planes;
 use groundcal::recording::Recording;
-use groundcal::replay::{replay, ReplayOptions};
+use groundcal::replay::{replay, AlsoKeep, ReplayOptions};
 use groundcal::report::{write_report, Provenance};
 
 /// Writes the report, opens it in Chromium and returns the phone's and the
@@ -252,10 +252,18 @@ fn report_of_a_recording_shows_its_setup_and_commanded_poses() {
     }
     let dir = common::shared().join("data/sample-12");
     let recording = Recording::open(&dir).expect("the sample opens");
-    let replayed = replay(&recording, &ReplayOptions::default()).expect("the sample replays");
+    let options = ReplayOptions {
+        keep: AlsoKeep {
+            input_digest: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let replayed = replay(&recording, &options).expect("the sample replays");
     let result = replayed.result;
     assert!(result.accepted(), "{:?}", result.reasons);
-    let provenance = Provenance::now("../shared/data/sample-12", replayed.input_digest);
+    let digest = replayed.input_digest.expect("asked for");
+    let provenance = Provenance::now("../shared/data/sample-12", digest);
 
     for view in open_in_chromium("sample", &result, &provenance) {
         let sections = &view["sections"];

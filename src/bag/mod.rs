@@ -118,7 +118,7 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     });
     Ok(Replay {
         result,
-        input_digest: bag.digest.clone(),
+        input_digest: Some(bag.digest.clone()),
         frames: bag.poses.iter().map(|p| p.frames.len()).sum(),
         ground_from_robot: bodies
             .iter()

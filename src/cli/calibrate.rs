@@ -366,7 +366,10 @@ fn write_mcap(
     let recording = crate::recording::Recording::open(recording_dir).map_err(|e| e.to_string())?;
     let mut options = crate::replay::ReplayOptions {
         depth_scale: config.calibration.depth_scale,
-        ground_points: true,
+        keep: crate::replay::AlsoKeep {
+            ground_points: true,
+            input_digest: false,
+        },
         ..Default::default()
     };
     options.pose.plane.method = config.calibration.ground_fit;

@@ -48,7 +48,11 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
             return ExitStatus::BadInput;
         }
     };
-    tracing::info!(frames = outcome.frames, digest = %outcome.input_digest, "replayed");
+    tracing::info!(
+        frames = outcome.frames,
+        digest = outcome.input_digest.as_deref(),
+        "replayed"
+    );
     if let Err(status) = report(report_dir, dir, &outcome) {
         return status;
     }
@@ -82,7 +86,13 @@ fn report(
     let Some(report_dir) = report_dir else {
         return Ok(());
     };
-    let provenance = Provenance::now(&input.display().to_string(), outcome.input_digest.clone());
+    // The caller asks for the digest with the report; a replay without it
+    // says so rather than show a digest of nothing.
+    let digest = outcome
+        .input_digest
+        .clone()
+        .unwrap_or_else(|| "not computed".into());
+    let provenance = Provenance::now(&input.display().to_string(), digest);
     match write_report(report_dir, &outcome.result, &provenance) {
         Ok(path) => {
             eprintln!("groundcal replay: report written to {}", path.display());

@@ -97,7 +97,7 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
             pose_settings,
             None,
             calibration.depth_correction.as_deref(),
-            false,
+            crate::replay::AlsoKeep::default(),
         ) {
             Ok(o) => o,
             Err(e) => {

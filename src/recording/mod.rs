@@ -12,7 +12,7 @@ pub mod writer;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use crate::depth_image::{parse_fakenect_pgm_into, DepthImage};
+use crate::depth_image::{fakenect_pixels_start, parse_fakenect_pgm_into, DepthImage};
 use dump::{parse_index, DumpEntry, EntryKind};
 use poses::{parse_poses, PoseRecord};
 use session::Session;
@@ -260,6 +260,40 @@ impl Recording {
         Ok(())
     }
 
+    /// A depth frame's pixels, read from its file straight into `pixels`
+    /// (reused from frame to frame), the file's bytes added to `digest` when
+    /// one is given.
+    ///
+    /// The same pixels and errors as [`Recording::read_depth_frame_into`]
+    /// without the file's copy: a replay reads about 100 MB of frames, and
+    /// copying and converting them again cost a fifth of its time
+    /// (docs/performance.md). A file that is not a plain dump of the
+    /// session's size is read whole and explained by the parser.
+    pub fn read_depth_pixels_into(
+        &self,
+        name: &str,
+        pixels: &mut Vec<u16>,
+        mut digest: Option<&mut blake3::Hasher>,
+    ) -> Result<(), InputError> {
+        let path = self.kinect_path(name);
+        let intrinsics = self.session.kinect.intrinsics;
+        if read_dump_pixels(
+            &path,
+            intrinsics.width,
+            intrinsics.height,
+            pixels,
+            digest.as_deref_mut(),
+        ) {
+            return Ok(());
+        }
+        let mut bytes = Vec::new();
+        self.read_depth_frame_into(name, &mut bytes, pixels)?;
+        if let Some(digest) = digest {
+            digest.update(&bytes);
+        }
+        Ok(())
+    }
+
     /// Reads one accelerometer reading (`a-…` file: a raw tilt state).
     pub fn read_tilt_state(&self, name: &str) -> Result<dump::RawTiltState, InputError> {
         let path = self.kinect_path(name);
@@ -274,6 +308,163 @@ impl Recording {
 }
 
 /// Size of a fakenect depth file: the header and two bytes per pixel.
+/// [`Recording::read_depth_pixels_into`]'s direct path: true when the file
+/// was a dump of exactly `width` × `height` and its pixels are in `pixels`
+/// (and its bytes in `digest`); false (nothing added to `digest`) for anything
+/// else, including an error, which the whole-file reader then reports.
+fn read_dump_pixels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    pixels: &mut Vec<u16>,
+    digest: Option<&mut blake3::Hasher>,
+) -> bool {
+    use std::io::Read;
+    let Ok(mut file) = std::fs::File::open(path) else {
+        return false;
+    };
+    // The header is about 18 bytes; 64 hold it with room.
+    let mut head = [0u8; 64];
+    let mut filled = 0;
+    while filled < head.len() {
+        match file.read(&mut head[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(_) => return false,
+        }
+    }
+    let Some((w, h, start)) = fakenect_pixels_start(&head[..filled]) else {
+        return false;
+    };
+    if (w, h) != (width, height) {
+        return false;
+    }
+    if pixels.len() != w * h {
+        pixels.clear();
+        pixels.resize(w * h, 0);
+    }
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(pixels.as_mut_slice());
+    let early = &head[start..filled];
+    if early.len() > bytes.len() {
+        return false;
+    }
+    bytes[..early.len()].copy_from_slice(early);
+    if file.read_exact(&mut bytes[early.len()..]).is_err() {
+        return false;
+    }
+    // Nothing may follow the pixels.
+    let mut more = [0u8; 1];
+    if !matches!(file.read(&mut more), Ok(0)) {
+        return false;
+    }
+    if let Some(digest) = digest {
+        digest.update(&head[..start]);
+        digest.update(bytes);
+    }
+    // Fakenect writes the host's order, which the format takes as little-endian.
+    if cfg!(target_endian = "big") {
+        for pixel in pixels.iter_mut() {
+            *pixel = u16::from_le(*pixel);
+        }
+    }
+    true
+}
+
 pub fn fakenect_frame_len(width: usize, height: usize) -> usize {
     format!("P5 {width} {height} 65535\n").len() + 2 * width * height
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dump(width: usize, height: usize) -> Vec<u8> {
+        let mut bytes = format!("P5 {width} {height} 65535\n").into_bytes();
+        for i in 0..width * height {
+            bytes.extend_from_slice(&((i * 37 % 2048) as u16).to_le_bytes());
+        }
+        bytes
+    }
+
+    fn scratch(name: &str, bytes: &[u8]) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("groundcal-recording-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_dump_read_straight_into_its_pixels_is_the_parsers_and_the_files_digest() {
+        let bytes = dump(40, 30);
+        let path = scratch("plain.pgm", &bytes);
+        let (mut pixels, mut digest) = (vec![7u16; 3], blake3::Hasher::new());
+        assert!(read_dump_pixels(
+            &path,
+            40,
+            30,
+            &mut pixels,
+            Some(&mut digest)
+        ));
+        let parsed = crate::depth_image::parse_fakenect_pgm(&path, &bytes).unwrap();
+        assert_eq!(pixels, parsed.pixels);
+        assert_eq!(digest.finalize(), blake3::hash(&bytes));
+        // Again into the same buffer, now of the right size.
+        let mut digest = blake3::Hasher::new();
+        assert!(read_dump_pixels(
+            &path,
+            40,
+            30,
+            &mut pixels,
+            Some(&mut digest)
+        ));
+        assert_eq!(pixels, parsed.pixels);
+    }
+
+    #[test]
+    fn anything_but_a_plain_dump_of_the_sessions_size_is_left_to_the_parser() {
+        let good = dump(40, 30);
+        let mut trailing = good.clone();
+        trailing.push(0);
+        let mut byte_maxval = b"P5 40 30 255\n".to_vec();
+        byte_maxval.extend_from_slice(&good[b"P5 40 30 65535\n".len()..]);
+        let cases: [(&str, &[u8]); 6] = [
+            ("cut", &good[..good.len() - 1]),
+            ("header-only", &good[..b"P5 40 30 65535\n".len()]),
+            ("trailing", &trailing),
+            ("maxval", &byte_maxval),
+            ("magic", b"P6 40 30 65535\n"),
+            ("empty", b""),
+        ];
+        for (name, bytes) in cases {
+            let path = scratch(&format!("{name}.pgm"), bytes);
+            let (mut pixels, mut digest) = (Vec::new(), blake3::Hasher::new());
+            assert!(
+                !read_dump_pixels(&path, 40, 30, &mut pixels, Some(&mut digest)),
+                "{name}"
+            );
+            assert_eq!(
+                digest.finalize(),
+                blake3::Hasher::new().finalize(),
+                "{name}"
+            );
+        }
+        let path = scratch("other-size.pgm", &good);
+        let (mut pixels, mut digest) = (Vec::new(), blake3::Hasher::new());
+        assert!(!read_dump_pixels(
+            &path,
+            30,
+            40,
+            &mut pixels,
+            Some(&mut digest)
+        ));
+        assert!(!read_dump_pixels(
+            &path.with_extension("missing"),
+            40,
+            30,
+            &mut pixels,
+            Some(&mut digest)
+        ));
+    }
 }
