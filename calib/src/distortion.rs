@@ -544,20 +544,38 @@ fn bend(pose: &GroundResiduals, shape: &[f64], seen: &[bool], sigma: f64) -> Vec
     if !(band.is_finite() && band > 0.0 && sigma.is_finite() && sigma > 0.0) {
         return plane;
     }
+    // The cells with readings, their centres and pattern, once: each Newton
+    // step walks them all.
+    let cells: Vec<BentCell> = pose
+        .cells
+        .iter()
+        .enumerate()
+        .filter(|(_, cell)| cell.n > 0.0)
+        .map(|(k, cell)| BentCell {
+            n: cell.n,
+            u: cell.u / cell.n,
+            v: cell.v / cell.n,
+            pattern: if seen[k] { shape[k] } else { 0.0 },
+        })
+        .collect();
     let beta = band / sigma;
     for _ in 0..6 {
-        let (mut value, mut slope) = (Vector3::zeros(), Matrix3::zeros());
-        for (k, cell) in pose.cells.iter().enumerate() {
-            if cell.n <= 0.0 {
-                continue;
-            }
-            let phi = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
-            let pattern = if seen[k] { shape[k] } else { 0.0 };
-            let m = (pattern - phi.dot(&plane)) / sigma;
+        // Σ φ·n·g·σ, and the slope's six distinct moments Σ φφᵀ·n·g'.
+        let (mut value, mut slope) = (Vector3::zeros(), [0.0; 6]);
+        for cell in &cells {
+            let m = (cell.pattern - (plane.x + cell.u * plane.y + cell.v * plane.z)) / sigma;
             let (g, dg) = truncated_mean(m, beta);
-            value += phi * (cell.n * g * sigma);
-            slope -= phi * phi.transpose() * (cell.n * dg);
+            let (gain, w) = (cell.n * g * sigma, cell.n * dg);
+            value += Vector3::new(gain, cell.u * gain, cell.v * gain);
+            slope[0] += w;
+            slope[1] += cell.u * w;
+            slope[2] += cell.v * w;
+            slope[3] += cell.u * cell.u * w;
+            slope[4] += cell.u * cell.v * w;
+            slope[5] += cell.v * cell.v * w;
         }
+        let [s0, su, sv, suu, suv, svv] = slope;
+        let slope = -Matrix3::new(s0, su, sv, su, suu, suv, sv, suv, svv);
         let Some(step) = slope.try_inverse().map(|h| h * value) else {
             break;
         };
@@ -568,6 +586,15 @@ fn bend(pose: &GroundResiduals, shape: &[f64], seen: &[bool], sigma: f64) -> Vec
         }
     }
     plane
+}
+
+/// A cell as the bend sees it: its readings, their centre (pixels from the
+/// principal point) and the pattern there (1/m).
+struct BentCell {
+    n: f64,
+    u: f64,
+    v: f64,
+    pattern: f64,
 }
 
 /// For ε ~ N(0, 1): `g(m) = E[(m + ε)·1{|m + ε| < β}]` and its derivative.
@@ -823,14 +850,24 @@ impl PlanePartSolve<'_> {
         let mut part = PlanePart::zeros();
         let mut last = None;
         for _ in 0..6 {
-            let (r0, solution) = self.residuals(&part)?;
+            // The residuals at `part` and a step along each of its three
+            // parameters: four solves, independent, so side by side.
+            let mut solved: Vec<Option<(DVector<f64>, Solution)>> = (0..4)
+                .into_par_iter()
+                .map(|j| {
+                    let mut at = part;
+                    if j > 0 {
+                        at[j - 1] += PLANE_PART_STEP;
+                    }
+                    self.residuals(&at)
+                })
+                .collect();
+            let (r0, solution) = solved[0].take()?;
             let mut jacobian = DMatrix::zeros(r0.len(), 3);
             let mut sensitivity = nalgebra::Matrix6x3::zeros();
             let mount = solution.robot_from_sensor.to_vector();
             for j in 0..3 {
-                let mut step = part;
-                step[j] += PLANE_PART_STEP;
-                let (r, moved) = self.residuals(&step)?;
+                let (r, moved) = solved[j + 1].take()?;
                 if r.len() != r0.len() {
                     return None;
                 }
