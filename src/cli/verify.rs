@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use super::calibrate::{show_progress, stop_signal};
-use super::{print_json, ExitStatus};
+use super::{print_json, print_stdout, ExitStatus};
 use crate::hardware::{self, Selection};
 use crate::recording::Recording;
 use crate::session::{self, Plan, SessionError};
@@ -28,14 +28,18 @@ pub struct VerifyOptions {
 }
 
 /// Prints the document; the exit status its verdict calls for.
+/// `verify` keeps ignoring SIGPIPE (it moves the robot), so a reader gone
+/// is an error here, said if stderr is still there, never a panic.
 fn finish(document: &VerifyJson, json: bool) -> ExitStatus {
-    if json {
-        if let Err(e) = print_json(document) {
-            eprintln!("groundcal verify: {e}");
-            return ExitStatus::RuntimeFailure;
-        }
+    let printed = if json {
+        print_json(document)
     } else {
-        print!("{}", document.to_table());
+        print_stdout(&document.to_table())
+    };
+    if let Err(e) = printed {
+        use std::io::Write;
+        let _ = writeln!(std::io::stderr(), "groundcal verify: {e}");
+        return ExitStatus::RuntimeFailure;
     }
     if document.drifted() {
         ExitStatus::Drift
