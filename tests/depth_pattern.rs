@@ -122,8 +122,9 @@ fn a_fixed_pattern_is_found_and_corrected() {
 /// raw units or less the pattern within 0.1 raw units RMS) or rejected with
 /// a reason, never accepted further off. The cases `a_fixed_pattern_is_found_and_corrected` and
 /// `a_pattern_that_changes_with_depth_is_rejected_in_words` already take
-/// (with their replays) are not repeated. Waves of 1.5 raw units are not
-/// here: they are accepted 1.0 mm off (docs/method.md, "Larger patterns").
+/// (with their replays) are not repeated. Waves of 1.5 raw units were
+/// accepted 1.0 mm off before the gate `pattern_max_mm` (docs/method.md,
+/// "Larger patterns"); now the patterns past ±1 raw unit are rejected.
 #[test]
 fn every_kind_on_both_depth_models_is_corrected_or_rejected_never_accepted_off() {
     let dir = temp_dir("depth-pattern-kinds");
@@ -152,6 +153,7 @@ fn every_kind_on_both_depth_models_is_corrected_or_rejected_never_accepted_off()
             0.0,
             true,
         ),
+        ("waves", DistortionShape::Waves, 1.5, 0.0, false),
     ];
     for (name, shape, amplitude_raw, decay_per_m, zero_plane) in cases {
         let truth = DepthDistortion {
@@ -188,6 +190,14 @@ fn every_kind_on_both_depth_models_is_corrected_or_rejected_never_accepted_off()
                 reasons.contains("the depth image is warped"),
                 "{case}: {reasons}"
             );
+            // Past ±1 raw unit, by the pattern's own gate.
+            if amplitude_raw > 1.0 && decay_per_m == 0.0 {
+                assert!(result["gate_checks"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|c| c["gate"] == "pattern_max_mm" && c["passed"] == false));
+            }
             continue;
         }
         assert_eq!(code, 0, "{case}: {result:#}");

@@ -33,6 +33,12 @@ pub struct Gates {
     /// left uncorrected because it changes from pose to pose: uneven
     /// ground, clutter, or a sensor pattern that changes with depth.
     pub warp_max_mm: f64,
+    /// Largest depth error at 2 m (millimetres) of a depth pattern that is
+    /// corrected: the correction is checked on patterns up to about ±1 raw
+    /// unit (13–14 mm at 2 m; a real Kinect's reach about that at the
+    /// corners); at ±1.25 and more its offset was found 3–5 σ off and a mount
+    /// up to 1 mm off (docs/method.md, "Larger patterns").
+    pub pattern_max_mm: f64,
 }
 
 impl Default for Gates {
@@ -46,6 +52,7 @@ impl Default for Gates {
             min_used_fraction: 0.7,
             depth_scale_max_deviation: 0.03,
             warp_max_mm: 1.0,
+            pattern_max_mm: 15.0,
         }
     }
 }
@@ -60,6 +67,7 @@ impl Gates {
             ("sigma_position_max_mm", self.sigma_position_max_mm),
             ("depth_scale_max_deviation", self.depth_scale_max_deviation),
             ("warp_max_mm", self.warp_max_mm),
+            ("pattern_max_mm", self.pattern_max_mm),
         ];
         for (name, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -125,6 +133,15 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
             }
             checks.push(check);
         }
+        if let Some(check) = pattern_check(gates, pattern) {
+            if !check.passed {
+                reasons.push(format!(
+                    "the depth image is warped by up to {:.0} mm at 2 m, more than the {:.0} mm its correction is checked for, so the pattern's offset, and the mount with it, may be further off than their σ say: have a maintainer check the Kinect",
+                    check.measured, check.limit
+                ));
+            }
+            checks.push(check);
+        }
     }
     Calibration {
         verdict: if reasons.is_empty() {
@@ -160,6 +177,22 @@ fn warp_check(gates: &Gates, pattern: &crate::outcome::DepthPattern) -> Option<G
         passed: at_most(measured, gates.warp_max_mm),
         at: None,
         place: None,
+    })
+}
+
+/// The corrected pattern's gate: its largest depth error at 2 m.
+fn pattern_check(gates: &Gates, pattern: &crate::outcome::DepthPattern) -> Option<GateCheck> {
+    pattern.corrected.then(|| {
+        let measured = pattern.largest_depth_error_m(2.0) * 1e3;
+        GateCheck {
+            gate: "pattern_max_mm",
+            limit: gates.pattern_max_mm,
+            measured,
+            at_least: false,
+            passed: at_most(measured, gates.pattern_max_mm),
+            at: None,
+            place: None,
+        }
     })
 }
 

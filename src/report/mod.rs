@@ -197,6 +197,12 @@ fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static s
             format!("{} mm", num(m, 2)),
             "",
         ),
+        "pattern_max_mm" => (
+            "depth pattern at 2 m, corrected (largest)",
+            format!("≤ {} mm", num(l, 0)),
+            format!("{} mm", num(m, 1)),
+            "",
+        ),
         "min_poses_used" => (
             "poses used",
             format!("≥ {}", num(l, 0)),

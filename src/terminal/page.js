@@ -219,6 +219,7 @@ const TODO = {
   min_used_fraction: 'todoNoGround',
   depth_scale_max_deviation: 'todoScale',
   warp_max_mm: 'todoWarp',
+  pattern_max_mm: 'todoPattern',
   observable: 'todoSchedule',
 };
 function todoFor(result) {
@@ -326,6 +327,7 @@ const GATE_UNITS = {
   observable: ['', 3],
   depth_scale_max_deviation: ['%', 2],
   warp_max_mm: [' mm', 1],
+  pattern_max_mm: [' mm', 1],
 };
 // Where a gate's value comes from (the check's typed `place`), in words.
 const AXES = ['forward', 'up', 'right'];
