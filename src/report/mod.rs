@@ -192,13 +192,13 @@ fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static s
             "",
         ),
         "warp_max_mm" => (
-            "depth warp at 2 m, not corrected (RMS)",
+            "depth warp at 2&nbsp;m, not corrected (RMS)",
             format!("≤ {} mm", num(l, 1)),
             format!("{} mm", num(m, 2)),
             "",
         ),
         "pattern_max_mm" => (
-            "depth pattern at 2 m, corrected (largest)",
+            "largest corrected depth pattern at 2&nbsp;m",
             format!("≤ {} mm", num(l, 0)),
             format!("{} mm", num(m, 1)),
             "",
