@@ -155,12 +155,15 @@ fn every_kind_on_both_depth_models_is_corrected_or_rejected_never_accepted_off()
         ),
         ("waves", DistortionShape::Waves, 1.5, 0.0, false),
     ];
-    for (name, shape, amplitude_raw, decay_per_m, zero_plane) in cases {
-        let truth = DepthDistortion {
-            shape,
-            amplitude_raw,
-            decay_per_m,
-        };
+    // Each case is a calibration in its own process, half of it waiting for
+    // the simulated robot to move: two at a time.
+    let run = |&(name, shape, amplitude_raw, decay_per_m, zero_plane): &(
+        &str,
+        DistortionShape,
+        f64,
+        f64,
+        bool,
+    )| {
         let bands = match shape {
             DistortionShape::Bands { period_px } => format!(", band_period_px = {period_px:.1}"),
             _ => String::new(),
@@ -183,6 +186,28 @@ fn every_kind_on_both_depth_models_is_corrected_or_rejected_never_accepted_off()
             groundcal(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
         let result: Value =
             serde_json::from_str(&out).unwrap_or_else(|e| panic!("{case}: {e}: {err}"));
+        (case, code, result)
+    };
+    let outcomes: Vec<(String, i32, Value)> = cases
+        .chunks(2)
+        .flat_map(|pair| {
+            std::thread::scope(|scope| {
+                let running: Vec<_> = pair.iter().map(|c| scope.spawn(|| run(c))).collect();
+                running
+                    .into_iter()
+                    .map(|r| r.join().expect("a case's calibration"))
+                    .collect::<Vec<_>>()
+            })
+        })
+        .collect();
+    for ((case, code, result), (_, shape, amplitude_raw, decay_per_m, _)) in
+        outcomes.into_iter().zip(cases)
+    {
+        let truth = DepthDistortion {
+            shape,
+            amplitude_raw,
+            decay_per_m,
+        };
         let ((angle, angle_sigmas), (position, _)) = errors(&result);
         if code == 3 {
             let reasons = result["reasons"].to_string();
