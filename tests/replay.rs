@@ -331,27 +331,16 @@ fn replay_writes_a_self_contained_report() {
 #[test]
 fn a_reader_that_goes_away_ends_the_command_quietly() {
     use std::os::unix::process::ExitStatusExt;
-    use std::process::{Command, Stdio};
-    for args in [vec!["--json"], vec![]] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_groundcal"))
-            .arg("replay")
-            .arg(sample())
-            .args(&args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("groundcal runs");
-        // The reading end closed before the replay (tens of milliseconds)
-        // has anything to print.
-        drop(child.stdout.take());
-        let out = child.wait_with_output().expect("groundcal ends");
-        let stderr = String::from_utf8_lossy(&out.stderr);
+    let sample = sample();
+    for json in [true, false] {
+        let mut args = vec!["replay", sample.to_str().unwrap()];
+        if json {
+            args.push("--json");
+        }
+        // The reading end is closed before the replay (tens of
+        // milliseconds) has anything to print.
+        let (status, stderr) = common::groundcal_with_reader_gone(&args);
         assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
-        assert_eq!(
-            out.status.signal(),
-            Some(13),
-            "{args:?}: {:?} {stderr}",
-            out.status
-        );
+        assert_eq!(status.signal(), Some(13), "{args:?}: {status:?} {stderr}");
     }
 }

@@ -370,7 +370,6 @@ fn another_robots_recording_or_configuration_is_refused_naming_both() {
 /// away makes its printing fail: said and exit 1, not a panic (101).
 #[test]
 fn a_reader_that_goes_away_is_an_error_not_a_panic() {
-    use std::process::{Command, Stdio};
     let dir = temp_dir("verify-closed-stdout");
     std::fs::create_dir_all(&dir).unwrap();
     let sample = common::shared().join("data/sample-12");
@@ -380,8 +379,7 @@ fn a_reader_that_goes_away_is_an_error_not_a_panic() {
     std::fs::write(&calibration, out).unwrap();
     let config = root().join("config/sim.toml");
     for json in [false, true] {
-        let mut command = Command::new(env!("CARGO_BIN_EXE_groundcal"));
-        command.args([
+        let mut args = vec![
             "verify",
             "--config",
             config.to_str().unwrap(),
@@ -389,20 +387,13 @@ fn a_reader_that_goes_away_is_an_error_not_a_panic() {
             calibration.to_str().unwrap(),
             "--recording",
             sample.to_str().unwrap(),
-        ]);
+        ];
         if json {
-            command.arg("--json");
+            args.push("--json");
         }
-        let mut child = command
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("groundcal runs");
-        drop(child.stdout.take());
-        let out = child.wait_with_output().expect("groundcal ends");
-        let stderr = String::from_utf8_lossy(&out.stderr);
+        let (status, stderr) = common::groundcal_with_reader_gone(&args);
         assert!(!stderr.contains("panicked"), "json {json}: {stderr}");
-        assert_eq!(out.status.code(), Some(1), "json {json}: {stderr}");
+        assert_eq!(status.code(), Some(1), "json {json}: {stderr}");
         assert!(
             stderr.contains("cannot print the result"),
             "json {json}: {stderr}"

@@ -1147,14 +1147,9 @@ mod bend_on_frames {
     use crate::geometry::Plane;
     use crate::plane::{fit_ground, FitBuffers, GroundPrior, PlaneFitSettings};
     use crate::sensor::DepthCamera;
-    use rand::{Rng, SeedableRng};
+    use crate::test_noise::gaussian;
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
-
-    fn gaussian(rng: &mut impl Rng) -> f64 {
-        let u1: f64 = rng.gen_range(f64::EPSILON..1.0);
-        let u2: f64 = rng.gen();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-    }
 
     /// The bend predicted from the residuals is the one the fit itself
     /// takes: two raw frames of a flat ground 0.9 m away carrying a bowl of

@@ -49,3 +49,6 @@ pub mod sensor;
 pub mod solve;
 pub mod tilt;
 pub mod verify;
+
+#[cfg(test)]
+mod test_noise;

@@ -645,4 +645,31 @@ mod tests {
             }
         }
     }
+
+    /// The pattern's gate reads the largest corrected cell as depth at 2 m:
+    /// with the Kinect's `1/b` of about −325.6 raw units per 1/m, 1.2 raw
+    /// units are 14.7 mm (within 15) and 1.25 are 15.4 mm (past it). An
+    /// uncorrected pattern is not this gate's (the warp's gate judges it).
+    #[test]
+    fn the_pattern_gate_judges_the_largest_corrected_cell_at_two_metres() {
+        let gates = Gates::default();
+        let pattern = |corrected: bool, largest: f64| crate::outcome::DepthPattern {
+            corrected,
+            columns: 2,
+            rows: 2,
+            cell_px: 8,
+            raw: vec![Some(-0.5), None, Some(largest), Some(0.1)],
+            sigma_raw: vec![Some(0.01), None, Some(0.01), Some(0.01)],
+            raw_per_inverse_depth: -325.6,
+            ..crate::outcome::DepthPattern::not_estimated(String::new())
+        };
+        assert!(pattern_check(&gates, &pattern(false, 1.25)).is_none());
+        let within = pattern_check(&gates, &pattern(true, 1.2)).unwrap();
+        assert_eq!((within.gate, within.limit), ("pattern_max_mm", 15.0));
+        assert!((within.measured - 4.0 * 1.2 / 325.6 * 1e3).abs() < 1e-9);
+        assert!(within.passed && !within.at_least);
+        let past = pattern_check(&gates, &pattern(true, -1.25)).unwrap();
+        assert!((past.measured - 15.356).abs() < 1e-3, "{}", past.measured);
+        assert!(!past.passed);
+    }
 }

@@ -45,6 +45,24 @@ pub fn groundcal(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// Runs `groundcal` with its stdout's reader gone before anything is
+/// printed (as `groundcal … | head -c0` would); returns how it ended and its
+/// stderr, which names a panic if there was one.
+pub fn groundcal_with_reader_gone(args: &[&str]) -> (std::process::ExitStatus, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groundcal"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("groundcal runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("groundcal ends");
+    (
+        out.status,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// Runs `groundcal … --json` and parses stdout.
 pub fn groundcal_json(args: &[&str]) -> (i32, serde_json::Value) {
     let (code, stdout, stderr) = groundcal(args);

@@ -527,15 +527,9 @@ fn fit_in_inverse_depth<T: FitValue>(
 mod tests {
     use super::*;
     use crate::sensor::{DepthEncoding, DepthModel, DepthRange, Intrinsics, RAW_NO_READING};
-    use rand::{Rng, SeedableRng};
+    use crate::test_noise::gaussian;
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
-
-    /// Box–Muller, so the tests need no extra crate.
-    fn gaussian(rng: &mut impl Rng) -> f64 {
-        let u1: f64 = rng.gen_range(f64::EPSILON..1.0);
-        let u2: f64 = rng.gen();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-    }
 
     fn camera() -> DepthCamera {
         DepthCamera::new(
