@@ -104,7 +104,12 @@ pub fn render_html(result: &ResultJson, provenance: &Provenance) -> String {
     parameters_section(&mut page, result);
     setup_section(&mut page, result, &provenance.input);
     summary_section(&mut page, result);
-    pattern::depth_pattern_section(&mut page, result.depth_pattern.as_ref());
+    let pattern_too_large = result
+        .gate_checks
+        .iter()
+        .find(|c| c.gate == "pattern_max_mm" && !c.passed)
+        .map(|c| c.limit);
+    pattern::depth_pattern_section(&mut page, result.depth_pattern.as_ref(), pattern_too_large);
     observability_section(&mut page, result);
     correlations_section(&mut page, result);
     accuracy_section(&mut page, result);

@@ -90,8 +90,14 @@ fn base64(bytes: &[u8]) -> String {
 }
 
 /// The section: the picture and its scale when a pattern was corrected,
-/// else what was found in words.
-pub(super) fn depth_pattern_section(page: &mut String, pattern: Option<&DepthPatternJson>) {
+/// else what was found in words. `too_large_for_mm` is the limit of the
+/// gate `pattern_max_mm` when the pattern failed it: the correction was
+/// made, but the calibration must not lean on it.
+pub(super) fn depth_pattern_section(
+    page: &mut String,
+    pattern: Option<&DepthPatternJson>,
+    too_large_for_mm: Option<f64>,
+) {
     let Some(pattern) = pattern else {
         return;
     };
@@ -106,9 +112,16 @@ pub(super) fn depth_pattern_section(page: &mut String, pattern: Option<&DepthPat
         .flatten();
     match image {
         Some((range, data)) => {
+            let afterwards = match too_large_for_mm {
+                Some(limit) => format!(
+                    ": more than the {}&nbsp;mm its correction is checked for, so the calibration cannot rely on it",
+                    num(limit, 0)
+                ),
+                None => ". The calibration was corrected for it".to_string(),
+            };
             let _ = writeln!(
                 page,
-                "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer). The calibration was corrected for it.</p>",
+                "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer){afterwards}.</p>",
                 num(pattern.largest_mm_at_2m, 1)
             );
             let _ = write!(
@@ -185,6 +198,51 @@ mod tests {
         ] {
             assert_eq!(base64(text.as_bytes()), encoded);
         }
+    }
+
+    /// A corrected pattern of 2 × 2 cells, 22.6 mm at 2 m at its largest.
+    fn corrected_pattern() -> DepthPatternJson {
+        DepthPatternJson {
+            corrected: true,
+            note: String::new(),
+            cell_px: 8,
+            columns: 2,
+            rows: 2,
+            raw: vec![Some(-1.5), Some(0.5), None, Some(1.5)],
+            sigma_raw: vec![Some(0.02); 4],
+            largest_mm_at_2m: 22.6,
+            shape_rms_raw: 1.0,
+            shape_chi2_per_dof: 40.0,
+            consistency_chi2_per_dof: 1.02,
+            plane_part_raw: None,
+            plane_part_sigma_raw: None,
+            plane_part_taken: false,
+            uncorrected_mm_at_2m: None,
+            raw_per_inverse_depth: 325.0,
+        }
+    }
+
+    /// The picture is drawn either way; the words say whether the
+    /// calibration may rely on the correction (the gate `pattern_max_mm`).
+    #[test]
+    fn a_pattern_too_large_for_its_correction_is_not_called_corrected_for() {
+        let mut within = String::new();
+        depth_pattern_section(&mut within, Some(&corrected_pattern()), None);
+        assert!(
+            within.contains("The calibration was corrected for it."),
+            "{within}"
+        );
+        assert!(within.contains("<img class=\"warp\""), "{within}");
+
+        let mut too_large = String::new();
+        depth_pattern_section(&mut too_large, Some(&corrected_pattern()), Some(15.0));
+        assert!(
+            too_large.contains("22.6 mm</strong> off at 2 m")
+                && too_large.contains("more than the 15&nbsp;mm its correction is checked for, so the calibration cannot rely on it."),
+            "{too_large}"
+        );
+        assert!(!too_large.contains("corrected for it"), "{too_large}");
+        assert!(too_large.contains("<img class=\"warp\""), "{too_large}");
     }
 
     #[test]

@@ -224,6 +224,7 @@ const WORDS = {
     // The depth image's own warp (the Kinect's fixed pattern).
     warpTitle: 'The depth image\'s own warp',
     warpCorrected: (mm) => 'The Kinect reads the depth up to ' + mm + ' mm off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer). The calibration was corrected for it.',
+    warpTooLarge: (mm, limit) => 'The Kinect reads the depth up to ' + mm + ' mm off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer): more than the ' + limit + '\u00a0mm its correction is checked for, so the calibration cannot rely on it.',
     warpUncorrected: (mm) => 'The ground looked warped by ' + mm + ' mm at 2 m, differently at each pose: not the sensor\'s fixed pattern, so nothing was corrected.',
     warpNone: 'The depth image shows no warp of its own.',
     warpNearer: (mm) => '−' + mm + ' mm nearer',
@@ -447,6 +448,7 @@ const WORDS = {
 
     warpTitle: '深度图像自身的扭曲',
     warpCorrected: (mm) => 'Kinect 在 2 米处的深度读数最多偏差 ' + mm + ' 毫米，偏差图案固定在图像中（红色：比实际远，蓝色：比实际近）。标定已对此进行校正。',
+    warpTooLarge: (mm, limit) => 'Kinect 在 2 米处的深度读数最多偏差 ' + mm + ' 毫米，偏差图案固定在图像中（红色：比实际远，蓝色：比实际近）：超过了校正所检验的 ' + limit + ' 毫米，因此标定不能依赖这一校正。',
     warpUncorrected: (mm) => '地面在 2 米处看起来扭曲了 ' + mm + ' 毫米，且每个姿态不同：这不是传感器固定的图案，因此没有校正。',
     warpNone: '深度图像没有自身的扭曲。',
     warpNearer: (mm) => '−' + mm + ' 毫米 更近',

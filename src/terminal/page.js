@@ -609,7 +609,11 @@ function render() {
       if (r.robot_from_sensor) valuesTable($('values'), r.robot_from_sensor, r.sigma, against, r.predicted_sigma, scale);
       else $('values').innerHTML = '';
     });
-    redraw('warp', JSON.stringify([s.result_id, language]), () => showWarp(r.depth_pattern, s.result_id));
+    // A pattern the gate `pattern_max_mm` found too large is drawn, but
+    // its words say the calibration cannot rely on its correction.
+    const tooLarge = (r.gate_checks || []).find((c) => c.gate === 'pattern_max_mm' && !c.passed);
+    const tooLargeFor = tooLarge ? tooLarge.limit : null;
+    redraw('warp', JSON.stringify([s.result_id, language, tooLargeFor]), () => showWarp(r.depth_pattern, s.result_id, tooLargeFor));
     activeHere = !!activeId && activeId === s.result_id;
     $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, activeDoc) : '';
     $('activeline').innerHTML = '';
@@ -716,7 +720,7 @@ async function loadView() {
 // cell, coloured by the depth error it causes at 2 m (red farther, blue
 // nearer, white none, grey where no ground was seen), on a scale rounded up
 // to 1, 2 or 5 × 10ⁿ mm.
-function drawWarp(p) {
+function drawWarp(p, tooLargeFor) {
   const box = $('warp-box');
   box.hidden = !p;
   if (!p) return;
@@ -750,12 +754,14 @@ function drawWarp(p) {
   context.putImageData(image, 0, 0);
   $('warp-near').textContent = t('warpNearer', String(range));
   $('warp-far').textContent = t('warpFarther', String(range));
-  $('warp-words').textContent = t('warpCorrected', mm(p.largest_mm_at_2m));
+  $('warp-words').textContent = typeof tooLargeFor === 'number'
+    ? t('warpTooLarge', mm(p.largest_mm_at_2m), String(Math.round(tooLargeFor)))
+    : t('warpCorrected', mm(p.largest_mm_at_2m));
 }
 
 // The status leaves the pattern's cells out (it is polled every second);
 // the stored calibration has them, fetched once per result.
-async function showWarp(p, id) {
+async function showWarp(p, id, tooLargeFor) {
   if (p && p.corrected && p.raw.length === 0 && id) {
     // Until the cells come, nothing is claimed.
     $('warp-box').hidden = false;
@@ -765,14 +771,14 @@ async function showWarp(p, id) {
       const r = await fetchWithin('/api/calibrations/' + encodeURIComponent(id), {}, 5000);
       if (r.ok) {
         const stored = await r.json();
-        if (stored.depth_pattern && drawn.get('warp') === JSON.stringify([id, language])) drawWarp(stored.depth_pattern);
+        if (stored.depth_pattern && drawn.get('warp') === JSON.stringify([id, language, tooLargeFor])) drawWarp(stored.depth_pattern, tooLargeFor);
       }
     } catch (e) {
       // The words stay; the picture comes with the next result.
     }
     return;
   }
-  drawWarp(p);
+  drawWarp(p, tooLargeFor);
 }
 
 // One canvas pixel per cell: grey by depth (lighter when nearer), green
