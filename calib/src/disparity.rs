@@ -441,6 +441,11 @@ impl DisparityMoments {
 
 /// A value of a frame the fit reads: a raw Kinect value, or an inverse depth.
 pub trait FitValue: Copy + Send + Sync {
+    /// The step between two values the sensor can give (a whole raw unit),
+    /// or 0 where the steps are not even (inverse depth converted from
+    /// millimetres): rounding to it is noise of `QUANTUM/√12` at least.
+    const QUANTUM: f64;
+
     fn to_f32(self) -> f32;
 
     /// How many of `values` lie in `lo..=hi`.
@@ -448,6 +453,8 @@ pub trait FitValue: Copy + Send + Sync {
 }
 
 impl FitValue for u16 {
+    const QUANTUM: f64 = 1.0;
+
     #[inline(always)]
     fn to_f32(self) -> f32 {
         f32::from(self)
@@ -474,6 +481,8 @@ impl FitValue for u16 {
 }
 
 impl FitValue for f32 {
+    const QUANTUM: f64 = 0.0;
+
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self

@@ -216,11 +216,14 @@ pub fn find_ground<T: FitValue>(
         return Err(no_ground());
     }
     // The frame's noise: a low quantile of the cells' RMS, so that a view
-    // mostly of people and edges does not inflate it.
+    // mostly of people and edges does not inflate it; but not below the
+    // values' rounding. A quiet sensor's cells where the ground is level
+    // along the rows read one value throughout and fit exactly: a noise
+    // of zero from them let no two cells agree.
     let mut rms: Vec<f64> = all_cells.iter().map(|c| c.rms).collect();
     let at = rms.len() * 3 / 10;
     let (_, &mut noise, _) = rms.select_nth_unstable_by(at, f64::total_cmp);
-    let noise = noise.max(1e-6);
+    let noise = noise.max(T::QUANTUM / 12f64.sqrt()).max(1e-6);
     let planar_limit = settings.planar_cell_sigmas * noise;
     let agree_band = settings.agreement_sigmas * noise;
 
