@@ -68,6 +68,77 @@ fn level_schedule(dir: &std::path::Path) -> std::path::PathBuf {
     path
 }
 
+/// A depth pattern's offset and gradients over the image are pinned only by
+/// the spread of the poses' heights and tilts (docs/method.md, "What pins
+/// each part"), and `plan` predicts what finding one costs. With the
+/// simulator's noise, on the paper's schedule it costs the angles several
+/// times their σ; `config/schedules/designed-52.toml`, whose heights and
+/// tilts spread wider, halves that in the same robot time. An independent
+/// count (`scripts/count-plane-part`, Fisher information in numpy) gives
+/// 0.0031/0.0061/0.0072° for the paper's schedule and 0.0017/0.0033/0.0032°
+/// for the designed one.
+#[test]
+fn plan_predicts_what_a_depth_pattern_costs_and_a_designed_schedule_halves_it() {
+    let config = root().join("config/sim.toml");
+    let designed = root().join("config/schedules/designed-52.toml");
+    let (code, paper) = groundcal_json(&["plan", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{paper:#}");
+    let (code, wide) = groundcal_json(&[
+        "plan",
+        "--config",
+        config.to_str().unwrap(),
+        designed.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{wide:#}");
+    let worst_angle = |sigma: &Value| {
+        ["alpha_deg", "beta_deg", "gamma_deg"]
+            .iter()
+            .map(|k| sigma[k].as_f64().unwrap())
+            .fold(0.0, f64::max)
+    };
+    for plan in [&paper, &wide] {
+        let with = &plan["sigma_with_depth_pattern"];
+        for key in KEYS {
+            let (without, with) = (
+                plan["sigma"][key].as_f64().unwrap(),
+                with[key].as_f64().unwrap(),
+            );
+            assert!(
+                with >= without * (1.0 - 1e-9),
+                "{key}: {with} with a pattern, {without} without"
+            );
+        }
+    }
+    let (paper_without, paper_with) = (
+        worst_angle(&paper["sigma"]),
+        worst_angle(&paper["sigma_with_depth_pattern"]),
+    );
+    let wide_with = worst_angle(&wide["sigma_with_depth_pattern"]);
+    println!("largest angle σ: paper's {paper_without:.4}° without a pattern, {paper_with:.4}° with; designed {wide_with:.4}° with");
+    assert!(
+        paper_with > 3.0 * paper_without,
+        "{paper_with} against {paper_without}"
+    );
+    assert!(
+        wide_with < 0.6 * paper_with,
+        "{wide_with} against {paper_with}"
+    );
+    // Within a quarter of the independent count, angle by angle.
+    for (sigma, count) in [
+        (&paper["sigma_with_depth_pattern"], [0.0031, 0.0061, 0.0072]),
+        (&wide["sigma_with_depth_pattern"], [0.0017, 0.0033, 0.0032]),
+    ] {
+        for (k, key) in ["alpha_deg", "beta_deg", "gamma_deg"].iter().enumerate() {
+            let ratio = sigma[key].as_f64().unwrap() / count[k];
+            assert!(
+                (0.75..=1.45).contains(&ratio),
+                "{key}: {ratio:.2}× the count: {sigma}"
+            );
+        }
+    }
+}
+
 #[test]
 fn a_schedule_that_never_tilts_is_refused_before_the_robot_moves() {
     let dir = temp_dir("plan-level");

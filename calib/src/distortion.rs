@@ -24,7 +24,7 @@
 //! Units: the fit's inverse depth (1/m) inside, raw units of the depth model
 //! outside (one raw unit is about 12 mm of depth at 2 m).
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3};
 use rayon::prelude::*;
 
 use crate::depth::Intrinsics;
@@ -802,6 +802,49 @@ struct PlanePartSolve<'a> {
 /// Steps of the numerical derivatives, raw units (and per 100 pixels).
 const PLANE_PART_STEP: f64 = 0.02;
 
+/// The plane part's problem linearised at one value.
+struct Linearised {
+    /// The poses' whitened residuals.
+    residuals: DVector<f64>,
+    /// Their derivatives by the plane part's three parameters.
+    jacobian: DMatrix<f64>,
+    /// `JᵀJ`: the plane part's information, in units of the whitening noise.
+    information: Matrix3<f64>,
+    /// How the six parameters move with it (radians and metres per unit).
+    sensitivity: nalgebra::Matrix6x3<f64>,
+    solution: Solution,
+}
+
+/// What estimating a pattern's plane part would add to the mount's
+/// covariance (radians and metres), on `observations` that carry noise of
+/// `noise` (σ of one pose's normal in radians, of its offset in metres):
+/// `S·C·Sᵀ`, with `C` the plane part's covariance and `S` how the mount
+/// moves with it. For planning: on exact planes predicted for a schedule it
+/// says what a found pattern will cost before the robot moves. The result
+/// does not depend on the intrinsics or the depth model, which only
+/// re-parametrise the plane part; the defaults are used.
+pub fn plane_part_cost(
+    observations: &[Observation],
+    settings: &SolveSettings,
+    noise: (f64, f64),
+) -> Option<Matrix6<f64>> {
+    let intrinsics = Intrinsics::default();
+    let (_, b) = crate::depth::DepthModel::inverse_linear_default().inverse_depth_affine();
+    let indices: Vec<usize> = (0..observations.len()).collect();
+    let problem = PlanePartSolve {
+        observations,
+        indices: &indices,
+        settings,
+        intrinsics,
+        raw_per_inverse_depth: 1.0 / b,
+        noise,
+    };
+    let linearised = problem.linearise(&PlanePart::zeros())?;
+    let covariance = linearised.information.try_inverse()?;
+    let s = linearised.sensitivity;
+    Some(s * covariance * s.transpose())
+}
+
 impl PlanePartSolve<'_> {
     /// The observations with `part` taken out of the pattern's poses.
     fn corrected(&self, part: &PlanePart) -> Vec<Observation> {
@@ -846,40 +889,59 @@ impl PlanePartSolve<'_> {
         Some((DVector::from_vec(values), solution))
     }
 
+    /// The whitened residuals at `part`, their derivatives by the plane
+    /// part, how the mount moves with it, and the solve at `part`.
+    fn linearise(&self, part: &PlanePart) -> Option<Linearised> {
+        // The residuals at `part` and a step along each of its three
+        // parameters: four solves, independent, so side by side.
+        let mut solved: Vec<Option<(DVector<f64>, Solution)>> = (0..4)
+            .into_par_iter()
+            .map(|j| {
+                let mut at = *part;
+                if j > 0 {
+                    at[j - 1] += PLANE_PART_STEP;
+                }
+                self.residuals(&at)
+            })
+            .collect();
+        let (r0, solution) = solved[0].take()?;
+        let mut jacobian = DMatrix::zeros(r0.len(), 3);
+        let mut sensitivity = nalgebra::Matrix6x3::zeros();
+        let mount = solution.robot_from_sensor.to_vector();
+        for j in 0..3 {
+            let (r, moved) = solved[j + 1].take()?;
+            if r.len() != r0.len() {
+                return None;
+            }
+            jacobian.set_column(j, &((r - &r0) / PLANE_PART_STEP));
+            let mut change = moved.robot_from_sensor.to_vector() - mount;
+            for angle in 0..3 {
+                change[angle] = wrap(change[angle]);
+            }
+            sensitivity.set_column(j, &(change / PLANE_PART_STEP));
+        }
+        let information = jacobian.transpose() * &jacobian;
+        let information = Matrix3::from_fn(|i, j| information[(i, j)]);
+        Some(Linearised {
+            residuals: r0,
+            jacobian,
+            information,
+            sensitivity,
+            solution,
+        })
+    }
+
     fn estimate(&self) -> Option<PlanePartEstimate> {
         let mut part = PlanePart::zeros();
         let mut last = None;
         for _ in 0..6 {
-            // The residuals at `part` and a step along each of its three
-            // parameters: four solves, independent, so side by side.
-            let mut solved: Vec<Option<(DVector<f64>, Solution)>> = (0..4)
-                .into_par_iter()
-                .map(|j| {
-                    let mut at = part;
-                    if j > 0 {
-                        at[j - 1] += PLANE_PART_STEP;
-                    }
-                    self.residuals(&at)
-                })
-                .collect();
-            let (r0, solution) = solved[0].take()?;
-            let mut jacobian = DMatrix::zeros(r0.len(), 3);
-            let mut sensitivity = nalgebra::Matrix6x3::zeros();
-            let mount = solution.robot_from_sensor.to_vector();
-            for j in 0..3 {
-                let (r, moved) = solved[j + 1].take()?;
-                if r.len() != r0.len() {
-                    return None;
-                }
-                jacobian.set_column(j, &((r - &r0) / PLANE_PART_STEP));
-                let mut change = moved.robot_from_sensor.to_vector() - mount;
-                for angle in 0..3 {
-                    change[angle] = wrap(change[angle]);
-                }
-                sensitivity.set_column(j, &(change / PLANE_PART_STEP));
-            }
-            let information = jacobian.transpose() * &jacobian;
-            let information = Matrix3::from_fn(|i, j| information[(i, j)]);
+            let Linearised {
+                residuals: r0,
+                jacobian,
+                information,
+                sensitivity,
+                solution,
+            } = self.linearise(&part)?;
             let covariance = information.try_inverse()?;
             let gradient = jacobian.transpose() * &r0;
             let step = -(covariance * Vector3::new(gradient[0], gradient[1], gradient[2]));

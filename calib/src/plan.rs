@@ -82,15 +82,7 @@ impl Prediction {
     /// One σ of each parameter (degrees, millimetres), in the order
     /// α, β, γ, px, py, pz.
     pub fn sigma_deg_mm(&self) -> [f64; 6] {
-        let sigma = self.sigma();
-        std::array::from_fn(|i| {
-            let sigma = sigma[i];
-            if i < 3 {
-                sigma.to_degrees()
-            } else {
-                sigma * 1000.0
-            }
-        })
+        sigma_deg_mm(&self.covariance)
     }
 
     /// One σ of each parameter (radians, metres), in the order α, β, γ,
@@ -117,6 +109,19 @@ impl Prediction {
     }
 }
 
+/// One σ of each parameter of `covariance` (radians, metres) in degrees
+/// and millimetres, in the order α, β, γ, px, py, pz.
+pub fn sigma_deg_mm(covariance: &Matrix6<f64>) -> [f64; 6] {
+    let sigma = super::outcome::sigma_of(covariance);
+    std::array::from_fn(|i| {
+        if i < 3 {
+            sigma[i].to_degrees()
+        } else {
+            sigma[i] * 1000.0
+        }
+    })
+}
+
 /// Predicts what a calibration over `body_poses` (commanded
 /// `ground_from_robot`, which the real poses follow closely) will give for
 /// a sensor mounted near `nominal`, with `noise` on each observation.
@@ -137,7 +142,22 @@ pub fn predict_schedule_with(
     noise: &NoiseModel,
     depth_scale: DepthScaleSetting,
 ) -> Result<Prediction, SolveError> {
-    let observations: Vec<Observation> = body_poses
+    let observations = exact_observations(body_poses, nominal);
+    let settings = prediction_settings(noise, depth_scale);
+    let solution = solve(&observations, &settings)?;
+    Ok(Prediction {
+        covariance: solution.covariance,
+        depth_scale: solution.depth_scale,
+        observability: solution.observability,
+        expected_theta_deg: noise.normal_sigma_deg * (std::f64::consts::PI / 2.0).sqrt(),
+        expected_e_d_mm: noise.offset_sigma_mm * (2.0 / std::f64::consts::PI).sqrt(),
+    })
+}
+
+/// The planes a sensor mounted at `nominal` would see at `body_poses`,
+/// exactly.
+fn exact_observations(body_poses: &[PoseParams], nominal: &PoseParams) -> Vec<Observation> {
+    body_poses
         .iter()
         .enumerate()
         .map(|(i, pose)| {
@@ -149,20 +169,44 @@ pub fn predict_schedule_with(
             observation.plane_covariance = Some(Matrix4::zeros());
             observation
         })
-        .collect();
-    let settings = SolveSettings {
+        .collect()
+}
+
+/// The solve's settings for a prediction: the model's noise, not the
+/// residuals' (they are zero).
+fn prediction_settings(noise: &NoiseModel, depth_scale: DepthScaleSetting) -> SolveSettings {
+    SolveSettings {
         depth_scale,
         noise_from_residuals: false,
         ..noise.solve_settings()
-    };
+    }
+}
+
+/// The covariance of `[α, β, γ, px, py, pz]` (radians, metres) a
+/// calibration over `body_poses` will have when it finds a depth pattern
+/// and estimates its plane part (a constant and two gradients of the raw
+/// values) with the mount: the prediction's, plus what the plane part costs.
+/// Only the spread of the poses' heights and tilts pins that part
+/// (docs/method.md, "What pins each part"), so schedules that predict the
+/// same σ without a pattern can differ by two with one. `None` when the
+/// plane part is not observable at all.
+pub fn predict_with_depth_pattern(
+    body_poses: &[PoseParams],
+    nominal: &PoseParams,
+    noise: &NoiseModel,
+    depth_scale: DepthScaleSetting,
+) -> Result<Option<Matrix6<f64>>, SolveError> {
+    let observations = exact_observations(body_poses, nominal);
+    let settings = prediction_settings(noise, depth_scale);
     let solution = solve(&observations, &settings)?;
-    Ok(Prediction {
-        covariance: solution.covariance,
-        depth_scale: solution.depth_scale,
-        observability: solution.observability,
-        expected_theta_deg: noise.normal_sigma_deg * (std::f64::consts::PI / 2.0).sqrt(),
-        expected_e_d_mm: noise.offset_sigma_mm * (2.0 / std::f64::consts::PI).sqrt(),
-    })
+    let per_pose = (
+        noise.normal_sigma_deg.to_radians(),
+        noise.offset_sigma_mm * 1e-3,
+    );
+    Ok(
+        crate::distortion::plane_part_cost(&observations, &settings, per_pose)
+            .map(|cost| solution.covariance + cost),
+    )
 }
 
 /// Chooses `count` of `candidates` (commanded body poses) whose predicted

@@ -10,7 +10,9 @@ use serde::Serialize;
 
 use super::ExitStatus;
 use crate::calib::outcome::Observability;
-use crate::calib::plan::{predict_schedule_with, NoiseModel, Prediction};
+use crate::calib::plan::{
+    predict_schedule_with, predict_with_depth_pattern, sigma_deg_mm, NoiseModel, Prediction,
+};
 use crate::config::Config;
 use crate::output::SigmaJson;
 use crate::recording::read_bounded;
@@ -37,6 +39,12 @@ pub struct PlanJson {
     /// Whether the calibration will estimate the depth scale (its σ is
     /// `sigma.depth_scale`), or take it as given, and why.
     pub depth_scale: DepthScaleJson,
+    /// Predicted one-σ when the Kinect's depth carries a fixed pattern whose
+    /// offset and gradients over the image are estimated with the mount
+    /// (docs/method.md, "What pins each part"); absent when the schedule
+    /// cannot separate them from the mount at all.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma_with_depth_pattern: Option<SigmaJson>,
 }
 
 #[derive(Debug, Serialize)]
@@ -126,7 +134,9 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
             gates.min_poses_used
         ));
     }
-    let plan = to_json(&schedule, &prediction, noise, reasons);
+    let mut plan = to_json(&schedule, &prediction, noise, reasons);
+    plan.sigma_with_depth_pattern =
+        with_depth_pattern(&schedule, &nominal, &noise, config.calibration.depth_scale);
     let printed = if json {
         super::print_json(&plan)
     } else {
@@ -142,6 +152,30 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
     } else {
         ExitStatus::Rejected
     }
+}
+
+/// The predicted σ of `schedule` when a depth pattern's plane part is
+/// estimated with the mount, or `None` when it cannot be.
+fn with_depth_pattern(
+    schedule: &Schedule,
+    nominal: &crate::calib::geometry::PoseParams,
+    noise: &NoiseModel,
+    depth_scale: crate::calib::solve::DepthScaleSetting,
+) -> Option<SigmaJson> {
+    let poses: Vec<_> = schedule.poses.iter().map(|p| p.to_params()).collect();
+    let covariance = predict_with_depth_pattern(&poses, nominal, noise, depth_scale)
+        .ok()
+        .flatten()?;
+    let [alpha_deg, beta_deg, gamma_deg, px_mm, py_mm, pz_mm] = sigma_deg_mm(&covariance);
+    Some(SigmaJson {
+        alpha_deg,
+        beta_deg,
+        gamma_deg,
+        px_mm,
+        py_mm,
+        pz_mm,
+        depth_scale: None,
+    })
 }
 
 /// What planning starts from: the configuration (every check but the
@@ -238,6 +272,7 @@ fn to_json(
             e_d_mm: prediction.expected_e_d_mm,
         },
         noise,
+        sigma_with_depth_pattern: None,
     }
 }
 
@@ -278,6 +313,13 @@ fn to_text(plan: &PlanJson) -> String {
             );
         }
     }
+    if let Some(p) = &plan.sigma_with_depth_pattern {
+        let _ = writeln!(
+            out,
+            "\nwith a depth pattern (its offset and gradients estimated with the mount):\n  alpha {:.4}°  beta {:.4}°  gamma {:.4}°\n  px {:.3} mm  py {:.3} mm  pz {:.3} mm",
+            p.alpha_deg, p.beta_deg, p.gamma_deg, p.px_mm, p.py_mm, p.pz_mm
+        );
+    }
     let _ = writeln!(
         out,
         "\nweakest rotation: {}\nweakest position: {}",
@@ -317,6 +359,9 @@ pub struct ScheduleSummaryJson {
     pub poses: usize,
     /// Predicted one-σ (null when the schedule cannot observe all six).
     pub sigma: Option<SigmaJson>,
+    /// The same when a depth pattern's offset and gradients are estimated
+    /// with the mount (as `plan`'s `sigma_with_depth_pattern`).
+    pub sigma_with_depth_pattern: Option<SigmaJson>,
     /// Estimated robot time: per pose the motion, the settling and the
     /// frames.
     pub wall_time_s: f64,
@@ -397,6 +442,8 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
         schedule: schedule.name.clone(),
         poses: schedule.poses.len(),
         sigma: sigma.as_ref().map(SigmaJson::from_radians_metres),
+        sigma_with_depth_pattern: sigma
+            .and_then(|_| with_depth_pattern(schedule, &nominal, &noise, c.depth_scale)),
         wall_time_s: per_pose_s * schedule.poses.len() as f64,
     };
     let report = DesignJson {
@@ -464,6 +511,18 @@ fn design_text(report: &DesignJson, how: &str) -> String {
             "  {name:<14} {:>14} {:>14}",
             pick(&d.sigma, k),
             pick(&c.sigma, k)
+        );
+    }
+    for (k, name) in ["alpha", "beta", "gamma", "px", "py", "pz"]
+        .iter()
+        .enumerate()
+    {
+        let _ = writeln!(
+            out,
+            "  {:<14} {:>14} {:>14}",
+            format!("{name}, pattern"),
+            pick(&d.sigma_with_depth_pattern, k),
+            pick(&c.sigma_with_depth_pattern, k)
         );
     }
     let _ = writeln!(
