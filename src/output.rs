@@ -456,6 +456,10 @@ pub struct DepthPatternJson {
     /// `warp_max_mm` judges it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncorrected_mm_at_2m: Option<f64>,
+    /// That warp is fixed in the image (the sensor's pattern), left
+    /// uncorrected because the ground fit in use (the paper's) cannot.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub uncorrected_fixed: bool,
     /// Raw units per 1/m of inverse depth (the depth model's 1/b): the depth
     /// error at z metres is −z²·raw/raw_per_inverse_depth.
     pub raw_per_inverse_depth: f64,
@@ -483,6 +487,7 @@ impl DepthPatternJson {
             uncorrected_mm_at_2m: p.uncorrected_shape_rms_raw.map(|raw| {
                 crate::calib::outcome::depth_error_m(raw, 2.0, p.raw_per_inverse_depth) * 1e3
             }),
+            uncorrected_fixed: p.uncorrected_fixed,
             raw_per_inverse_depth: p.raw_per_inverse_depth,
         }
     }

@@ -358,6 +358,80 @@ fn a_pattern_that_changes_with_depth_is_rejected_in_words() {
     }
 }
 
+/// `--ground-fit paper` (the paper's fit, kept to compare with) corrects no
+/// pattern, but no longer hides one: the default fit's residuals, taken
+/// beside it, and the geometry across its planes judge the warp. Before,
+/// with it the radial bowl was accepted 5.1 mm off, the tilted plane (no
+/// shape, only an offset and gradients) 2.0 mm off on the zero-plane model
+/// and uneven ground 3.7 mm off; now each is rejected in words, and open flat ground with no pattern
+/// is still accepted.
+#[test]
+fn the_papers_fit_does_not_hide_a_warped_depth() {
+    let dir = temp_dir("depth-pattern-paper-fit");
+    let radial = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }";
+    let tilted = "depth_distortion = { shape = \"tilted\", amplitude_raw = 0.5 }";
+    let fixed = "in a pattern fixed in the image, which the paper's ground fit (--ground-fit paper) does not correct";
+    let cases = [
+        (
+            "radial",
+            sim_config_with_pattern(&dir.join("radial"), radial, false),
+            Some(fixed),
+        ),
+        (
+            "tilted",
+            sim_config_with_pattern(&dir.join("tilted"), tilted, true),
+            Some(fixed),
+        ),
+        (
+            "uneven",
+            {
+                let case = dir.join("uneven");
+                std::fs::create_dir_all(&case).unwrap();
+                common::sim_config_unmeasured(&case, &[("world = \"flat\"", "world = \"uneven\"")])
+            },
+            Some("changes from pose to pose"),
+        ),
+        (
+            "flat",
+            sim_config_with_pattern(&dir.join("flat"), "", false),
+            None,
+        ),
+    ];
+    for (name, config, rejected_for) in cases {
+        let (code, out, err) = groundcal(&[
+            "calibrate",
+            "--config",
+            config.to_str().unwrap(),
+            "--ground-fit",
+            "paper",
+            "--json",
+        ]);
+        let result: Value =
+            serde_json::from_str(&out).unwrap_or_else(|e| panic!("{name}: {e}: {out}\n{err}"));
+        let ((angle, _), (position, _)) = errors(&result);
+        eprintln!(
+            "{name}, the paper's fit: exit {code}, {angle:.4}°, {position:.2} mm off, {}",
+            result["reasons"]
+        );
+        match rejected_for {
+            Some(words) => {
+                assert_eq!(code, 3, "{name}: {result:#}");
+                let reasons = result["reasons"].to_string();
+                assert!(
+                    reasons.contains("the depth image is warped") && reasons.contains(words),
+                    "{name}: {reasons}"
+                );
+                assert_eq!(result["depth_pattern"]["corrected"], false, "{name}");
+            }
+            None => {
+                assert_eq!(code, 0, "{name}: {result:#}");
+                assert!(position < 0.5, "{name}: {position} mm");
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// The found pattern leaves groundcal for a terrain mapper (`export --format
 /// depth-correction`), and a check against the calibration takes it out of
 /// its frames as the calibration did: `verify` of the calibration's own

@@ -119,6 +119,11 @@ fn terminal_page_calibrates_and_accepts_in_chromium() {
     assert!(text("gatesTitle").contains(" passed"), "{seen}");
     // Each σ with the one predicted before the robot moved.
     assert_eq!(seen["predicted"], 7, "{seen}");
+    assert_eq!(
+        seen["warp"]["words"], "The depth image shows no warp of its own.",
+        "{seen}"
+    );
+    assert_eq!(seen["warp"]["shown"], serde_json::json!([]), "{seen}");
     assert!(text("notActiveYet").starts_with("Not active yet"), "{seen}");
     // Accept asks first, then shows Active and hides itself.
     assert!(

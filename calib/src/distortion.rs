@@ -723,6 +723,25 @@ pub fn solve_with_pattern(
         return Ok(base);
     };
     let intrinsics = shape.intrinsics;
+    let indices: Vec<usize> = with_residuals.iter().map(|(k, _)| *k).collect();
+    if residuals.iter().any(|r| r.beside_another_fit) {
+        // Another fit's planes: what the residuals and the geometry show is
+        // judged, never corrected (the bends are the default fit's).
+        let plane = PlanePartSolve {
+            observations,
+            indices: &indices,
+            settings,
+            intrinsics,
+            raw_per_inverse_depth: shape.raw_per_inverse_depth,
+            noise: base.noise_per_pose,
+        };
+        let part = plane
+            .estimate()
+            .filter(|found| shape.consistent() && found.chi2 > PLANE_PART_CHI2);
+        let mut base = base;
+        base.depth_pattern = Some(pattern_not_corrected_by_another_fit(&shape, part.as_ref()));
+        return Ok(base);
+    }
 
     // The shape's corrections of each plane, when the shape is real.
     let shape_taken = shape.significant() && shape.consistent();
@@ -740,7 +759,6 @@ pub fn solve_with_pattern(
     };
 
     // The plane part, by the geometry.
-    let indices: Vec<usize> = with_residuals.iter().map(|(k, _)| *k).collect();
     let plane = PlanePartSolve {
         observations: &corrected,
         indices: &indices,
@@ -981,6 +999,40 @@ fn wrap(angle: f64) -> f64 {
     }
 }
 
+/// What the default fit's residuals, taken beside another fit
+/// (`--ground-fit paper`), and the geometry across that fit's planes show.
+/// A warp that changes from pose to pose is left uncorrected as with the
+/// default fit; a pattern fixed in the image (a shape, or an offset and
+/// gradients the geometry finds) is left uncorrected too, with its RMS over
+/// the cells seen, for the gate `warp_max_mm` to judge: that fit's planes
+/// cannot be corrected by these residuals. The cells keep what was found,
+/// but the pattern is not `corrected`, so nothing takes it out of a frame.
+fn pattern_not_corrected_by_another_fit(
+    shape: &ShapeEstimate,
+    plane_part: Option<&PlanePartEstimate>,
+) -> DepthPattern {
+    let shape_fixed = shape.significant() && shape.consistent();
+    if !shape_fixed && plane_part.is_none() {
+        return pattern_of(shape, false, None);
+    }
+    let mut pattern = pattern_of(shape, shape_fixed, plane_part);
+    // The shape's RMS, as for a warp left uncorrected by the default fit;
+    // without one, the offset's and gradients' over the cells seen.
+    let rms = if shape_fixed {
+        shape.all_cells_rms_raw
+    } else {
+        let cells: Vec<f64> = pattern.raw.iter().flatten().copied().collect();
+        (cells.iter().map(|v| v * v).sum::<f64>() / cells.len().max(1) as f64).sqrt()
+    };
+    pattern.corrected = false;
+    pattern.uncorrected_shape_rms_raw = Some(rms);
+    pattern.uncorrected_fixed = true;
+    pattern.note = Some(format!(
+        "not corrected: the depth carries a pattern fixed in the image ({rms:.3} raw units RMS, seen by the default fit beside the paper's), which the paper's ground fit (--ground-fit paper) does not correct"
+    ));
+    pattern
+}
+
 /// The pattern as the result carries it: raw units per cell, shape and
 /// plane part, with σ and the words.
 fn pattern_of(
@@ -1069,6 +1121,7 @@ fn pattern_of(
             .map(|p| [0, 1, 2].map(|i| p.covariance[(i, i)].max(0.0).sqrt())),
         plane_part_taken: part_taken.is_some(),
         uncorrected_shape_rms_raw: uncorrected.then_some(shape.all_cells_rms_raw),
+        uncorrected_fixed: false,
         raw_per_inverse_depth: k_raw,
         note: Some(note),
     }
@@ -1120,6 +1173,7 @@ mod tests {
                     intrinsics,
                     raw_per_inverse_depth: -1.0 / 0.003,
                     fit_band: f64::INFINITY,
+                    beside_another_fit: false,
                 }
             })
             .collect()
@@ -1320,6 +1374,7 @@ mod bend_on_frames {
         let untruncated = bend(
             &GroundResiduals {
                 fit_band: f64::INFINITY,
+                beside_another_fit: false,
                 ..residuals.clone()
             },
             &shape,

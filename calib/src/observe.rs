@@ -8,7 +8,9 @@ use nalgebra::Vector3;
 
 use crate::body::{Feet, GroundFrame};
 use crate::geometry::{PoseDegMm, Transform};
-use crate::plane::{fit_ground, FitBuffers, GroundFit, GroundPrior, PlaneFitSettings};
+use crate::plane::{
+    fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitSettings,
+};
 use crate::residuals::GroundResiduals;
 use crate::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::solve::Observation;
@@ -355,11 +357,37 @@ impl PoseObserver {
             ground_residuals: self
                 .settings
                 .ground_residuals
-                .then(|| GroundResiduals::of(frames, &self.camera, &fit, buffers.residual_image()))
+                .then(|| self.residuals(frames, &prior, &fit, buffers))
                 .flatten()
                 .map(std::sync::Arc::new),
         };
         Ok((observation, fit))
+    }
+
+    /// The ground's residuals for the depth pattern: the fit's own, or, for
+    /// the paper's fit (which corrects no pattern), the default fit's made
+    /// beside it, so that a warped depth image is still seen and judged.
+    fn residuals(
+        &self,
+        frames: &[&[u16]],
+        prior: &GroundPrior,
+        fit: &GroundFit,
+        buffers: &mut FitBuffers,
+    ) -> Option<GroundResiduals> {
+        match fit.method {
+            GroundFitMethod::Disparity => {
+                GroundResiduals::of(frames, &self.camera, fit, buffers.residual_image())
+            }
+            GroundFitMethod::Paper => {
+                let settings = PlaneFitSettings {
+                    method: GroundFitMethod::Disparity,
+                    ..self.settings.plane
+                };
+                let beside = fit_ground(frames, &self.camera, prior, &settings, buffers).ok()?;
+                GroundResiduals::of(frames, &self.camera, &beside, buffers.residual_image())
+                    .map(GroundResiduals::beside_another_fit)
+            }
+        }
     }
 }
 

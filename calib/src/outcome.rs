@@ -290,6 +290,10 @@ pub struct DepthPattern {
     /// The RMS of a shape that stood out of the noise but was not corrected
     /// (it changed from pose to pose), raw units.
     pub uncorrected_shape_rms_raw: Option<f64>,
+    /// Whether that uncorrected shape is fixed in the image: the sensor's
+    /// own pattern, left uncorrected because the ground fit in use (the
+    /// paper's) cannot take it out.
+    pub uncorrected_fixed: bool,
     /// Raw units per 1/m of inverse depth (the depth model's `1/b`): a cell's
     /// depth error at depth z is `−z²·value/raw_per_inverse_depth`.
     pub raw_per_inverse_depth: f64,
@@ -314,6 +318,7 @@ impl DepthPattern {
             plane_part_sigma: None,
             plane_part_taken: false,
             uncorrected_shape_rms_raw: None,
+            uncorrected_fixed: false,
             raw_per_inverse_depth: 0.0,
             note: Some(note),
         }

@@ -124,7 +124,12 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
     }
     if let Some(pattern) = &solution.depth_pattern {
         if let Some(check) = warp_check(gates, pattern) {
-            if !check.passed {
+            if !check.passed && pattern.uncorrected_fixed {
+                reasons.push(format!(
+                    "the depth image is warped by {:.1} mm RMS at 2 m in a pattern fixed in the image, which the paper's ground fit (--ground-fit paper) does not correct: calibrate with the default ground fit, which does",
+                    check.measured
+                ));
+            } else if !check.passed {
                 reasons.push(format!(
                     "the depth image is warped by {:.1} mm RMS at 2 m in a way that changes from pose to pose ({:.1} times the noise), so it cannot be corrected as the sensor's fixed pattern: calibrate on open, flat ground with nothing in view; if it stays, the Kinect's depth pattern changes with the distance and needs a maintainer",
                     check.measured,

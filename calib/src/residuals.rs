@@ -53,6 +53,11 @@ pub struct GroundResiduals {
     /// The fit's own rejection band (1/m): the readings it took for the
     /// ground lay within it of its plane.
     pub(crate) fit_band: f64,
+    /// Taken from the default fit made beside another one (the paper's,
+    /// `--ground-fit paper`): they show a warp of the depth, but the
+    /// observation's plane is not the one they bend, so nothing may be
+    /// corrected by them.
+    pub(crate) beside_another_fit: bool,
 }
 
 /// The sums as one pose's frames are read.
@@ -253,12 +258,23 @@ struct Pass {
 }
 
 impl GroundResiduals {
+    /// These residuals, marked as taken from the default fit made beside
+    /// another fit of the same frames: they judge a warp, they correct
+    /// nothing.
+    pub fn beside_another_fit(self) -> Self {
+        Self {
+            beside_another_fit: true,
+            ..self
+        }
+    }
+
     /// The residuals of `frames` from the ground `fit` found in them: the
     /// readings within twice the fit's own band. `None` for the paper's fit
     /// (`--ground-fit paper`, kept to compare with): its band is in metres
     /// point by point, and a pattern estimated through it is not one the
     /// default fit would see (in the corridor it found one where there is
-    /// none).
+    /// none); [`GroundResiduals::beside_another_fit`] marks the default
+    /// fit's residuals taken beside it instead.
     pub fn of(
         frames: &[&[u16]],
         camera: &DepthCamera,
@@ -324,6 +340,7 @@ impl GroundResiduals {
             intrinsics,
             raw_per_inverse_depth: camera.raw_per_inverse_depth(),
             fit_band: band,
+            beside_another_fit: false,
         })
     }
 }

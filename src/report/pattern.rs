@@ -218,6 +218,7 @@ mod tests {
             plane_part_sigma_raw: None,
             plane_part_taken: false,
             uncorrected_mm_at_2m: None,
+            uncorrected_fixed: false,
             raw_per_inverse_depth: 325.0,
         }
     }

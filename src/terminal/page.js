@@ -225,7 +225,10 @@ const TODO = {
 function todoFor(result) {
   const lines = [];
   for (const c of result.gate_checks || []) {
-    const line = !c.passed && TODO[c.gate] && t(TODO[c.gate]);
+    // A pattern fixed in the image that the paper's fit left uncorrected
+    // needs the default fit, not flat ground.
+    const fixedWarp = c.gate === 'warp_max_mm' && result.depth_pattern && result.depth_pattern.uncorrected_fixed;
+    const line = !c.passed && TODO[c.gate] && t(fixedWarp ? 'todoWarpFixed' : TODO[c.gate]);
     if (line && !lines.includes(line)) lines.push(line);
   }
   if ((result.reasons || []).some((r) => /motor/.test(r))) lines.push(t('todoMotor'));
@@ -728,8 +731,8 @@ function drawWarp(p, tooLargeFor) {
   for (const id of ['warp', 'warp-scale', 'warp-ticks']) $(id).hidden = !drawn;
   const mm = (v) => (Math.round(v * 10) / 10).toString();
   if (!drawn) {
-    $('warp-words').textContent = typeof p.uncorrected_mm_at_2m === 'number'
-      ? t('warpUncorrected', mm(p.uncorrected_mm_at_2m)) : t('warpNone');
+    $('warp-words').textContent = typeof p.uncorrected_mm_at_2m !== 'number' ? t('warpNone')
+      : t(p.uncorrected_fixed ? 'warpUncorrectedFixed' : 'warpUncorrected', mm(p.uncorrected_mm_at_2m));
     return;
   }
   const largest = Math.max(p.largest_mm_at_2m || 0, 1);

@@ -134,6 +134,13 @@ try {
   seen.gates = await page.$$eval('#gates li', (n) => n.map((e) => e.textContent));
   seen.gatesTitle = await text('gates-title');
   seen.notActiveYet = await text('activeline');
+  // No pattern on the simulated Kinect: the warp card says so in words and
+  // shows no picture, no scale and no ticks (an empty frame and a lone "0"
+  // were shown until CSS let [hidden] win).
+  seen.warp = await page.evaluate(() => ({
+    words: document.getElementById('warp-words').textContent,
+    shown: ['warp', 'warp-scale', 'warp-ticks'].filter((id) => document.getElementById(id).getClientRects().length > 0),
+  }));
   await shot(page, '3-verdict');
 
   seen.confirmQuestion = await confirmed('#accept', '3b-confirm');
