@@ -502,28 +502,28 @@ fn design_text(report: &DesignJson, how: &str) -> String {
             }
         })
     };
-    for (k, name) in ["alpha", "beta", "gamma", "px", "py", "pz"]
-        .iter()
-        .enumerate()
-    {
-        let _ = writeln!(
-            out,
-            "  {name:<14} {:>14} {:>14}",
-            pick(&d.sigma, k),
-            pick(&c.sigma, k)
-        );
-    }
-    for (k, name) in ["alpha", "beta", "gamma", "px", "py", "pz"]
-        .iter()
-        .enumerate()
-    {
-        let _ = writeln!(
-            out,
-            "  {:<14} {:>14} {:>14}",
-            format!("{name}, pattern"),
-            pick(&d.sigma_with_depth_pattern, k),
-            pick(&c.sigma_with_depth_pattern, k)
-        );
+    // Without a depth pattern, then with one (its offset and gradients
+    // estimated with the mount).
+    for (suffix, designed, configured) in [
+        ("", &d.sigma, &c.sigma),
+        (
+            ", pattern",
+            &d.sigma_with_depth_pattern,
+            &c.sigma_with_depth_pattern,
+        ),
+    ] {
+        for (k, name) in ["alpha", "beta", "gamma", "px", "py", "pz"]
+            .iter()
+            .enumerate()
+        {
+            let _ = writeln!(
+                out,
+                "  {:<14} {:>14} {:>14}",
+                format!("{name}{suffix}"),
+                pick(designed, k),
+                pick(configured, k)
+            );
+        }
     }
     let _ = writeln!(
         out,
