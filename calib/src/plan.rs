@@ -82,13 +82,20 @@ impl Prediction {
     /// One σ of each parameter (degrees, millimetres), in the order
     /// α, β, γ, px, py, pz.
     pub fn sigma_deg_mm(&self) -> [f64; 6] {
-        sigma_deg_mm(&self.covariance)
+        let sigma = self.sigma();
+        std::array::from_fn(|i| {
+            if i < 3 {
+                sigma[i].to_degrees()
+            } else {
+                sigma[i] * 1000.0
+            }
+        })
     }
 
     /// One σ of each parameter (radians, metres), in the order α, β, γ,
     /// px, py, pz.
     pub fn sigma(&self) -> [f64; 6] {
-        super::outcome::sigma_of(&self.covariance).into()
+        sigma_of_covariance(&self.covariance)
     }
 
     /// The correlation matrix of the six parameters.
@@ -109,17 +116,10 @@ impl Prediction {
     }
 }
 
-/// One σ of each parameter of `covariance` (radians, metres) in degrees
-/// and millimetres, in the order α, β, γ, px, py, pz.
-pub fn sigma_deg_mm(covariance: &Matrix6<f64>) -> [f64; 6] {
-    let sigma = super::outcome::sigma_of(covariance);
-    std::array::from_fn(|i| {
-        if i < 3 {
-            sigma[i].to_degrees()
-        } else {
-            sigma[i] * 1000.0
-        }
-    })
+/// One σ of each parameter of `covariance` (radians, metres), in the order
+/// α, β, γ, px, py, pz.
+pub fn sigma_of_covariance(covariance: &Matrix6<f64>) -> [f64; 6] {
+    super::outcome::sigma_of(covariance).into()
 }
 
 /// Predicts what a calibration over `body_poses` (commanded

@@ -11,7 +11,7 @@ use serde::Serialize;
 use super::ExitStatus;
 use crate::calib::outcome::Observability;
 use crate::calib::plan::{
-    predict_schedule_with, predict_with_depth_pattern, sigma_deg_mm, NoiseModel, Prediction,
+    predict_schedule_with, predict_with_depth_pattern, sigma_of_covariance, NoiseModel, Prediction,
 };
 use crate::config::Config;
 use crate::output::SigmaJson;
@@ -166,16 +166,9 @@ fn with_depth_pattern(
     let covariance = predict_with_depth_pattern(&poses, nominal, noise, depth_scale)
         .ok()
         .flatten()?;
-    let [alpha_deg, beta_deg, gamma_deg, px_mm, py_mm, pz_mm] = sigma_deg_mm(&covariance);
-    Some(SigmaJson {
-        alpha_deg,
-        beta_deg,
-        gamma_deg,
-        px_mm,
-        py_mm,
-        pz_mm,
-        depth_scale: None,
-    })
+    Some(SigmaJson::from_radians_metres(&sigma_of_covariance(
+        &covariance,
+    )))
 }
 
 /// What planning starts from: the configuration (every check but the
