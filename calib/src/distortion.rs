@@ -724,16 +724,32 @@ pub fn solve_with_pattern(
     };
     let intrinsics = shape.intrinsics;
     let indices: Vec<usize> = with_residuals.iter().map(|(k, _)| *k).collect();
-    if residuals.iter().any(|r| r.beside_another_fit) {
+    if residuals.iter().any(|r| r.beside_another_fit.is_some()) {
         // Another fit's planes: what the residuals and the geometry show is
-        // judged, never corrected (the bends are the default fit's).
+        // judged, never corrected (the bends are the default fit's). The
+        // geometry is that of the default fit's planes too: the other fit's
+        // own bias changes with the pose as an offset and gradients would
+        // (the paper's, beside a corridor's walls, found a 4σ "pattern"
+        // that the default fit's planes do not show).
+        let mut own_planes = observations.to_vec();
+        for ((k, _), r) in with_residuals.iter().zip(&residuals) {
+            if let Some((plane, covariance)) = r.beside_another_fit {
+                own_planes[*k].plane = plane;
+                own_planes[*k].plane_covariance = Some(covariance);
+            }
+        }
+        let Ok(own_base) = solve::solve(&own_planes, settings) else {
+            let mut base = base;
+            base.depth_pattern = Some(pattern_not_corrected_by_another_fit(&shape, None));
+            return Ok(base);
+        };
         let plane = PlanePartSolve {
-            observations,
+            observations: &own_planes,
             indices: &indices,
             settings,
             intrinsics,
             raw_per_inverse_depth: shape.raw_per_inverse_depth,
-            noise: base.noise_per_pose,
+            noise: own_base.noise_per_pose,
         };
         let part = plane
             .estimate()
@@ -1173,7 +1189,7 @@ mod tests {
                     intrinsics,
                     raw_per_inverse_depth: -1.0 / 0.003,
                     fit_band: f64::INFINITY,
-                    beside_another_fit: false,
+                    beside_another_fit: None,
                 }
             })
             .collect()
@@ -1374,7 +1390,7 @@ mod bend_on_frames {
         let untruncated = bend(
             &GroundResiduals {
                 fit_band: f64::INFINITY,
-                beside_another_fit: false,
+                beside_another_fit: None,
                 ..residuals.clone()
             },
             &shape,

@@ -385,7 +385,7 @@ impl PoseObserver {
                 };
                 let beside = fit_ground(frames, &self.camera, prior, &settings, buffers).ok()?;
                 GroundResiduals::of(frames, &self.camera, &beside, buffers.residual_image())
-                    .map(GroundResiduals::beside_another_fit)
+                    .map(|r| r.beside_another_fit(beside.plane, beside.covariance))
             }
         }
     }

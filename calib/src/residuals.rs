@@ -3,10 +3,11 @@
 //! while its frames are in memory (sums, not pixels, so that no frame is
 //! kept).
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Matrix4, Vector3};
 
 use crate::depth::Intrinsics;
 use crate::disparity::{lane_sum, FitValue, InverseDepthImage, PixelPlane};
+use crate::geometry::Plane;
 use crate::plane::{GroundFit, InlierBand};
 use crate::sensor::DepthCamera;
 
@@ -54,10 +55,12 @@ pub struct GroundResiduals {
     /// ground lay within it of its plane.
     pub(crate) fit_band: f64,
     /// Taken from the default fit made beside another one (the paper's,
-    /// `--ground-fit paper`): they show a warp of the depth, but the
-    /// observation's plane is not the one they bend, so nothing may be
-    /// corrected by them.
-    pub(crate) beside_another_fit: bool,
+    /// `--ground-fit paper`): that default fit's plane and its covariance.
+    /// The residuals show a warp of the depth, but the observation's plane
+    /// is not the one they bend, so nothing may be corrected by them; and
+    /// the geometry across poses is judged on these planes, not the other
+    /// fit's, whose own bias (walls, obstacles) would look like a pattern.
+    pub(crate) beside_another_fit: Option<(Plane, Matrix4<f64>)>,
 }
 
 /// The sums as one pose's frames are read.
@@ -259,11 +262,11 @@ struct Pass {
 
 impl GroundResiduals {
     /// These residuals, marked as taken from the default fit made beside
-    /// another fit of the same frames: they judge a warp, they correct
-    /// nothing.
-    pub fn beside_another_fit(self) -> Self {
+    /// another fit of the same frames, with that default fit's plane and
+    /// covariance: they judge a warp, they correct nothing.
+    pub fn beside_another_fit(self, plane: Plane, covariance: Matrix4<f64>) -> Self {
         Self {
-            beside_another_fit: true,
+            beside_another_fit: Some((plane, covariance)),
             ..self
         }
     }
@@ -340,7 +343,7 @@ impl GroundResiduals {
             intrinsics,
             raw_per_inverse_depth: camera.raw_per_inverse_depth(),
             fit_band: band,
-            beside_another_fit: false,
+            beside_another_fit: None,
         })
     }
 }
