@@ -105,9 +105,8 @@ impl Sums {
 
     /// Adds one row's readings within `band` of `plane` (both in the row's
     /// value units), where the plane lies within `region`, to the band's
-    /// lanes, without a
-    /// branch. A last cell narrower than [`CELL_PX`] is padded with NaN,
-    /// which no comparison takes.
+    /// lanes, without a branch. A last cell narrower than [`CELL_PX`] is
+    /// padded with NaN, which no comparison takes.
     #[inline(always)]
     fn add_row<T: FitValue>(
         &mut self,
