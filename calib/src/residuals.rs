@@ -139,8 +139,8 @@ impl Sums {
             #[allow(clippy::needless_range_loop)]
             for l in 0..CELL_PX {
                 let k = l as f32;
-                let r = x[l] - (start + cu * k);
                 let on_plane = start + cu * k;
+                let r = x[l] - on_plane;
                 let keep = r.abs() <= band && on_plane >= region.0 && on_plane <= region.1;
                 let n = if keep { 1.0 } else { 0.0 };
                 let r = if keep { r } else { 0.0 };
