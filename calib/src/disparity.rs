@@ -614,7 +614,11 @@ pub(crate) fn lane_sum<const N: usize>(lanes: &[f32; N]) -> f64 {
 /// there (`expected`), or untrusted (outside `lo..=hi`). Branch-free (`|`),
 /// so that the lanes stay vectors.
 #[inline(always)]
-fn clear_above(value_above: f32, expected: f32, (limit, lo, hi): (f32, f32, f32)) -> bool {
+pub(crate) fn clear_above(
+    value_above: f32,
+    expected: f32,
+    (limit, lo, hi): (f32, f32, f32),
+) -> bool {
     ((value_above - expected).abs() < limit) | (value_above < lo) | (value_above > hi)
 }
 

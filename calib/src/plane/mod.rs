@@ -219,9 +219,13 @@ pub struct GroundFit {
 /// ground, in the fit's own measure (the last rejection's).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum InlierBand {
-    /// Within this much inverse depth (1/m) of the plane along the pixel's
-    /// ray: the disparity fit's band.
-    InverseDepth(f64),
+    /// Within `band` of inverse depth (1/m) of the plane along the pixel's
+    /// ray: the disparity fit's band, less the pixels its `edge_guard` left
+    /// out (its limit in 1/m too).
+    InverseDepth {
+        band: f64,
+        edge_guard: Option<EdgeGuard>,
+    },
     /// Within this many σ(z) of the plane ([`crate::sensor::depth_weight`]):
     /// the paper's fit's band.
     Sigmas(f64),
@@ -241,7 +245,7 @@ impl GroundFit {
         match self.band {
             // Along the ray p = z·r, the plane's inverse depth is −(n·r)/d,
             // so the reading's 1/z misses it by (n·p + d)/(z·d).
-            InlierBand::InverseDepth(band) => (distance / (z * self.plane.d)).abs() <= band,
+            InlierBand::InverseDepth { band, .. } => (distance / (z * self.plane.d)).abs() <= band,
             InlierBand::Sigmas(band) => {
                 let distance_mm = distance * 1e3;
                 distance_mm * distance_mm * f64::from(super::sensor::depth_weight(z as f32))
@@ -519,7 +523,13 @@ fn fit_in_inverse_depth<T: FitValue>(
         rms_m: variance.sqrt() * domain.scale.abs() / (mean_w * mean_w).max(1e-12),
         iterations,
         method: GroundFitMethod::Disparity,
-        band: InlierBand::InverseDepth(band * domain.scale.abs()),
+        band: InlierBand::InverseDepth {
+            band: band * domain.scale.abs(),
+            edge_guard: guard(sigma).map(|g| EdgeGuard {
+                limit: g.limit * domain.scale.abs(),
+                ..g
+            }),
+        },
     })
 }
 
