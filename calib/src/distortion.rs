@@ -50,8 +50,8 @@ const SHAPE_SIGNIFICANCE: f64 = 8.0;
 /// The residuals after a fixed pattern may be at most this many times the
 /// readings' noise (χ² per degree of freedom) for the pattern to be taken
 /// as the sensor's: fixed patterns of every simulated kind leave 1.01–1.04
-/// on open ground and 1.03–1.20 among boxes, walls and clutter; a pattern
-/// that weakens with depth 1.48–1.51 (docs/method.md).
+/// on open ground and 1.01–1.05 among boxes, walls and clutter; a pattern
+/// that weakens with depth 1.47–1.51 (docs/method.md).
 const MAX_CONSISTENCY: f64 = 1.25;
 
 /// At least this share of the cells seen must keep residuals fixed in the
