@@ -733,9 +733,9 @@ pub fn solve_with_pattern(
         // that the default fit's planes do not show).
         let mut own_planes = observations.to_vec();
         for ((k, _), r) in with_residuals.iter().zip(&residuals) {
-            if let Some((plane, covariance)) = r.beside_another_fit {
-                own_planes[*k].plane = plane;
-                own_planes[*k].plane_covariance = Some(covariance);
+            if let Some(own) = r.beside_another_fit {
+                own_planes[*k].plane = own.plane;
+                own_planes[*k].plane_covariance = Some(own.covariance);
             }
         }
         let Ok(own_base) = solve::solve(&own_planes, settings) else {

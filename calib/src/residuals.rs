@@ -62,7 +62,15 @@ pub struct GroundResiduals {
     /// is not the one they bend, so nothing may be corrected by them; and
     /// the geometry across poses is judged on these planes, not the other
     /// fit's, whose own bias (walls, obstacles) would look like a pattern.
-    pub(crate) beside_another_fit: Option<(Plane, Matrix4<f64>)>,
+    pub(crate) beside_another_fit: Option<DefaultFitBeside>,
+}
+
+/// The default fit made beside another fit of the same frames: the plane
+/// the residuals were taken from, and its covariance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct DefaultFitBeside {
+    pub(crate) plane: Plane,
+    pub(crate) covariance: Matrix4<f64>,
 }
 
 /// The sums as one pose's frames are read.
@@ -302,7 +310,7 @@ impl GroundResiduals {
     /// covariance: they judge a warp, they correct nothing.
     pub fn beside_another_fit(self, plane: Plane, covariance: Matrix4<f64>) -> Self {
         Self {
-            beside_another_fit: Some((plane, covariance)),
+            beside_another_fit: Some(DefaultFitBeside { plane, covariance }),
             ..self
         }
     }
