@@ -319,13 +319,13 @@ impl GroundResiduals {
     /// readings within twice the fit's own band, less those its edge guard
     /// left out. The guard leaves out the rows at an obstacle's foot; summed
     /// here, they made the bends predicted from these residuals miss the
-    /// fit's by 0.015–0.021 raw units of a ±1 pattern in clutter and where a
-    /// wall meets the floor, and put the pitch 3–5σ off. `None` for the paper's fit
-    /// (`--ground-fit paper`, kept to compare with): its band is in metres
-    /// point by point, and a pattern estimated through it is not one the
-    /// default fit would see (in the corridor it found one where there is
-    /// none); [`GroundResiduals::beside_another_fit`] marks the default
-    /// fit's residuals taken beside it instead.
+    /// fit's by 0.015–0.021 raw units of a ±1 pattern in clutter and where
+    /// a wall meets the floor, and put the pitch 3–5σ off. `None` for the
+    /// paper's fit (`--ground-fit paper`, kept to compare with): its band
+    /// is in metres point by point, and a pattern estimated through it is
+    /// not one the default fit would see (in the corridor it found one
+    /// where there is none); [`GroundResiduals::beside_another_fit`] marks
+    /// the default fit's residuals taken beside it instead.
     pub fn of(
         frames: &[&[u16]],
         camera: &DepthCamera,
