@@ -833,6 +833,11 @@ struct PlanePartSolve<'a> {
     noise: (f64, f64),
 }
 
+/// Parameters fitted to the plane part's residuals: the mount's six, the
+/// depth scale and the plane part's three (the residuals' degrees of
+/// freedom are their count less these).
+const PARAMETERS_FITTED: f64 = 10.0;
+
 /// Steps of the numerical derivatives, raw units (and per 100 pixels).
 const PLANE_PART_STEP: f64 = 0.02;
 
@@ -980,7 +985,7 @@ impl PlanePartSolve<'_> {
             let gradient = jacobian.transpose() * &r0;
             let step = -(covariance * Vector3::new(gradient[0], gradient[1], gradient[2]));
             // The noise the residuals show, with the pattern's part taken out.
-            let dof = (r0.len() as f64 - 10.0).max(1.0);
+            let dof = (r0.len() as f64 - PARAMETERS_FITTED).max(1.0);
             let factor = ((r0.norm_squared() - gradient.dot(&-step)) / dof).max(1e-6);
             // Its covariance from the poses' own residuals, never below
             // what their average noise gives: the poses are not equally
@@ -1016,7 +1021,7 @@ impl PlanePartSolve<'_> {
 
 /// The plane part's covariance from the residuals pose by pose (a sandwich
 /// clustered by pose, `(JᵀJ)⁻¹·Σ_i J_iᵀ r_i r_iᵀ J_i·(JᵀJ)⁻¹`, times
-/// `n/(n − 10)` for the ten parameters fitted): right whatever the poses'
+/// `n/(n − 10)` for the [`PARAMETERS_FITTED`]): right whatever the poses'
 /// noise, where `σ²·(JᵀJ)⁻¹` assumes every pose as noisy as the average.
 /// `inverse_information` is `(JᵀJ)⁻¹`.
 fn per_pose_sandwich(
@@ -1035,7 +1040,7 @@ fn per_pose_sandwich(
         meat += score * score.transpose();
     }
     let n = residuals.len() as f64;
-    inverse_information * meat * inverse_information * (n / (n - 10.0).max(1.0))
+    inverse_information * meat * inverse_information * (n / (n - PARAMETERS_FITTED).max(1.0))
 }
 
 /// The smallest covariance (in every direction) at least both `a` and `b`:
