@@ -451,6 +451,11 @@ pub struct DepthPatternJson {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plane_part_sigma_raw: Option<[f64; 3]>,
     pub plane_part_taken: bool,
+    /// When the plane part was taken: σ of α, β, γ (degrees) had it been
+    /// known exactly, beside the result's σ what correcting it cost (the
+    /// gate `pattern_angle_sigma_growth_max` judges it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angle_sigma_known_plane_part_deg: Option<[f64; 3]>,
     /// A warp that stood out of the noise but was not corrected because it
     /// changed from pose to pose: its RMS at 2 m, millimetres (the gate
     /// `warp_max_mm` judges it).
@@ -484,6 +489,9 @@ impl DepthPatternJson {
             plane_part_raw: p.plane_part,
             plane_part_sigma_raw: p.plane_part_sigma,
             plane_part_taken: p.plane_part_taken,
+            angle_sigma_known_plane_part_deg: p
+                .angle_sigma_known_plane_part
+                .map(|s| s.map(f64::to_degrees)),
             uncorrected_mm_at_2m: p.uncorrected_shape_rms_raw.map(|raw| {
                 crate::calib::outcome::depth_error_m(raw, 2.0, p.raw_per_inverse_depth) * 1e3
             }),

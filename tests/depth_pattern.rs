@@ -3,8 +3,11 @@
 //! recording, as a real robot's configuration (no noise table), and the
 //! recording is replayed with no configuration at all. A fixed pattern is
 //! found within 0.1 raw units RMS and corrected (before: 5.3 mm off for the
-//! radial bowl, accepted); no pattern changes nothing; a pattern that
-//! weakens with depth, which the model cannot separate, is rejected in words
+//! radial bowl, accepted). On the robot's designed schedule the calibration
+//! is accepted; on the paper's, whose heights cannot tell the pattern's
+//! slope from a tilt of the sensor (its angles' σ grow 13–17 times), it is
+//! rejected in words. No pattern changes nothing; a pattern that weakens
+//! with depth, which the model cannot separate, is rejected in words
 //! (before: 1.9 mm off, accepted).
 
 mod common;
@@ -79,6 +82,11 @@ fn pattern_error(pattern: &Value, truth: &DepthDistortion) -> f64 {
     (sum / count).sqrt()
 }
 
+/// On the paper's schedule each pattern is found and corrected, the mount
+/// within 0.3 mm and 3σ of its angles, and the calibration rejected for the
+/// pattern's cost alone: the gate `pattern_angle_sigma_growth_max`
+/// (before it: accepted, the angles 0.009–0.012° off against issue 23's
+/// 0.005°).
 #[test]
 fn a_fixed_pattern_is_found_and_corrected() {
     let dir = temp_dir("depth-pattern");
@@ -98,8 +106,24 @@ fn a_fixed_pattern_is_found_and_corrected() {
         let case = dir.join(name);
         let runs = calibrate_and_replay(&sim_config_with_pattern(&case, &line, zero_plane), &case);
         for (how, (code, result)) in ["live", "replay"].iter().zip(&runs) {
-            assert_eq!(*code, 0, "{name} {how}: {result:#}");
+            assert_eq!(*code, 3, "{name} {how}: {result:#}");
             assert_eq!(result["depth_pattern"]["corrected"], true, "{name} {how}");
+            let reasons = result["reasons"].as_array().unwrap();
+            assert_eq!(reasons.len(), 1, "{name} {how}: {reasons:#?}");
+            assert!(
+                reasons[0].as_str().unwrap().contains(
+                    "this schedule cannot tell the pattern's slope across the image from a tilt of the sensor"
+                ),
+                "{name} {how}: {reasons:#?}"
+            );
+            let growth = result["gate_checks"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|c| c["gate"] == "pattern_angle_sigma_growth_max")
+                .unwrap_or_else(|| panic!("{name} {how}: no growth gate"));
+            assert_eq!(growth["passed"], false, "{growth}");
+            assert!(growth["measured"].as_f64().unwrap() > 10.0, "{growth}");
             let ((angle, angle_sigmas), (position, position_sigmas)) = errors(result);
             // The plane part costs the angles σ (docs/method.md): within
             // 3σ of their own, and 0.3 mm.
@@ -117,12 +141,15 @@ fn a_fixed_pattern_is_found_and_corrected() {
 }
 
 /// The schedule pins the pattern's plane part (docs/method.md, "What pins
-/// each part"): `config/schedules/designed-52.toml`, what `plan --design 52`
-/// makes of config/groundcal.toml, spreads its heights (530–770 mm) and
-/// tilts wider than the paper's 52 (615–753 mm) in the same robot time. With
-/// a radial bowl of ±0.5 raw units (seed 7), live, the paper's schedule puts
-/// the mount 0.24 mm and 0.014° off; the designed one within 0.15 mm, its
-/// angles within 0.012° and 4σ, and the pattern within 0.1 raw units RMS.
+/// each part"): `config/schedules/designed-52.toml`, the robot's schedule,
+/// what `plan --design 52` makes of config/groundcal.toml on the paper's 52,
+/// spreads its heights (530–770 mm) and tilts wider than the paper's 52
+/// (615–753 mm) in the same robot time. With a radial bowl of ±0.5 raw units
+/// (seed 7), live, the paper's schedule puts the mount 0.24 mm and 0.009°
+/// off and is rejected for the pattern's cost; the designed one is accepted,
+/// within 0.15 mm, its angles within 0.012° and 4σ, their σ grown by
+/// correcting the pattern less than 8 times, and the pattern within 0.1 raw
+/// units RMS.
 #[test]
 fn a_designed_schedule_pins_the_patterns_plane_part() {
     let dir = temp_dir("depth-pattern-designed");
@@ -132,8 +159,7 @@ fn a_designed_schedule_pins_the_patterns_plane_part() {
         "--design",
         "52",
         "--config",
-        common::root()
-            .join("config/groundcal.toml")
+        common::robot_config_on_the_papers_schedule(&dir)
             .to_str()
             .unwrap(),
         "--out",
@@ -151,29 +177,25 @@ fn a_designed_schedule_pins_the_patterns_plane_part() {
     assert_eq!(
         poses(&made),
         poses(&shipped),
-        "config/schedules/designed-52.toml is not what plan --design 52 makes of config/groundcal.toml"
+        "config/schedules/designed-52.toml is not what plan --design 52 makes of config/groundcal.toml on octopus-52"
     );
 
     let line = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }";
     let config = sim_config_with_pattern(&dir, line, false);
-    let text = std::fs::read_to_string(&config).unwrap();
-    let paper = common::root().join("config/schedules/octopus-52.toml");
-    let paper_line = format!("schedule = \"{}\"", paper.display());
-    assert!(text.contains(&paper_line), "{text}");
-    std::fs::write(
-        &config,
-        text.replace(
-            &paper_line,
-            &format!("schedule = \"{}\"", shipped.display()),
-        ),
-    )
-    .unwrap();
+    common::on_schedule(&config, "designed-52");
     let (code, out, err) =
         groundcal(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
     let result: Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}\n{err}"));
     assert_eq!(code, 0, "{result:#}");
     assert_eq!(result["summary"]["poses_used"], 52, "{result:#}");
     assert_eq!(result["depth_pattern"]["corrected"], true, "{result:#}");
+    let growth = result["gate_checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["gate"] == "pattern_angle_sigma_growth_max")
+        .expect("the pattern's cost judged");
+    assert!(growth["measured"].as_f64().unwrap() < 8.0, "{growth}");
     let ((angle, angle_sigmas), (position, position_sigmas)) = errors(&result);
     eprintln!("designed-52, radial ±0.5: {angle:.4}° ({angle_sigmas:.1}σ), {position:.3} mm ({position_sigmas:.1}σ)");
     assert!(
@@ -192,7 +214,9 @@ fn a_designed_schedule_pins_the_patterns_plane_part() {
 }
 
 /// Every kind of pattern the simulator makes, on both depth models, at the
-/// amplitudes of a real unit (issue 23: 0.25–1.5 raw units), live: each is
+/// amplitudes of a real unit (issue 23: 0.25–1.5 raw units), live on the
+/// robot's schedule (designed-52; on the paper's every corrected pattern is
+/// rejected for its cost, `a_fixed_pattern_is_found_and_corrected`): each is
 /// either corrected (the mount within 0.5 mm and 3σ of its angles; at ±0.5
 /// raw units or less the pattern within 0.1 raw units RMS) or rejected with
 /// a reason, never accepted further off. The cases `a_fixed_pattern_is_found_and_corrected` and
@@ -257,6 +281,7 @@ fn every_kind_on_both_depth_models_is_corrected_or_rejected_never_accepted_off()
             &line,
             zero_plane,
         );
+        common::on_schedule(&config, "designed-52");
         let (code, out, err) =
             groundcal(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
         let result: Value =
@@ -482,6 +507,7 @@ fn the_correction_is_exported_and_checks_take_it_out() {
     };
     let line = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }";
     let config = sim_config_with_pattern(&dir, line, false);
+    common::on_schedule(&config, "designed-52");
     let [(code, live), _] = calibrate_and_replay(&config, &dir);
     assert_eq!(code, 0, "{live:#}");
     let result = dir.join("result.json");

@@ -342,6 +342,7 @@ fn report_draws_the_depth_images_own_warp() {
     let dir = common::temp_dir("report-pattern");
     let line = "depth_distortion = { shape = \"radial\", amplitude_raw = 0.5 }";
     let config = common::sim_config_with_pattern(&dir, line, false);
+    common::on_schedule(&config, "designed-52");
     let (code, out, err) =
         common::groundcal(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
     assert_eq!(code, 0, "{err}");

@@ -784,13 +784,14 @@ pub fn solve_with_pattern(
         noise: shaped.noise_per_pose,
     };
     let estimate = plane.estimate();
-    let (solution, plane_part) = match estimate {
+    let (solution, plane_part, angle_sigma_known_part) = match estimate {
         Some(found) if shape_taken || (shape.consistent() && found.chi2 > PLANE_PART_CHI2) => {
             let mut solution = found.solution.clone();
+            let known = [0, 1, 2].map(|k| solution.covariance[(k, k)].max(0.0).sqrt());
             // The mount's σ with the plane part's own uncertainty.
             solution.covariance +=
                 found.sensitivity * found.covariance * found.sensitivity.transpose();
-            (solution, Some(found))
+            (solution, Some(found), Some(known))
         }
         other => (
             shaped,
@@ -798,10 +799,14 @@ pub fn solve_with_pattern(
                 taken: false,
                 ..found
             }),
+            None,
         ),
     };
     let mut solution = solution;
-    solution.depth_pattern = Some(pattern_of(&shape, shape_taken, plane_part.as_ref()));
+    solution.depth_pattern = Some(DepthPattern {
+        angle_sigma_known_plane_part: angle_sigma_known_part,
+        ..pattern_of(&shape, shape_taken, plane_part.as_ref())
+    });
     Ok(solution)
 }
 
@@ -1196,6 +1201,7 @@ fn pattern_of(
         uncorrected_shape_rms_raw: uncorrected.then_some(shape.all_cells_rms_raw),
         uncorrected_fixed: false,
         raw_per_inverse_depth: k_raw,
+        angle_sigma_known_plane_part: None,
         note: Some(note),
     }
 }

@@ -297,6 +297,12 @@ pub struct DepthPattern {
     /// Raw units per 1/m of inverse depth (the depth model's `1/b`): a cell's
     /// depth error at depth z is `−z²·value/raw_per_inverse_depth`.
     pub raw_per_inverse_depth: f64,
+    /// The σ of α, β, γ (radians) had the plane part been known exactly,
+    /// when it was taken: beside the result's σ, what correcting it cost.
+    /// The plane part tilts every pose's ground as a turn of the sensor
+    /// would, and only the spread of the body's heights tells the two
+    /// apart, so this cost is the schedule's, whatever the noise.
+    pub angle_sigma_known_plane_part: Option<[f64; 3]>,
     /// What was found, in words.
     pub note: Option<String>,
 }
@@ -320,6 +326,7 @@ impl DepthPattern {
             uncorrected_shape_rms_raw: None,
             uncorrected_fixed: false,
             raw_per_inverse_depth: 0.0,
+            angle_sigma_known_plane_part: None,
             note: Some(note),
         }
     }

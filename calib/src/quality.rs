@@ -39,6 +39,17 @@ pub struct Gates {
     /// corners); at ±1.25 and more its offset was found 3–5 σ off and a mount
     /// up to 1 mm off (docs/method.md, "Larger patterns").
     pub pattern_max_mm: f64,
+    /// Largest growth of an angle's σ (α, β, γ) from correcting a depth
+    /// pattern's plane part, against its σ had that part been known. The
+    /// part (a constant and two gradients of the raw values) tilts every
+    /// pose's ground as a turn of the sensor would, and only the spread of
+    /// the body's heights tells the two apart: a ratio judges that spread,
+    /// whatever the noise. On the simulator the paper's schedule (heights
+    /// 615–753 mm) makes β and γ 10–12 times less certain, a designed one
+    /// (530–770 mm) 5–6 times (docs/method.md, "What pins each part"). 8:
+    /// issue 23 asks 0.005° with a corrected pattern, 8 times the σ the
+    /// paper's schedule leaves β and γ without one (0.0006°).
+    pub pattern_angle_sigma_growth_max: f64,
 }
 
 impl Default for Gates {
@@ -53,6 +64,7 @@ impl Default for Gates {
             depth_scale_max_deviation: 0.03,
             warp_max_mm: 1.0,
             pattern_max_mm: 15.0,
+            pattern_angle_sigma_growth_max: 8.0,
         }
     }
 }
@@ -68,6 +80,10 @@ impl Gates {
             ("depth_scale_max_deviation", self.depth_scale_max_deviation),
             ("warp_max_mm", self.warp_max_mm),
             ("pattern_max_mm", self.pattern_max_mm),
+            (
+                "pattern_angle_sigma_growth_max",
+                self.pattern_angle_sigma_growth_max,
+            ),
         ];
         for (name, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -147,6 +163,18 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
             }
             checks.push(check);
         }
+        if let Some((check, with, known)) = pattern_sigma_check(gates, pattern, &solution.sigma()) {
+            if !check.passed {
+                let (with, known) = apart(with, known, 4);
+                reasons.push(format!(
+                    "the depth pattern was corrected, but this schedule cannot tell the pattern's slope across the image from a tilt of the sensor: correcting it leaves the angle {} {:.1} times less certain than the ground alone pins it (±{with}° instead of ±{known}°), more than the {:.1} times allowed; calibrate with a schedule that spreads the body's heights wider ({WIDER_HEIGHTS})",
+                    check.at.as_deref().unwrap_or("of the sensor"),
+                    check.measured,
+                    check.limit,
+                ));
+            }
+            checks.push(check);
+        }
     }
     Calibration {
         verdict: if reasons.is_empty() {
@@ -201,6 +229,30 @@ fn pattern_check(gates: &Gates, pattern: &crate::outcome::DepthPattern) -> Optio
     })
 }
 
+/// The corrected pattern's cost in the angles, when its plane part was
+/// taken: the largest growth of an angle's σ against its σ had the part
+/// been known, with that angle's σ both ways (degrees).
+fn pattern_sigma_check(
+    gates: &Gates,
+    pattern: &crate::outcome::DepthPattern,
+    sigma: &Vector6<f64>,
+) -> Option<(GateCheck, f64, f64)> {
+    let known = pattern
+        .angle_sigma_known_plane_part
+        .filter(|_| pattern.corrected)?;
+    let (k, growth) = worst_of([0, 1, 2].map(|k| sigma[k] / known[k]));
+    let check = GateCheck {
+        gate: "pattern_angle_sigma_growth_max",
+        limit: gates.pattern_angle_sigma_growth_max,
+        measured: growth,
+        at_least: false,
+        passed: at_most(growth, gates.pattern_angle_sigma_growth_max),
+        at: Some(ANGLE_NAMES[k].to_string()),
+        place: Some(GatePlace::Parameter { index: k }),
+    };
+    Some((check, sigma[k].to_degrees(), known[k].to_degrees()))
+}
+
 /// The depth scale's gate, when it was estimated.
 fn depth_scale_check(gates: &Gates, scale: &crate::outcome::DepthScale) -> Option<GateCheck> {
     scale.estimated.then(|| {
@@ -234,6 +286,10 @@ pub fn summarise(poses: &[PoseOutcome]) -> Summary {
 /// What to do about a σ too large, in words an operator can act on.
 const UNCERTAIN: &str = "calibrate again with the robot on open, flat ground and nothing moving in view; if it stays this uncertain, the schedule needs larger tilts (a maintainer's groundcal plan)";
 
+/// Where a schedule that pins a depth pattern's plane part comes from.
+const WIDER_HEIGHTS: &str =
+    "the robot's config/schedules/designed-52.toml, or a maintainer's groundcal plan --design 52";
+
 /// The parameters as the operator's page and the report name them.
 const ANGLE_NAMES: [&str; 3] = ["α (turn about up)", "β (pitch)", "γ (roll)"];
 const POSITION_NAMES: [&str; 3] = ["x (forward)", "y (up)", "z (right)"];
@@ -249,6 +305,39 @@ fn apart(measured: f64, limit: f64, decimals: usize) -> (String, String) {
         }
     }
     (format!("{measured}"), format!("{limit}"))
+}
+
+/// The worst σ of three parameters from `offset`, scaled by `scale`, with
+/// its name and place.
+fn worst_sigma(
+    sigma: &Vector6<f64>,
+    offset: usize,
+    scale: f64,
+    names: [&str; 3],
+) -> (f64, Option<String>, Option<GatePlace>) {
+    let (k, s) = worst_of([0, 1, 2].map(|k| sigma[offset + k] * scale));
+    (
+        s,
+        Some(names[k].to_string()),
+        Some(GatePlace::Parameter { index: offset + k }),
+    )
+}
+
+/// The largest of three values and where it is, NaN (an unobservable
+/// parameter) first.
+fn worst_of(values: [f64; 3]) -> (usize, f64) {
+    let mut worst = (0, values[0]);
+    for (k, value) in values.into_iter().enumerate().skip(1) {
+        let beyond = match (value.is_nan(), worst.1.is_nan()) {
+            (true, false) => true,
+            (false, true) => false,
+            _ => value > worst.1,
+        };
+        if beyond {
+            worst = (k, value);
+        }
+    }
+    worst
 }
 
 /// Whether a value is within an upper limit (NaN is not).
@@ -274,22 +363,6 @@ pub fn check_gates(
             .filter(|p| p.used)
             .max_by(|a, b| key(a).total_cmp(&key(b)))
             .map(|p| p.index)
-    };
-    // The worst σ of three, NaN (unobservable) first.
-    let worst_sigma = |offset: usize, scale: f64, names: [&str; 3]| {
-        let (k, s) = (0..3)
-            .map(|k| (k, sigma[offset + k] * scale))
-            .max_by(|a, b| match (a.1.is_nan(), b.1.is_nan()) {
-                (true, false) => std::cmp::Ordering::Greater,
-                (false, true) => std::cmp::Ordering::Less,
-                _ => a.1.total_cmp(&b.1),
-            })
-            .unwrap_or((0, f64::NAN));
-        (
-            s,
-            Some(names[k].to_string()),
-            Some(GatePlace::Parameter { index: offset + k }),
-        )
     };
     let at_pose = |index: Option<u32>| {
         (
@@ -345,12 +418,12 @@ pub fn check_gates(
         max(
             "sigma_angle_max_deg",
             gates.sigma_angle_max_deg,
-            worst_sigma(0, 180.0 / std::f64::consts::PI, ANGLE_NAMES),
+            worst_sigma(sigma, 0, 180.0 / std::f64::consts::PI, ANGLE_NAMES),
         ),
         max(
             "sigma_position_max_mm",
             gates.sigma_position_max_mm,
-            worst_sigma(3, 1e3, POSITION_NAMES),
+            worst_sigma(sigma, 3, 1e3, POSITION_NAMES),
         ),
         GateCheck {
             gate: "min_poses_used",
@@ -676,5 +749,55 @@ mod tests {
         let past = pattern_check(&gates, &pattern(true, -1.25)).unwrap();
         assert!((past.measured - 15.356).abs() < 1e-3, "{}", past.measured);
         assert!(!past.passed);
+    }
+
+    /// A corrected pattern's plane part costs the angles σ (docs/method.md):
+    /// the gate takes the largest growth of one, and only when that part
+    /// was taken.
+    #[test]
+    fn the_patterns_gate_judges_the_angles_sigma_growth_once_its_plane_part_is_taken() {
+        let gates = Gates::default();
+        let known = [0.0019, 0.0006, 0.0006].map(f64::to_radians);
+        let pattern = |corrected: bool, known: Option<[f64; 3]>| crate::outcome::DepthPattern {
+            corrected,
+            plane_part_taken: known.is_some(),
+            angle_sigma_known_plane_part: known,
+            ..crate::outcome::DepthPattern::not_estimated(String::new())
+        };
+        // The paper's schedule with the plane part (docs/method.md).
+        let sigma = |degrees: [f64; 3]| {
+            let mut sigma = sigma(0.0, 0.2);
+            for (k, d) in degrees.into_iter().enumerate() {
+                sigma[k] = d.to_radians();
+            }
+            sigma
+        };
+        let paper = sigma([0.0031, 0.0061, 0.0072]);
+        assert!(pattern_sigma_check(&gates, &pattern(true, None), &paper).is_none());
+        assert!(pattern_sigma_check(&gates, &pattern(false, Some(known)), &paper).is_none());
+        let (past, with, without) =
+            pattern_sigma_check(&gates, &pattern(true, Some(known)), &paper).unwrap();
+        assert_eq!(
+            (past.gate, past.limit),
+            ("pattern_angle_sigma_growth_max", 8.0)
+        );
+        assert!((past.measured - 12.0).abs() < 1e-9, "{}", past.measured);
+        assert!((with - 0.0072).abs() < 1e-12 && (without - 0.0006).abs() < 1e-12);
+        assert_eq!(past.at.as_deref(), Some("γ (roll)"));
+        assert_eq!(past.place, Some(GatePlace::Parameter { index: 2 }));
+        assert!(!past.passed && !past.at_least);
+        // A designed schedule's, and an angle that cannot be observed.
+        let designed = sigma([0.0017, 0.0033, 0.0032]);
+        let (within, _, _) =
+            pattern_sigma_check(&gates, &pattern(true, Some(known)), &designed).unwrap();
+        assert!(
+            within.passed && (within.measured - 5.5).abs() < 1e-9,
+            "{within:?}"
+        );
+        let mut unobservable = designed;
+        unobservable[0] = f64::NAN;
+        let (nan, _, _) =
+            pattern_sigma_check(&gates, &pattern(true, Some(known)), &unobservable).unwrap();
+        assert!(!nan.passed && nan.at.as_deref() == Some("α (turn about up)"));
     }
 }

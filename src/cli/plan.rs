@@ -45,6 +45,12 @@ pub struct PlanJson {
     /// cannot separate them from the mount at all.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sigma_with_depth_pattern: Option<SigmaJson>,
+    /// When correcting such a pattern would grow an angle's σ beyond the
+    /// gate `pattern_angle_sigma_growth_max`, that a calibration of a
+    /// Kinect with one will be rejected, in words (every real Kinect's
+    /// depth has a pattern; the schedule alone is not refused for it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_pattern_note: Option<String>,
 }
 
 #[derive(Debug, Serialize)]
@@ -137,6 +143,9 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
     let mut plan = to_json(&schedule, &prediction, noise, reasons);
     plan.sigma_with_depth_pattern =
         with_depth_pattern(&schedule, &nominal, &noise, config.calibration.depth_scale);
+    plan.depth_pattern_note = plan.sigma_with_depth_pattern.as_ref().and_then(|with| {
+        depth_pattern_note(&plan.sigma, with, gates.pattern_angle_sigma_growth_max)
+    });
     let printed = if json {
         super::print_json(&plan)
     } else {
@@ -152,6 +161,29 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
     } else {
         ExitStatus::Rejected
     }
+}
+
+/// Whether correcting a depth pattern would grow an angle's predicted σ
+/// beyond `growth_max` times `without`, as the calibration's gate judges,
+/// in words.
+fn depth_pattern_note(without: &SigmaJson, with: &SigmaJson, growth_max: f64) -> Option<String> {
+    let angles = [
+        ("alpha", without.alpha_deg, with.alpha_deg),
+        ("beta", without.beta_deg, with.beta_deg),
+        ("gamma", without.gamma_deg, with.gamma_deg),
+    ];
+    let (name, growth) = angles
+        .iter()
+        .map(|&(name, without, with)| (name, with / without))
+        .fold(
+            ("alpha", 0.0),
+            |worst, next| if next.1 > worst.1 { next } else { worst },
+        );
+    (growth > growth_max).then(|| {
+        format!(
+            "a Kinect's depth pattern (a real one always has one) would make {name} {growth:.1} times less certain than without it, more than the {growth_max} times the gate pattern_angle_sigma_growth_max allows: its calibration will be rejected on this schedule; groundcal plan --design spreads the body's heights wider"
+        )
+    })
 }
 
 /// The predicted σ of `schedule` when a depth pattern's plane part is
@@ -266,6 +298,7 @@ fn to_json(
         },
         noise,
         sigma_with_depth_pattern: None,
+        depth_pattern_note: None,
     }
 }
 
@@ -312,6 +345,9 @@ fn to_text(plan: &PlanJson) -> String {
             "\nwith a depth pattern (its offset and gradients estimated with the mount):\n  alpha {:.4}°  beta {:.4}°  gamma {:.4}°\n  px {:.3} mm  py {:.3} mm  pz {:.3} mm",
             p.alpha_deg, p.beta_deg, p.gamma_deg, p.px_mm, p.py_mm, p.pz_mm
         );
+    }
+    if let Some(note) = &plan.depth_pattern_note {
+        let _ = writeln!(out, "  note: {note}");
     }
     let _ = writeln!(
         out,

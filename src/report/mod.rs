@@ -208,6 +208,12 @@ fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static s
             format!("{} mm", num(m, 1)),
             "",
         ),
+        "pattern_angle_sigma_growth_max" => (
+            "largest growth of σ of α, β, γ from correcting the depth pattern",
+            format!("≤ {}×", num(l, 1)),
+            format!("{}×", num(m, 1)),
+            "of ",
+        ),
         "min_poses_used" => (
             "poses used",
             format!("≥ {}", num(l, 0)),

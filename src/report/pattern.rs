@@ -217,6 +217,7 @@ mod tests {
             plane_part_raw: None,
             plane_part_sigma_raw: None,
             plane_part_taken: false,
+            angle_sigma_known_plane_part_deg: None,
             uncorrected_mm_at_2m: None,
             uncorrected_fixed: false,
             raw_per_inverse_depth: 325.0,

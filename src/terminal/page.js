@@ -220,6 +220,7 @@ const TODO = {
   depth_scale_max_deviation: 'todoScale',
   warp_max_mm: 'todoWarp',
   pattern_max_mm: 'todoPattern',
+  pattern_angle_sigma_growth_max: 'todoPatternSchedule',
   observable: 'todoSchedule',
 };
 function todoFor(result) {
@@ -331,6 +332,7 @@ const GATE_UNITS = {
   depth_scale_max_deviation: ['%', 2],
   warp_max_mm: [' mm', 1],
   pattern_max_mm: [' mm', 1],
+  pattern_angle_sigma_growth_max: ['×', 1],
 };
 // Where a gate's value comes from (the check's typed `place`), in words.
 const AXES = ['forward', 'up', 'right'];

@@ -290,6 +290,28 @@ pub fn stop_sim_robot(child: Child) -> String {
     stderr
 }
 
+/// The robot's configuration (`config/groundcal.toml`) on the paper's
+/// schedule, written into `dir`: what the shipped designed schedules were
+/// designed against (`plan --design` compares with the configured one).
+pub fn robot_config_on_the_papers_schedule(dir: &Path) -> PathBuf {
+    let shipped = "schedule = \"schedules/designed-52.toml\"";
+    let text = std::fs::read_to_string(root().join("config/groundcal.toml"))
+        .expect("config/groundcal.toml");
+    assert!(
+        text.contains(shipped),
+        "config/groundcal.toml lacks {shipped}"
+    );
+    let paper = root().join("config/schedules/octopus-52.toml");
+    let path = dir.join("groundcal-octopus-52.toml");
+    std::fs::create_dir_all(dir).expect("configuration directory");
+    std::fs::write(
+        &path,
+        text.replace(shipped, &format!("schedule = \"{}\"", paper.display())),
+    )
+    .expect("configuration written");
+    path
+}
+
 /// config/sim.toml with its schedule path made absolute and these
 /// replacements (each must occur), written into `dir` as `groundcal.toml`.
 pub fn sim_config(dir: &Path, replacements: &[(&str, &str)]) -> PathBuf {
@@ -324,6 +346,24 @@ pub fn sim_config_unmeasured(dir: &Path, replacements: &[(&str, &str)]) -> PathB
         .expect("and gates after it")..];
     std::fs::write(&path, format!("{before}{after}")).expect("configuration written");
     path
+}
+
+/// A configuration written by [`sim_config`] moved onto another of
+/// `config/schedules/` (its name without `.toml`), such as the robot's
+/// `designed-52`.
+pub fn on_schedule(config: &Path, schedule: &str) {
+    let text = std::fs::read_to_string(config).expect("the configuration written");
+    let paper = format!(
+        "schedule = \"{}\"",
+        root().join("config/schedules/octopus-52.toml").display()
+    );
+    assert!(text.contains(&paper), "{text}");
+    let other = root().join(format!("config/schedules/{schedule}.toml"));
+    std::fs::write(
+        config,
+        text.replace(&paper, &format!("schedule = \"{}\"", other.display())),
+    )
+    .expect("configuration written");
 }
 
 /// The line of config/sim.toml that names the simulated Kinect's depth model.
