@@ -148,8 +148,8 @@ fn a_fixed_pattern_is_found_and_corrected() {
 /// (seed 7), live, the paper's schedule puts the mount 0.24 mm and 0.009°
 /// off and is rejected for the pattern's cost; the designed one is accepted,
 /// within 0.15 mm, its angles within 0.012° and 4σ, their σ grown by
-/// correcting the pattern less than 8 times, and the pattern within 0.1 raw
-/// units RMS.
+/// correcting the pattern within the gate (5.5 times), and the pattern
+/// within 0.1 raw units RMS.
 #[test]
 fn a_designed_schedule_pins_the_patterns_plane_part() {
     let dir = temp_dir("depth-pattern-designed");
@@ -195,7 +195,7 @@ fn a_designed_schedule_pins_the_patterns_plane_part() {
         .iter()
         .find(|c| c["gate"] == "pattern_angle_sigma_growth_max")
         .expect("the pattern's cost judged");
-    assert!(growth["measured"].as_f64().unwrap() < 8.0, "{growth}");
+    assert_eq!(growth["passed"], true, "{growth}");
     let ((angle, angle_sigmas), (position, position_sigmas)) = errors(&result);
     eprintln!("designed-52, radial ±0.5: {angle:.4}° ({angle_sigmas:.1}σ), {position:.3} mm ({position_sigmas:.1}σ)");
     assert!(
