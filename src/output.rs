@@ -534,6 +534,15 @@ impl DepthPatternJson {
                 ));
             }
         }
+        if let Some((k, v)) = self.angle_sigma_known_plane_part_deg.and_then(|sigma| {
+            (0..3)
+                .map(|k| (k, sigma[k]))
+                .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+        }) {
+            return Err(format!(
+                "\"angle_sigma_known_plane_part_deg[{k}]\" is {v}, not a σ"
+            ));
+        }
         if !self.raw_per_inverse_depth.is_finite()
             || (cells > 0 && self.raw_per_inverse_depth == 0.0)
         {
@@ -981,6 +990,25 @@ mod tests {
     use super::*;
     use crate::calib::calibrate::{calibrate, CalibrationSettings};
     use crate::recording::planes::read_planes;
+
+    /// A pattern's σ of the angles had its plane part been known is read
+    /// back only as σ: a NaN (written as null, or made up) is named.
+    #[test]
+    fn a_patterns_angle_sigma_that_is_not_one_is_named() {
+        let mut pattern = DepthPatternJson::from_pattern(
+            &crate::calib::outcome::DepthPattern::not_estimated(String::new()),
+        );
+        pattern.angle_sigma_known_plane_part_deg = Some([0.0017, 0.0006, 0.0007]);
+        assert_eq!(pattern.validate(), Ok(()));
+        pattern.angle_sigma_known_plane_part_deg = Some([0.0017, f64::NAN, 0.0007]);
+        let error = pattern.validate().unwrap_err();
+        assert!(
+            error.contains("\"angle_sigma_known_plane_part_deg[1]\" is NaN"),
+            "{error}"
+        );
+        pattern.angle_sigma_known_plane_part_deg = Some([0.0017, 0.0006, -1.0]);
+        assert!(pattern.validate().is_err());
+    }
 
     fn table2() -> ResultJson {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -301,7 +301,7 @@ pub struct DepthPattern {
     /// when it was taken: beside the result's σ, what correcting it cost.
     /// The plane part tilts every pose's ground as a turn of the sensor
     /// would, and only the spread of the body's heights tells the two
-    /// apart, so this cost is the schedule's, whatever the noise.
+    /// apart, so this cost is mostly the schedule's.
     pub angle_sigma_known_plane_part: Option<[f64; 3]>,
     /// What was found, in words.
     pub note: Option<String>,
