@@ -288,7 +288,7 @@ const UNCERTAIN: &str = "calibrate again with the robot on open, flat ground and
 
 /// Where a schedule that pins a depth pattern's plane part comes from.
 const WIDER_HEIGHTS: &str =
-    "the robot's config/schedules/designed-52.toml, or a maintainer's groundcal plan --design 52";
+    "schedules/designed-52.toml, installed with groundcal beside its configuration, or a maintainer's groundcal plan --design 52";
 
 /// The parameters as the operator's page and the report name them.
 const ANGLE_NAMES: [&str; 3] = ["α (turn about up)", "β (pitch)", "γ (roll)"];
