@@ -166,6 +166,12 @@ fn a_designed_schedule_pins_the_patterns_plane_part() {
         made.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{stdout}{said}");
+    // It says which of the two would be rejected with a pattern.
+    assert!(
+        stdout.contains("note on octopus-52: a Kinect's depth pattern")
+            && !stdout.contains("note on designed-52"),
+        "{stdout}"
+    );
     let shipped = common::root().join("config/schedules/designed-52.toml");
     let poses = |path: &Path| -> String {
         let text = std::fs::read_to_string(path).expect("a schedule");

@@ -391,6 +391,10 @@ pub struct ScheduleSummaryJson {
     /// The same when a depth pattern's offset and gradients are estimated
     /// with the mount (as `plan`'s `sigma_with_depth_pattern`).
     pub sigma_with_depth_pattern: Option<SigmaJson>,
+    /// As `plan`'s: when a calibration of a Kinect with a depth pattern
+    /// would be rejected on this schedule for the pattern's cost.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_pattern_note: Option<String>,
     /// Estimated robot time: per pose the motion, the settling and the
     /// frames.
     pub wall_time_s: f64,
@@ -467,13 +471,23 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
         eprintln!("groundcal plan: {}: {e}", out.display());
         return ExitStatus::RuntimeFailure;
     }
-    let summary = |schedule: &Schedule, sigma: Option<[f64; 6]>| ScheduleSummaryJson {
-        schedule: schedule.name.clone(),
-        poses: schedule.poses.len(),
-        sigma: sigma.as_ref().map(SigmaJson::from_radians_metres),
-        sigma_with_depth_pattern: sigma
-            .and_then(|_| with_depth_pattern(schedule, &nominal, &noise, c.depth_scale)),
-        wall_time_s: per_pose_s * schedule.poses.len() as f64,
+    let summary = |schedule: &Schedule, sigma: Option<[f64; 6]>| {
+        let without = sigma.as_ref().map(SigmaJson::from_radians_metres);
+        let with =
+            sigma.and_then(|_| with_depth_pattern(schedule, &nominal, &noise, c.depth_scale));
+        ScheduleSummaryJson {
+            schedule: schedule.name.clone(),
+            poses: schedule.poses.len(),
+            depth_pattern_note: without
+                .as_ref()
+                .zip(with.as_ref())
+                .and_then(|(without, with)| {
+                    depth_pattern_note(without, with, gates.pattern_angle_sigma_growth_max)
+                }),
+            sigma: without,
+            sigma_with_depth_pattern: with,
+            wall_time_s: per_pose_s * schedule.poses.len() as f64,
+        }
     };
     let report = DesignJson {
         out: out.to_path_buf(),
@@ -561,6 +575,11 @@ fn design_text(report: &DesignJson, how: &str) -> String {
         format!("{:.0} s", d.wall_time_s),
         format!("{:.0} s", c.wall_time_s)
     );
+    for summary in [d, c] {
+        if let Some(note) = &summary.depth_pattern_note {
+            let _ = writeln!(out, "  note on {}: {note}", summary.schedule);
+        }
+    }
     let _ = writeln!(out, "\nwritten to {}", report.out.display());
     out
 }
