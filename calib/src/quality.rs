@@ -163,7 +163,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
             }
             checks.push(check);
         }
-        if let Some((check, with, known)) = pattern_sigma_check(gates, pattern, &solution.sigma()) {
+        if let Some((check, with, known)) = pattern_cost_check(gates, pattern, &solution.sigma()) {
             if !check.passed {
                 let (with, known) = apart(with, known, 4);
                 reasons.push(format!(
@@ -232,7 +232,7 @@ fn pattern_check(gates: &Gates, pattern: &crate::outcome::DepthPattern) -> Optio
 /// The corrected pattern's cost in the angles, when its plane part was
 /// taken: the largest growth of an angle's σ against its σ had the part
 /// been known, with that angle's σ both ways (degrees).
-fn pattern_sigma_check(
+fn pattern_cost_check(
     gates: &Gates,
     pattern: &crate::outcome::DepthPattern,
     sigma: &Vector6<f64>,
@@ -240,7 +240,7 @@ fn pattern_sigma_check(
     let known = pattern
         .angle_sigma_known_plane_part
         .filter(|_| pattern.corrected)?;
-    let (k, growth) = worst_of([0, 1, 2].map(|k| sigma[k] / known[k]));
+    let (k, growth) = angle_sigma_growth([sigma[0], sigma[1], sigma[2]], known);
     let check = GateCheck {
         gate: "pattern_angle_sigma_growth_max",
         limit: gates.pattern_angle_sigma_growth_max,
@@ -251,6 +251,14 @@ fn pattern_sigma_check(
         place: Some(GatePlace::Parameter { index: k }),
     };
     Some((check, sigma[k].to_degrees(), known[k].to_degrees()))
+}
+
+/// What correcting a depth pattern's plane part costs the angles, as the
+/// gate `pattern_angle_sigma_growth_max` judges it and `plan` predicts it:
+/// the largest ratio of an angle's σ with the part estimated to its σ with
+/// the part known (α, β, γ in the same units), and which angle (0, 1, 2).
+pub fn angle_sigma_growth(with: [f64; 3], known: [f64; 3]) -> (usize, f64) {
+    worst_of([0, 1, 2].map(|k| with[k] / known[k]))
 }
 
 /// The depth scale's gate, when it was estimated.
@@ -773,10 +781,10 @@ mod tests {
             sigma
         };
         let paper = sigma([0.0031, 0.0061, 0.0072]);
-        assert!(pattern_sigma_check(&gates, &pattern(true, None), &paper).is_none());
-        assert!(pattern_sigma_check(&gates, &pattern(false, Some(known)), &paper).is_none());
+        assert!(pattern_cost_check(&gates, &pattern(true, None), &paper).is_none());
+        assert!(pattern_cost_check(&gates, &pattern(false, Some(known)), &paper).is_none());
         let (past, with, without) =
-            pattern_sigma_check(&gates, &pattern(true, Some(known)), &paper).unwrap();
+            pattern_cost_check(&gates, &pattern(true, Some(known)), &paper).unwrap();
         assert_eq!(
             (past.gate, past.limit),
             ("pattern_angle_sigma_growth_max", 10.0)
@@ -789,7 +797,7 @@ mod tests {
         // A designed schedule's, and an angle that cannot be observed.
         let designed = sigma([0.0017, 0.0033, 0.0032]);
         let (within, _, _) =
-            pattern_sigma_check(&gates, &pattern(true, Some(known)), &designed).unwrap();
+            pattern_cost_check(&gates, &pattern(true, Some(known)), &designed).unwrap();
         assert!(
             within.passed && (within.measured - 5.5).abs() < 1e-9,
             "{within:?}"
@@ -797,7 +805,7 @@ mod tests {
         let mut unobservable = designed;
         unobservable[0] = f64::NAN;
         let (nan, _, _) =
-            pattern_sigma_check(&gates, &pattern(true, Some(known)), &unobservable).unwrap();
+            pattern_cost_check(&gates, &pattern(true, Some(known)), &unobservable).unwrap();
         assert!(!nan.passed && nan.at.as_deref() == Some("α (turn about up)"));
     }
 }

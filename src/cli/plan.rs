@@ -167,18 +167,11 @@ pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool)
 /// beyond `growth_max` times `without`, as the calibration's gate judges,
 /// in words.
 fn depth_pattern_note(without: &SigmaJson, with: &SigmaJson, growth_max: f64) -> Option<String> {
-    let angles = [
-        ("alpha", without.alpha_deg, with.alpha_deg),
-        ("beta", without.beta_deg, with.beta_deg),
-        ("gamma", without.gamma_deg, with.gamma_deg),
-    ];
-    let (name, growth) = angles
-        .iter()
-        .map(|&(name, without, with)| (name, with / without))
-        .fold(
-            ("alpha", 0.0),
-            |worst, next| if next.1 > worst.1 { next } else { worst },
-        );
+    let (k, growth) = crate::calib::quality::angle_sigma_growth(
+        [with.alpha_deg, with.beta_deg, with.gamma_deg],
+        [without.alpha_deg, without.beta_deg, without.gamma_deg],
+    );
+    let name = ["alpha", "beta", "gamma"][k];
     (growth > growth_max).then(|| {
         format!(
             "a Kinect's depth pattern (a real one always has one) would make {name} {growth:.1} times less certain than without it, more than the {growth_max} times the gate pattern_angle_sigma_growth_max allows: its calibration will be rejected on this schedule; groundcal plan --design spreads the body's heights wider"
