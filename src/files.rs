@@ -5,7 +5,9 @@
 //!   target, and the directory is fsynced, so that a reader (or a reboot)
 //!   sees the old file or the new one, never half of one.
 //! - A read refuses a file larger than what its kind can be before reading
-//!   it, so that a wrong path cannot fill the memory.
+//!   it, so that a wrong path cannot fill the memory, and takes only a
+//!   regular file: a FIFO would wait forever for a writer, and a device
+//!   (`/dev/zero`) never ends.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{Read, Write};
@@ -135,6 +137,45 @@ pub enum ReadError {
     TooLarge { path: PathBuf, max_bytes: u64 },
 }
 
+/// Opens a regular file to read, and nothing else. The open itself does not
+/// wait: it is non-blocking, so that a FIFO (which would wait for a writer)
+/// or a device is refused by what the opened file is, not by a separate look
+/// at the path that the file could change under. Reads of a regular file
+/// never block, so the flag changes nothing for them.
+pub fn open_regular(path: &Path) -> Result<File, FileError> {
+    use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+    let file = OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(failed(path, "open"))?;
+    let kind = file.metadata().map_err(failed(path, "read"))?.file_type();
+    if kind.is_file() {
+        return Ok(file);
+    }
+    let what = if kind.is_dir() {
+        "a directory"
+    } else if kind.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if kind.is_char_device() {
+        "a character device"
+    } else if kind.is_block_device() {
+        "a block device"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    };
+    Err(FileError {
+        path: path.to_path_buf(),
+        action: "read",
+        source: std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{what}, where a regular file was expected"),
+        ),
+    })
+}
+
 /// Reads a whole file of at most `max_bytes` into `bytes` (cleared first and
 /// reused from file to file: fresh memory costs page faults every time).
 pub fn read_bounded_into(
@@ -142,7 +183,7 @@ pub fn read_bounded_into(
     max_bytes: u64,
     bytes: &mut Vec<u8>,
 ) -> Result<(), ReadError> {
-    let file = File::open(path).map_err(failed(path, "open"))?;
+    let file = open_regular(path)?;
     // Sized from the file's length, so that a file is read without regrowing;
     // `take` guards against a file that grows after that.
     let expected = file
@@ -221,6 +262,39 @@ mod tests {
         );
         let e = read_bounded_into(&dir.join("missing"), 99, &mut bytes).unwrap_err();
         assert!(e.to_string().contains("cannot open"), "{e}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A FIFO would wait for a writer that never comes, a device never
+    /// ends: both are refused at once, by what they are.
+    #[test]
+    fn a_read_takes_only_a_regular_file() {
+        let dir = scratch("kinds");
+        fs::create_dir_all(&dir).unwrap();
+        let fifo = dir.join("fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.unwrap().success(), "mkfifo");
+        let mut bytes = Vec::new();
+        let (done, finished) = std::sync::mpsc::channel();
+        let reading = fifo.clone();
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            let _ = done
+                .send(read_bounded_into(&reading, 1 << 20, &mut bytes).map_err(|e| e.to_string()));
+        });
+        let e = finished
+            .recv_timeout(std::time::Duration::from_secs(5))
+            .expect("the read of a FIFO waited for a writer")
+            .unwrap_err();
+        assert!(e.contains("FIFO") && e.contains("fifo"), "{e}");
+        let e = read_bounded_into(Path::new("/dev/zero"), 1 << 20, &mut bytes).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("/dev/zero: cannot read: a character device"),
+            "{e}"
+        );
+        let e = read_bounded_into(&dir, 1 << 20, &mut bytes).unwrap_err();
+        assert!(e.to_string().contains("a directory"), "{e}");
         fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -72,6 +72,54 @@ fn a_configuration_that_serves_without_a_readable_token_is_refused() {
     }
 }
 
+/// The token file is read with a bound and only as a regular file: a
+/// device that never ends (`/dev/zero` grew `check-config` to 24 GB before
+/// the kernel killed it) or a FIFO that never opens is refused at once,
+/// named, with exit 2; so is a file too large to be a token.
+#[test]
+fn a_token_file_that_is_not_a_small_regular_file_is_refused_at_once() {
+    let scratch = common::TempDir::new("check-config-token-kinds");
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/groundcal.toml");
+    let config = installed_copy(&shipped, scratch.path());
+    let fifo = scratch.path().join("token-fifo");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let large = scratch.path().join("token-large");
+    std::fs::write(&large, vec![b'a'; 1 << 20]).unwrap();
+    let text = std::fs::read_to_string(&config).unwrap();
+    for (token_file, expected) in [
+        ("/dev/zero".to_string(), "a character device"),
+        (fifo.display().to_string(), "a FIFO"),
+        (large.display().to_string(), "larger than 4096 bytes"),
+    ] {
+        let text: String = text
+            .lines()
+            .map(|line| {
+                if line.starts_with("token_file") {
+                    format!("token_file = \"{token_file}\"\n")
+                } else {
+                    format!("{line}\n")
+                }
+            })
+            .collect();
+        std::fs::write(&config, text).unwrap();
+        let (code, _, stderr) = common::groundcal_within(
+            &["check-config", config.to_str().unwrap()],
+            std::time::Duration::from_secs(10),
+        );
+        assert_eq!(code, 2, "{token_file} (-1: killed after 10 s): {stderr}");
+        assert!(
+            stderr.contains("serve.token_file")
+                && stderr.contains(&token_file)
+                && stderr.contains(expected),
+            "{token_file}: {stderr}"
+        );
+    }
+}
+
 #[test]
 fn a_broken_configuration_is_named_with_its_line() {
     let path =

@@ -55,6 +55,36 @@ fn assert_bad_input(args: &[&str], must_mention: &[&str]) {
     }
 }
 
+/// A FIFO given as an input file is refused at once (a read of it would
+/// wait for a writer for ever), naming it: the planes of `solve`, the
+/// configuration of `check-config` and `plan`.
+#[test]
+fn a_fifo_as_an_input_file_is_refused_not_waited_on() {
+    let dir = std::env::temp_dir().join(format!("groundcal-fifo-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let fifo = dir.join("input");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let path = fifo.to_str().unwrap();
+    for args in [
+        vec!["solve", path],
+        vec!["check-config", path],
+        vec!["plan", "--config", path],
+    ] {
+        let (code, _, stderr) = common::groundcal_within(&args, std::time::Duration::from_secs(10));
+        assert_eq!(code, 2, "{args:?} (-1: killed after 10 s): {stderr}");
+        assert!(
+            stderr.contains(path) && stderr.contains("a FIFO"),
+            "{args:?}: {stderr}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn solve_names_a_missing_file() {
     assert_bad_input(

@@ -25,7 +25,8 @@ pub fn is_mcap_file(path: &std::path::Path) -> bool {
     use std::io::Read;
     let mut magic = [0u8; 8];
     path.is_file()
-        && std::fs::File::open(path)
+        && crate::files::open_regular(path)
+            .map_err(std::io::Error::other)
             .and_then(|mut f| f.read_exact(&mut magic))
             .is_ok()
         && &magic == stream::MAGIC

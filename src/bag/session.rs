@@ -354,7 +354,10 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         path: path.display().to_string(),
         what,
     };
-    let open = || std::fs::File::open(path).map_err(|e| fail(format!("cannot open: {e}")));
+    let open = || {
+        crate::files::open_regular(path)
+            .map_err(|e| fail(format!("cannot {}: {}", e.action, e.source)))
+    };
     let wanted = |topic: &str| {
         topic == options.depth_topic
             || topic == options.camera_info_topic

@@ -20,11 +20,34 @@ use super::handlers::ApiError;
 use super::state::AppState;
 use crate::config::resolve_from_config;
 
-/// Reads the token file (relative to the configuration's directory when relative).
+/// The largest token file read: the package writes 64 characters, a person
+/// a passphrase; anything larger is not a token.
+pub const MAX_TOKEN_FILE_BYTES: u64 = 4096;
+
+/// Reads the token file (relative to the configuration's directory when
+/// relative): a regular file of at most [`MAX_TOKEN_FILE_BYTES`] of UTF-8, so
+/// that a wrong path (`/dev/zero`, a FIFO) is refused at once rather than read
+/// until the memory runs out or waited on for ever.
 pub fn read_token(config_path: &Path, token_file: &Path) -> Result<String, String> {
+    use crate::files::ReadError;
     let path = resolve_from_config(config_path, token_file);
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| format!("{}: cannot read the token: {e}", path.display()))?;
+    let mut bytes = Vec::new();
+    crate::files::read_bounded_into(&path, MAX_TOKEN_FILE_BYTES, &mut bytes).map_err(
+        |e| match e {
+            ReadError::File(f) => format!(
+                "{}: cannot read the token: cannot {}: {}",
+                path.display(),
+                f.action,
+                f.source
+            ),
+            ReadError::TooLarge { max_bytes, .. } => format!(
+                "{}: the token file is larger than {max_bytes} bytes: not a token file",
+                path.display()
+            ),
+        },
+    )?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| format!("{}: the token file is not UTF-8 text", path.display()))?;
     let token = text.trim().to_string();
     if token.is_empty() {
         return Err(format!("{}: the token file is empty", path.display()));

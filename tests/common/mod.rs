@@ -45,6 +45,41 @@ pub fn groundcal(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// Runs the real `groundcal` binary, killed if it has not ended within
+/// `limit` (a read that hangs must fail a test, not hang it); returns (exit
+/// code, stdout, stderr), the code -1 when it was killed.
+pub fn groundcal_within(args: &[&str], limit: std::time::Duration) -> (i32, String, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groundcal"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("groundcal runs");
+    let started = std::time::Instant::now();
+    let killed = loop {
+        match child.try_wait().expect("groundcal can be waited for") {
+            Some(_) => break false,
+            None if started.elapsed() > limit => {
+                let _ = child.kill();
+                break true;
+            }
+            None => std::thread::sleep(std::time::Duration::from_millis(20)),
+        }
+    };
+    let out = child.wait_with_output().expect("groundcal's output");
+    let code = if killed {
+        -1
+    } else {
+        out.status.code().unwrap_or(-1)
+    };
+    (
+        code,
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// Runs `groundcal` with its stdout's reader gone before anything is
 /// printed (as `groundcal … | head -c0` would); returns how it ended and its
 /// stderr, which names a panic if there was one.
