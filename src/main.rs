@@ -167,6 +167,11 @@ enum Command {
         /// calibration.depth_scale) or a known value such as 1.0032.
         #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::config::parse_depth_scale)]
         depth_scale: Option<groundcal::config::DepthScaleSetting>,
+        /// Replay a recording whose poses.jsonl ends part-way through a
+        /// record (a power cut while recording) without that pose; the result
+        /// says so. Without it such a recording is refused, naming the cut.
+        #[arg(long)]
+        cut_off: bool,
     },
     /// The calibration in other tools' formats (URDF, ROS 2 static_transform_publisher, JSON).
     #[command(
@@ -401,6 +406,7 @@ fn run(args: Args) -> ExitStatus {
             ground_fit,
             config,
             depth_scale,
+            cut_off,
         } => {
             let (gates, noise, verify, configured_scale) =
                 match config.as_deref().map(groundcal::config::Config::load) {
@@ -444,6 +450,7 @@ fn run(args: Args) -> ExitStatus {
                 json,
                 report: report.as_deref(),
                 mcap: mcap.as_deref(),
+                cut_off,
             };
             if groundcal::bag::is_mcap_file(&dir) {
                 return match bag.options() {

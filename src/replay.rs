@@ -301,6 +301,14 @@ pub fn observe_recording(
 /// Replays a recording.
 pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, InputError> {
     let session = &recording.session;
+    if recording.poses.is_empty() {
+        // Nothing to solve is a defect of the input, not a rejected calibration.
+        return Err(InputError::new(
+            &recording.dir.join("poses.jsonl"),
+            None,
+            "holds no pose record: a recording to replay has at least one pose (a calibration has tens)",
+        ));
+    }
     let nominal = options.nominal_mount.or(session.nominal_mount);
     // A replay finds the depth pattern afresh, as the calibration did.
     let observed = observe_recording(
@@ -364,8 +372,12 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         },
         gates_from: Some(gates_from.into()),
     });
-    if recording.truncated_tail {
-        result.notes.push("poses.jsonl ends in a line cut off part-way (the recording was interrupted): it was left out".into());
+    if let Some(cut) = recording.cut_off {
+        result.notes.push(format!(
+            "poses.jsonl line {}: {}; replayed with --cut-off, without that pose",
+            cut.line,
+            cut.describe()
+        ));
     }
     Ok(Replay {
         result,

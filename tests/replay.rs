@@ -253,22 +253,86 @@ fn a_pose_without_frames_is_skipped_and_said_so() {
     assert_eq!(code, 0, "11 of 12 poses still calibrate");
 }
 
+/// A recording cut off part-way through its last record (a power cut
+/// while recording) is refused, naming the file, the line and the byte, the
+/// same whether a newline followed the cut or not; with `--cut-off` it is
+/// replayed without that pose, and the result and stderr say so.
 #[test]
-fn a_recording_cut_off_mid_line_is_valid_up_to_its_last_complete_pose() {
+fn a_recording_cut_off_mid_record_is_named_and_replayed_only_when_asked() {
     let copy = Copy::new("cut");
-    copy.edit("poses.jsonl", |t| {
-        let cut = t.trim_end().rfind('\n').unwrap() + 40;
-        t[..cut].to_string()
-    });
-    let (_, stdout, stderr) = copy.replay();
-    let result: serde_json::Value =
-        serde_json::from_str(&stdout).unwrap_or_else(|_| panic!("{stderr}"));
-    assert_eq!(result["poses"].as_array().unwrap().len(), 11);
-    assert!(result["notes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .any(|n| n.as_str().unwrap().contains("cut off")));
+    let text = std::fs::read_to_string(copy.path("poses.jsonl")).unwrap();
+    let last_line_starts = text.trim_end().rfind('\n').unwrap() + 1;
+    let cut = last_line_starts + 40;
+    for (what, tail) in [("without a newline", ""), ("with a newline", "\n")] {
+        std::fs::write(copy.path("poses.jsonl"), format!("{}{tail}", &text[..cut])).unwrap();
+        let (code, stdout, stderr) = copy.replay();
+        assert_eq!(code, 2, "{what}: {stderr}");
+        assert!(stdout.is_empty(), "{what}: {stdout}");
+        let named = format!(
+            "poses.jsonl:12: the record that starts at byte {last_line_starts} ends after 40 bytes"
+        );
+        assert!(stderr.contains(&named), "{what}: {stderr}");
+        assert!(stderr.contains("--cut-off"), "{what}: {stderr}");
+
+        let (code, stdout, stderr) =
+            groundcal(&["replay", copy.0.to_str().unwrap(), "--json", "--cut-off"]);
+        let result: serde_json::Value =
+            serde_json::from_str(&stdout).unwrap_or_else(|_| panic!("{what}: {stderr}"));
+        assert_eq!(code, 0, "{what}: {stderr}");
+        assert!(stderr.contains(&named), "{what}: {stderr}");
+        assert_eq!(result["poses"].as_array().unwrap().len(), 11);
+        assert!(
+            result["notes"].as_array().unwrap().iter().any(|n| {
+                let n = n.as_str().unwrap();
+                n.contains("line 12") && n.contains("--cut-off")
+            }),
+            "{what}: {}",
+            result["notes"]
+        );
+    }
+    // A record cut off before the last one is no power cut: it is an error
+    // that names its line, with or without the flag.
+    let mut lines: Vec<&str> = text.lines().collect();
+    let whole = lines[6].to_string();
+    lines[6] = &whole[..40];
+    std::fs::write(copy.path("poses.jsonl"), lines.join("\n") + "\n").unwrap();
+    let (code, _, stderr) = groundcal(&["replay", copy.0.to_str().unwrap(), "--json", "--cut-off"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("poses.jsonl:7: not a pose record"),
+        "{stderr}"
+    );
+}
+
+/// An empty `poses.jsonl` is bad input (exit 2, named), not a rejected
+/// calibration (exit 3).
+#[test]
+fn a_recording_without_poses_is_bad_input() {
+    let copy = Copy::new("empty");
+    std::fs::write(copy.path("poses.jsonl"), "").unwrap();
+    assert_bad(&copy, &["poses.jsonl", "no pose record"]);
+}
+
+/// A FIFO where a file should be would wait for a writer for ever: it is
+/// refused at once, by what it is.
+#[test]
+fn a_fifo_in_place_of_a_file_is_refused_not_waited_on() {
+    let copy = Copy::new("fifo");
+    std::fs::remove_file(copy.path("session.json")).unwrap();
+    let made = std::process::Command::new("mkfifo")
+        .arg(copy.path("session.json"))
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let (code, _, stderr) = common::groundcal_within(
+        &["replay", copy.0.to_str().unwrap(), "--json"],
+        std::time::Duration::from_secs(10),
+    );
+    assert_eq!(code, 2, "(-1: killed after 10 s) {stderr}");
+    assert!(
+        stderr.contains("session.json") && stderr.contains("a FIFO"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -16,6 +16,8 @@ pub struct Outputs<'a> {
     pub report: Option<&'a Path>,
     /// The session as an MCAP file.
     pub mcap: Option<&'a Path>,
+    /// Takes a recording whose last record is cut off, without that pose.
+    pub cut_off: bool,
 }
 
 /// Runs the command; the result goes to stdout, messages to stderr, and the
@@ -34,13 +36,26 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
             return ExitStatus::BadInput;
         }
     }
-    let recording = match Recording::open(dir) {
+    let opened = if outputs.cut_off {
+        Recording::open_cut_off(dir)
+    } else {
+        Recording::open(dir)
+    };
+    let recording = match opened {
         Ok(r) => r,
         Err(e) => {
             eprintln!("groundcal replay: {e}");
             return ExitStatus::BadInput;
         }
     };
+    if let Some(cut) = recording.cut_off {
+        eprintln!(
+            "groundcal replay: {}:{}: {}; replayed without that pose (--cut-off)",
+            dir.join("poses.jsonl").display(),
+            cut.line,
+            cut.describe()
+        );
+    }
     let outcome = match replay(&recording, options) {
         Ok(o) => o,
         Err(e) => {

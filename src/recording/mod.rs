@@ -105,8 +105,9 @@ pub struct Recording {
     pub dir: PathBuf,
     pub session: Session,
     pub poses: Vec<PoseRecord>,
-    /// `poses.jsonl` ended in a line cut off part-way, which was left out.
-    pub truncated_tail: bool,
+    /// `poses.jsonl` ends part-way through a record, which was left out
+    /// (only a recording opened with [`Recording::open_cut_off`]).
+    pub cut_off: Option<poses::CutOff>,
     pub index: Vec<DumpEntry>,
     /// The raw text files, for the input digest.
     texts: [Vec<u8>; 3],
@@ -120,8 +121,28 @@ fn read_text(path: &Path) -> Result<(Vec<u8>, String), InputError> {
 }
 
 impl Recording {
-    /// Opens and checks a recording directory.
+    /// Opens and checks a recording directory. One whose `poses.jsonl` ends
+    /// part-way through a record (a power cut while recording) is refused,
+    /// naming the line and the byte: see [`Recording::open_cut_off`].
     pub fn open(dir: &Path) -> Result<Self, InputError> {
+        let recording = Self::open_cut_off(dir)?;
+        match recording.cut_off {
+            Some(cut) => Err(InputError::new(
+                &dir.join("poses.jsonl"),
+                Some(cut.line),
+                format!(
+                    "{}; `groundcal replay --cut-off` replays the poses before it",
+                    cut.describe()
+                ),
+            )),
+            None => Ok(recording),
+        }
+    }
+
+    /// Opens and checks a recording directory as [`Recording::open`] does,
+    /// but takes one whose last record is cut off part-way: without that
+    /// pose, and with [`Recording::cut_off`] saying where it was cut.
+    pub fn open_cut_off(dir: &Path) -> Result<Self, InputError> {
         if !dir.is_dir() {
             return Err(InputError::new(
                 dir,
@@ -205,7 +226,7 @@ impl Recording {
             dir: dir.to_path_buf(),
             session,
             poses: poses_file.poses,
-            truncated_tail: poses_file.truncated_tail,
+            cut_off: poses_file.cut_off,
             index,
             texts: [session_bytes, poses_bytes, index_bytes],
         })
@@ -320,7 +341,7 @@ fn read_dump_pixels(
     digest: Option<&mut blake3::Hasher>,
 ) -> bool {
     use std::io::Read;
-    let Ok(mut file) = std::fs::File::open(path) else {
+    let Ok(mut file) = crate::files::open_regular(path) else {
         return false;
     };
     // The header is about 18 bytes; 64 hold it with room.

@@ -32,8 +32,30 @@ pub struct PoseRecord {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PosesFile {
     pub poses: Vec<PoseRecord>,
-    /// A last line cut off part-way (power loss while writing), left out.
-    pub truncated_tail: bool,
+    /// A last record cut off part-way (power lost while it was written),
+    /// left out of `poses`.
+    pub cut_off: Option<CutOff>,
+}
+
+/// Where `poses.jsonl` ends part-way through a record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CutOff {
+    /// The record's line, 1-based.
+    pub line: usize,
+    /// The byte of the file where that record starts, 0-based.
+    pub byte: usize,
+    /// The bytes of it that were written.
+    pub written: usize,
+}
+
+impl CutOff {
+    /// The cut in words, after the file's name and the line.
+    pub fn describe(&self) -> String {
+        format!(
+            "the record that starts at byte {} ends after {} bytes, part-way through: the recording was interrupted while this pose was being written",
+            self.byte, self.written
+        )
+    }
 }
 
 /// The most poses a recording may hold: the solve's own bound on
@@ -46,24 +68,33 @@ pub const MAX_FILES_PER_POSE: usize = 100;
 /// Parses `poses.jsonl`.
 ///
 /// A recorder writes a pose's line after its frames, so a recording cut off
-/// part-way is valid up to its last complete line: an unterminated last line
-/// that does not parse is left out (and said so); any other defect is an error.
+/// part-way holds whole poses up to its last record, which may end part-way
+/// through (with or without a newline after it, as a file system may leave
+/// it). That record is returned as [`PosesFile::cut_off`], for the caller to
+/// refuse or, when asked to, leave out and say so; a record cut off before
+/// the last line, and any other defect, is an error.
 pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
     let mut poses: Vec<PoseRecord> = Vec::new();
-    let mut truncated_tail = false;
-    let ends_with_newline = text.ends_with('\n');
+    let mut cut_off = None;
     let lines: Vec<&str> = text.split_inclusive('\n').collect();
+    let last_record = lines.iter().rposition(|l| !l.trim().is_empty());
+    let mut byte = 0;
     for (k, raw) in lines.iter().enumerate() {
         let number = k + 1;
+        let starts_at = byte;
+        byte += raw.len();
         let line = raw.trim_end_matches(['\n', '\r']);
         if line.trim().is_empty() {
             continue;
         }
-        let is_unterminated_last = k + 1 == lines.len() && !ends_with_newline;
         let mut record: PoseRecord = match serde_json::from_str(line) {
             Ok(r) => r,
-            Err(_) if is_unterminated_last => {
-                truncated_tail = true;
+            Err(e) if e.is_eof() && Some(k) == last_record => {
+                cut_off = Some(CutOff {
+                    line: number,
+                    byte: starts_at,
+                    written: line.len(),
+                });
                 break;
             }
             Err(e) => {
@@ -116,10 +147,7 @@ pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
         }
         poses.push(record);
     }
-    Ok(PosesFile {
-        poses,
-        truncated_tail,
-    })
+    Ok(PosesFile { poses, cut_off })
 }
 
 #[cfg(test)]

@@ -554,7 +554,7 @@ mod tests {
         let copy = Recording::open(&dir.0).unwrap();
         assert_eq!(copy.session, source.session);
         assert_eq!(copy.poses, source.poses[..4]);
-        assert!(!copy.truncated_tail);
+        assert!(copy.cut_off.is_none());
         assert_eq!(copy.index, source.index[..copy.index.len()]);
         for entry in &copy.index {
             let ours = std::fs::read(copy.kinect_path(&entry.name)).unwrap();
@@ -592,7 +592,7 @@ mod tests {
         }
         let cut = Recording::open(&dir.0).unwrap();
         assert_eq!(cut.poses, source.poses[..2]);
-        assert!(!cut.truncated_tail);
+        assert!(cut.cut_off.is_none());
         assert_eq!(
             cut.index.last().unwrap().name,
             source.poses[2].depth_frames[0]
@@ -606,9 +606,11 @@ mod tests {
             .unwrap();
         poses.write_all(&line.as_bytes()[..line.len() / 2]).unwrap();
         drop(poses);
-        let torn = Recording::open(&dir.0).unwrap();
+        let refused = Recording::open(&dir.0).unwrap_err();
+        assert_eq!(refused.line, Some(3), "{refused}");
+        let torn = Recording::open_cut_off(&dir.0).unwrap();
         assert_eq!(torn.poses, source.poses[..2]);
-        assert!(torn.truncated_tail);
+        assert_eq!(torn.cut_off.map(|c| c.line), Some(3));
     }
 
     #[test]
