@@ -6,6 +6,11 @@
 //! ```text
 //! active.json               the active calibration (format below)
 //! history/<id>.json         every result ever made, accepted or not
+//! running.json              a run (calibration or check) in progress, or
+//!                           one that a stop cut off: kept until a person
+//!                           starts the next one
+//! check.json                the last check of a calibration that reached a
+//!                           verdict (consistent or drift)
 //! ```
 //!
 //! `active.json` is `{"format": "groundcal-active", "version": 1, "id": ...,
@@ -97,8 +102,21 @@ pub struct StoredResult {
     /// Set aside by an operator (`reject`), with its status before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub operator_rejection: Option<OperatorRejection>,
+    /// It was the active calibration until another was made active (the
+    /// last time it was replaced).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replaced: Option<Replacement>,
     #[serde(flatten)]
     pub result: ResultJson,
+}
+
+/// When, by whom and by which calibration an active calibration was replaced.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Replacement {
+    pub at: String,
+    pub by: String,
+    /// The calibration made active in its place.
+    pub by_id: String,
 }
 
 /// An operator's rejection of a result.
@@ -148,11 +166,55 @@ pub struct ActiveDocument {
     pub depth_pattern: Option<crate::output::DepthPatternJson>,
 }
 
-/// `running.json`: who started the calibration in progress, and when.
+/// `running.json`: who started the run in progress, when, and what it
+/// was (`calibration` or `check`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct RunningMarker {
-    by: String,
-    started: String,
+pub struct RunningMarker {
+    pub by: String,
+    pub started: String,
+    /// Markers written before checks had them were calibrations'.
+    #[serde(default = "calibration")]
+    pub task: String,
+}
+
+fn calibration() -> String {
+    "calibration".into()
+}
+
+/// The largest file of the store read (a result with its pattern's cells is
+/// about 100 kB): anything larger is not the store's.
+const MAX_STORE_FILE_BYTES: u64 = 16 << 20;
+
+/// A file of the store, read with a bound and only as a regular file; None
+/// when it does not exist.
+fn read_store_file(path: &Path) -> Result<Option<String>, StoreError> {
+    use crate::files::ReadError;
+    let mut bytes = Vec::new();
+    match crate::files::read_bounded_into(path, MAX_STORE_FILE_BYTES, &mut bytes) {
+        Ok(()) => {}
+        Err(ReadError::File(f)) if f.source.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(None)
+        }
+        Err(ReadError::File(f)) => {
+            return Err(StoreError::Io {
+                path: path.to_path_buf(),
+                action: f.action,
+                source: f.source,
+            })
+        }
+        Err(e @ ReadError::TooLarge { .. }) => {
+            return Err(StoreError::Invalid {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
+        }
+    }
+    String::from_utf8(bytes)
+        .map(Some)
+        .map_err(|_| StoreError::Invalid {
+            path: path.to_path_buf(),
+            message: "not UTF-8 text".into(),
+        })
 }
 
 /// One entry of the history.
@@ -165,6 +227,9 @@ pub struct HistoryEntry {
     /// Rejected by an operator (`reject`), not by its checks.
     #[serde(default)]
     pub operator_rejected: bool,
+    /// It was active until another was made active (when, by whom).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replaced: Option<Replacement>,
 }
 
 /// The store in a state directory.
@@ -254,11 +319,14 @@ impl Store {
         self.dir.join("running.json")
     }
 
-    /// Marks a calibration as running: who started it and when.
-    pub fn mark_running(&self, by: &str, started: &str) -> Result<(), StoreError> {
+    /// Marks a run (`task`: `calibration` or `check`) as running: who
+    /// started it and when. It replaces the marker of a run that a stop cut
+    /// off: a person has now started the next one.
+    pub fn mark_running(&self, by: &str, started: &str, task: &str) -> Result<(), StoreError> {
         let marker = RunningMarker {
             by: by.to_string(),
             started: started.to_string(),
+            task: task.to_string(),
         };
         let bytes = serde_json::to_vec(&marker).map_err(|e| StoreError::Invalid {
             path: self.running_path(),
@@ -268,22 +336,62 @@ impl Store {
         Ok(())
     }
 
-    /// The calibration has ended, whatever its outcome.
+    /// The run has ended, whatever its outcome (or a person has seen that
+    /// it was cut off and started the next). Durable: a marker that came back
+    /// after a power cut would hold the robot for nothing, one that vanished
+    /// early would let it move with nobody there.
     pub fn clear_running(&self) {
-        let _ = fs::remove_file(self.running_path());
+        if fs::remove_file(self.running_path()).is_ok() {
+            let _ = File::open(&self.dir).and_then(|d| d.sync_all());
+        }
     }
 
-    /// A calibration that was running when the service last stopped, as
-    /// (who started it, when), and the marker removed: it is said once.
-    pub fn take_interrupted(&self) -> Option<(String, String)> {
-        let text = fs::read_to_string(self.running_path()).ok()?;
-        self.clear_running();
-        // A marker cut short still says that a run was cut off.
-        let marker = serde_json::from_str(&text).unwrap_or_else(|_| RunningMarker {
+    /// The run that was in progress when the service last stopped, if any.
+    /// It is not removed: it stays, through any number of restarts, until a
+    /// person starts the next run ([`Store::mark_running`]).
+    pub fn interrupted(&self) -> Option<RunningMarker> {
+        // A marker that cannot be read still says that a run was cut off.
+        let unreadable = || RunningMarker {
             by: "?".into(),
             started: "?".into(),
-        });
-        Some((marker.by, marker.started))
+            task: calibration(),
+        };
+        match read_store_file(&self.running_path()) {
+            Ok(None) => None,
+            Ok(Some(text)) => Some(serde_json::from_str(&text).unwrap_or_else(|_| unreadable())),
+            Err(_) => Some(unreadable()),
+        }
+    }
+
+    /// `check.json`: the last check that reached a verdict.
+    fn check_path(&self) -> PathBuf {
+        self.dir.join("check.json")
+    }
+
+    /// Keeps the last check that reached a verdict (the caller's document:
+    /// the store does not look into it), atomically: a knock found before a
+    /// crash is still known after it.
+    pub fn save_check<T: Serialize>(&self, check: &T) -> Result<(), StoreError> {
+        let bytes = serde_json::to_vec_pretty(check).map_err(|e| StoreError::Invalid {
+            path: self.check_path(),
+            message: e.to_string(),
+        })?;
+        crate::files::write_atomically(&self.check_path(), &bytes)?;
+        Ok(())
+    }
+
+    /// The last check kept by [`Store::save_check`], if any.
+    pub fn last_check<T: serde::de::DeserializeOwned>(&self) -> Result<Option<T>, StoreError> {
+        let path = self.check_path();
+        let Some(text) = read_store_file(&path)? else {
+            return Ok(None);
+        };
+        serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| StoreError::Invalid {
+                path,
+                message: e.to_string(),
+            })
     }
 
     /// Keeps a result in the history and returns its id.
@@ -302,6 +410,7 @@ impl Store {
             id: id.clone(),
             created: created.to_string(),
             operator_rejection: None,
+            replaced: None,
             result: result.clone(),
         };
         let bytes = serde_json::to_vec_pretty(&entry).map_err(|e| StoreError::Invalid {
@@ -315,7 +424,7 @@ impl Store {
     /// A result of the history.
     pub fn get(&self, id: &str) -> Result<StoredResult, StoreError> {
         let path = self.entry_path(id)?;
-        let text = fs::read_to_string(&path).map_err(|_| StoreError::NotFound(id.to_string()))?;
+        let text = read_store_file(&path)?.ok_or_else(|| StoreError::NotFound(id.to_string()))?;
         serde_json::from_str(&text).map_err(|e| StoreError::Invalid {
             path,
             message: e.to_string(),
@@ -325,27 +434,26 @@ impl Store {
     /// The active calibration, if any.
     pub fn active(&self) -> Result<Option<ActiveDocument>, StoreError> {
         let path = self.active_path();
-        match fs::read_to_string(&path) {
-            Ok(text) => serde_json::from_str(&text)
-                .map(Some)
-                .map_err(|e| StoreError::Invalid {
-                    path,
-                    message: e.to_string(),
-                }),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-            Err(e) => Err(StoreError::Io {
+        let Some(text) = read_store_file(&path)? else {
+            return Ok(None);
+        };
+        serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| StoreError::Invalid {
                 path,
-                action: "cannot read",
-                source: e,
-            }),
-        }
+                message: e.to_string(),
+            })
     }
 
     /// Makes a result of the history the active calibration (accept, or roll
-    /// back to an earlier one). Rejected results never become active.
-    pub fn activate(&self, id: &str, now: &str) -> Result<ActiveDocument, StoreError> {
+    /// back to an earlier one), at `now` by `by`. Rejected results never
+    /// become active. The calibration it replaces is marked so in the
+    /// history ([`StoredResult::replaced`]): a page that still shows it must
+    /// not offer to make it active as if it never had been.
+    pub fn activate(&self, id: &str, now: &str, by: &str) -> Result<ActiveDocument, StoreError> {
         let _turn = self.turn()?;
         let entry = self.get(id)?;
+        let previous = self.active()?.map(|a| a.id).filter(|p| p != id);
         let result = entry.result;
         let mount = match (result.status, result.robot_from_sensor) {
             (ResultStatus::Accepted, Some(mount)) => mount,
@@ -372,6 +480,23 @@ impl Store {
             message: e.to_string(),
         })?;
         crate::files::write_atomically(&self.active_path(), &bytes)?;
+        if let Some(previous) = previous {
+            // Said in the history after the switch: a kill in between leaves
+            // the right calibration active and only this remark missing.
+            if let Ok(mut replaced) = self.get(&previous) {
+                replaced.replaced = Some(Replacement {
+                    at: now.to_string(),
+                    by: by.to_string(),
+                    by_id: id.to_string(),
+                });
+                let bytes =
+                    serde_json::to_vec_pretty(&replaced).map_err(|e| StoreError::Invalid {
+                        path: self.history_dir(),
+                        message: e.to_string(),
+                    })?;
+                crate::files::write_atomically(&self.entry_path(&previous)?, &bytes)?;
+            }
+        }
         Ok(active)
     }
 
@@ -423,6 +548,7 @@ impl Store {
                 created: stored.created,
                 active: active_id.as_deref() == Some(id),
                 operator_rejected: stored.operator_rejection.is_some(),
+                replaced: stored.replaced,
             });
         }
         entries.sort_by(|a, b| b.id.cmp(&a.id));
@@ -466,15 +592,15 @@ mod tests {
             .add(&result("rejected", 3.0), "2026-11-23T22:00:00Z")
             .unwrap();
         assert!(store.active().unwrap().is_none());
-        store.activate(&b, "now").unwrap();
+        store.activate(&b, "now", "t").unwrap();
         assert_eq!(
             store.active().unwrap().unwrap().robot_from_sensor.alpha_deg,
             2.0
         );
-        store.activate(&a, "later").unwrap();
+        store.activate(&a, "later", "t").unwrap();
         assert_eq!(store.active().unwrap().unwrap().id, a);
         assert!(matches!(
-            store.activate(&r, "x"),
+            store.activate(&r, "x", "t"),
             Err(StoreError::Rejected(_))
         ));
         assert_eq!(
@@ -494,6 +620,73 @@ mod tests {
         let _ = fs::remove_dir_all(&dir);
     }
 
+    /// A run cut off stays said through any number of restarts (each a new
+    /// `Store` reading it), until a person starts the next run.
+    #[test]
+    fn an_interrupted_run_is_remembered_until_the_next_one_starts() {
+        let (store, dir) = temp_store("interrupted");
+        assert!(store.interrupted().is_none());
+        store
+            .mark_running("phone (10.0.0.7)", "2026-12-04T10:00:00Z", "calibration")
+            .unwrap();
+        for _restart in 0..3 {
+            let again = Store::new(&dir);
+            let cut = again.interrupted().expect("still interrupted");
+            assert_eq!(cut.by, "phone (10.0.0.7)");
+            assert_eq!(cut.task, "calibration");
+        }
+        store
+            .mark_running("pad (10.0.0.8)", "2026-12-04T11:00:00Z", "check")
+            .unwrap();
+        assert_eq!(store.interrupted().unwrap().task, "check");
+        store.clear_running();
+        assert!(Store::new(&dir).interrupted().is_none());
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    /// A calibration replaced by another (a rollback) says so in the
+    /// history: when, by whom, by which.
+    #[test]
+    fn the_calibration_a_rollback_replaces_is_marked_replaced() {
+        let (store, dir) = temp_store("replaced");
+        let a = store
+            .add(&result("accepted", 1.0), "2026-11-23T20:00:00Z")
+            .unwrap();
+        let b = store
+            .add(&result("accepted", 2.0), "2026-11-23T21:00:00Z")
+            .unwrap();
+        store.activate(&b, "2026-11-24T08:00:00Z", "phone").unwrap();
+        assert!(store.get(&b).unwrap().replaced.is_none());
+        store
+            .activate(&a, "2026-11-24T09:00:00Z", "pad (10.0.0.8)")
+            .unwrap();
+        let replaced = store.get(&b).unwrap().replaced.unwrap();
+        assert_eq!(
+            (
+                replaced.at.as_str(),
+                replaced.by.as_str(),
+                replaced.by_id.as_str()
+            ),
+            ("2026-11-24T09:00:00Z", "pad (10.0.0.8)", a.as_str())
+        );
+        let history = store.history().unwrap();
+        assert!(history.iter().any(|h| h.id == b && h.replaced.is_some()));
+        assert!(history.iter().any(|h| h.id == a && h.replaced.is_none()));
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    /// The last check's document survives a restart, as written.
+    #[test]
+    fn the_last_check_is_kept() {
+        let (store, dir) = temp_store("check");
+        assert!(store.last_check::<serde_json::Value>().unwrap().is_none());
+        let check = serde_json::json!({"calibration_id": "20261204-1", "outcome": "drift"});
+        store.save_check(&check).unwrap();
+        let read: serde_json::Value = Store::new(&dir).last_check().unwrap().unwrap();
+        assert_eq!(read, check);
+        let _ = fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn ids_cannot_escape_the_history() {
         let (store, dir) = temp_store("escape");
@@ -502,7 +695,7 @@ mod tests {
             Err(StoreError::NotFound(_))
         ));
         assert!(matches!(
-            store.activate("/etc/passwd", "x"),
+            store.activate("/etc/passwd", "x", "t"),
             Err(StoreError::NotFound(_))
         ));
         let _ = fs::remove_dir_all(&dir);

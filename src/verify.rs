@@ -395,6 +395,28 @@ pub struct DirectionJson {
     pub checked: bool,
 }
 
+/// One drift, typed ([`crate::calib::verify::Drift`]): for a page that
+/// words it in its own language.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct DriftJson {
+    /// `ground` or `gravity`: which measurement says it.
+    pub from: String,
+    pub changes: Vec<DriftChangeJson>,
+    /// The accelerometer says so but the ground does not.
+    #[serde(default)]
+    pub ground_disagrees: bool,
+}
+
+/// One direction's change in a drift, degrees or millimetres, signed:
+/// positive is right (roll), left (yaw), up (pitch), forward, higher, right
+/// (sideways), as the English words read it.
+#[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
+pub struct DriftChangeJson {
+    pub direction: String,
+    pub change: f64,
+    pub unit: String,
+}
+
 /// One pose against the calibration.
 #[derive(Debug, Clone, Serialize, serde::Deserialize, PartialEq)]
 pub struct VerifyPoseJson {
@@ -434,6 +456,9 @@ pub struct VerifyJson {
     pub status: String,
     #[serde(default)]
     pub reasons: Vec<String>,
+    /// The reasons, typed, in their order.
+    #[serde(default)]
+    pub drifts: Vec<DriftJson>,
     pub checks: Vec<CheckJson>,
     pub directions: Vec<DirectionJson>,
     /// Directions these poses cannot see.
@@ -457,6 +482,34 @@ fn check_json(c: &Check) -> CheckJson {
         threshold: c.threshold * scale,
         unit: unit.into(),
         passed: c.passed,
+    }
+}
+
+fn drift_json(d: &crate::calib::verify::Drift) -> DriftJson {
+    use crate::calib::verify::Witness;
+    DriftJson {
+        from: match d.witness {
+            Witness::Ground => "ground",
+            Witness::Gravity => "gravity",
+        }
+        .into(),
+        changes: d
+            .changes
+            .iter()
+            .map(|(direction, change)| {
+                let (scale, unit) = if direction.is_rotation() {
+                    (180.0 / std::f64::consts::PI, "deg")
+                } else {
+                    (1000.0, "mm")
+                };
+                DriftChangeJson {
+                    direction: direction.name().into(),
+                    change: change * scale,
+                    unit: unit.into(),
+                }
+            })
+            .collect(),
+        ground_disagrees: d.ground_disagrees,
     }
 }
 
@@ -532,6 +585,7 @@ impl VerifyJson {
             }
             .into(),
             reasons: report.reasons.clone(),
+            drifts: report.drifts.iter().map(drift_json).collect(),
             checks: report.checks.iter().map(check_json).collect(),
             directions: report
                 .ground

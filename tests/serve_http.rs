@@ -482,7 +482,7 @@ async fn a_check_holds_the_active_calibration_until_it_ends() {
     .await
     .unwrap();
     groundcal::store::Store::new(&state_dir)
-        .activate(&a, "2026-12-01T02:00:00Z")
+        .activate(&a, "2026-12-01T02:00:00Z", "a test")
         .unwrap();
     // Real time: the check lasts a few seconds.
     let (addr, stop, server) = serve_simulation_at(&dir, Some(1.0)).await;

@@ -110,7 +110,7 @@ fn writer_process() {
     let mut n = 0;
     while changes == 0 || n < changes {
         let id = parts[1 + n % 2];
-        let stored = store.activate(id, "by another process").unwrap();
+        let stored = store.activate(id, "by another process", "a test").unwrap();
         assert_eq!(stored.id, id);
         n += 1;
     }
@@ -151,7 +151,9 @@ fn simultaneous_accepts_and_rollbacks_never_corrupt_the_active_calibration() {
             std::thread::spawn(move || -> Result<(), String> {
                 for _ in 0..pairs {
                     barrier.wait();
-                    let stored = store.activate(&id, "now").map_err(|e| e.to_string())?;
+                    let stored = store
+                        .activate(&id, "now", "a test")
+                        .map_err(|e| e.to_string())?;
                     if stored.id != id {
                         return Err(format!("asked for {id}, the reply names {}", stored.id));
                     }
@@ -183,7 +185,7 @@ fn simultaneous_accepts_and_rollbacks_never_corrupt_the_active_calibration() {
 fn a_kill_while_saving_leaves_the_old_or_the_new_file_and_a_start_cleans_up() {
     let dir = temp_dir("killed");
     let (store, a, b) = store_with_two(&dir);
-    store.activate(&a, "first").unwrap();
+    store.activate(&a, "first", "a test").unwrap();
     let ids = [a.as_str(), b.as_str()];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let mut left = 0;
@@ -199,7 +201,7 @@ fn a_kill_while_saving_leaves_the_old_or_the_new_file_and_a_start_cleans_up() {
     // The next start removes what the kills left; the store works on.
     let removed = store.remove_stale_temporaries().unwrap();
     assert_eq!(temporaries(&dir), 0);
-    store.activate(&b, "after the kills").unwrap();
+    store.activate(&b, "after the kills", "a test").unwrap();
     assert_eq!(store.active().unwrap().unwrap().id, b);
     println!("{kills} kills while saving: every read complete; {removed} temporaries removed at the start (at most {left} at once)");
     let _ = std::fs::remove_dir_all(&dir);

@@ -190,6 +190,26 @@ impl DirectionChange {
     }
 }
 
+/// Which measurement says that the sensor moved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Witness {
+    /// The ground the depth frames see.
+    Ground,
+    /// The Kinect's accelerometer.
+    Gravity,
+}
+
+/// One drift, typed: who says it, and the changes named (radians or metres,
+/// signed as [`Direction::words`] reads them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Drift {
+    pub witness: Witness,
+    pub changes: Vec<(Direction, f64)>,
+    /// The accelerometer says so but the ground does not (a slope, or an
+    /// accelerometer that moved in the Kinect).
+    pub ground_disagrees: bool,
+}
+
 /// One check with its threshold, as the operator reads it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Check {
@@ -234,6 +254,9 @@ pub struct VerifyReport {
     pub checks: Vec<Check>,
     /// The reasons for a drift, in an operator's words (empty: consistent).
     pub reasons: Vec<String>,
+    /// The same drifts, typed, one for each reason and in its order: for a
+    /// page that says them in words of its own language.
+    pub drifts: Vec<Drift>,
     /// Things to know that are not a drift.
     pub notes: Vec<String>,
 }
@@ -504,8 +527,9 @@ pub fn verify(
 
     let mut checks = Vec::new();
     let mut reasons = Vec::new();
+    let mut drifts = Vec::new();
     let mut notes = Vec::new();
-    let words = |changes: &[DirectionChange], directions: &[Direction]| -> Vec<String> {
+    let named = |changes: &[DirectionChange], directions: &[Direction]| -> Vec<(Direction, f64)> {
         let chosen: Vec<&DirectionChange> = changes
             .iter()
             .filter(|c| directions.contains(&c.direction) && c.drifted(k))
@@ -525,7 +549,14 @@ pub fn verify(
         } else {
             chosen
         };
-        chosen.iter().map(|c| c.direction.words(c.change)).collect()
+        chosen.iter().map(|c| (c.direction, c.change)).collect()
+    };
+    let words = |changes: &[(Direction, f64)]| -> String {
+        changes
+            .iter()
+            .map(|(d, change)| d.words(*change))
+            .collect::<Vec<_>>()
+            .join(" and ")
     };
     if let Some((tilt, sigma)) = tilt_of(&ground) {
         let passed = tilt <= k * sigma;
@@ -537,10 +568,16 @@ pub fn verify(
             passed,
         });
         if !passed {
+            let changes = named(&ground, &[Direction::Roll, Direction::Pitch]);
             reasons.push(format!(
                 "the ground says the sensor is {} than the active calibration says",
-                words(&ground, &[Direction::Roll, Direction::Pitch]).join(" and ")
+                words(&changes)
             ));
+            drifts.push(Drift {
+                witness: Witness::Ground,
+                changes,
+                ground_disagrees: false,
+            });
         }
     }
     for (direction, name, unit) in [
@@ -565,6 +602,11 @@ pub fn verify(
                 "the ground says the sensor is {} than the active calibration says",
                 direction.words(c.change)
             ));
+            drifts.push(Drift {
+                witness: Witness::Ground,
+                changes: vec![(direction, c.change)],
+                ground_disagrees: false,
+            });
         }
     }
     if let Some((tilt, sigma)) = tilt_of(&gravity) {
@@ -581,7 +623,13 @@ pub fn verify(
                 || checks
                     .iter()
                     .any(|c| c.name == "ground tilt θ" && !c.passed);
-            let said = words(&gravity, &[Direction::Roll, Direction::Pitch]).join(" and ");
+            let changes = named(&gravity, &[Direction::Roll, Direction::Pitch]);
+            let said = words(&changes);
+            drifts.push(Drift {
+                witness: Witness::Gravity,
+                changes,
+                ground_disagrees: !ground_agrees,
+            });
             if ground_agrees {
                 reasons.push(format!(
                     "the accelerometer says the sensor is {said} than the active calibration says"
@@ -611,6 +659,7 @@ pub fn verify(
         gravity,
         checks,
         reasons,
+        drifts,
         notes,
     })
 }

@@ -108,11 +108,16 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
                 opened_at_start = true;
                 // The link only binds its socket: the lower computer is first
                 // spoken to (HELLO) when a calibration starts.
-                format!(
-                    "opened: {}; lower computer at {} (first contacted at Calibrate)",
+                let words = format!(
+                    "opened: {}; lower computer at {} (first spoken to by a check or a calibration)",
                     options.selection.sensor(&config),
                     options.selection.robot(&config)
-                )
+                );
+                // Said where the operator looks, not only in the journal.
+                match hardware::mismatch(&config, &options.selection) {
+                    Some(warning) => format!("{words}; but {warning}"),
+                    None => words,
+                }
             }
             Err(e) => {
                 tracing::warn!("the hardware did not open: {e}");

@@ -276,6 +276,19 @@ fn sim_distortion(
     }
 }
 
+/// Why the simulated Kinect with a lower computer of its own process (or
+/// the robot's) cannot calibrate: it renders the simulated body, which that
+/// lower computer does not move, so it sees the home stance at every pose.
+pub const SIM_SENSOR_BLIND: &str = "the simulated Kinect sees only the in-process simulated body, which this lower computer does not move: every pose looks like the home stance, so a calibration finds no ground where it expects it and judges the tilt motor moved (use --robot sim, or a recording's frames with sim-robot --replay)";
+
+/// A warning for the operator about the hardware chosen, when its parts do
+/// not belong together ([`SIM_SENSOR_BLIND`]).
+pub fn mismatch(config: &Config, selection: &Selection) -> Option<&'static str> {
+    let sensor_is_sim = matches!(selection.sensor(config), SensorSource::Sim);
+    let robot_is_sim = selection.robot(config) == RobotAddress::Sim;
+    (sensor_is_sim && !robot_is_sim).then_some(SIM_SENSOR_BLIND)
+}
+
 /// The sensor of `source`; the simulated one sees the body of `sim`.
 fn sensor_from(
     config: &Config,
@@ -288,7 +301,7 @@ fn sensor_from(
         SensorSource::Sim => {
             let parts = sim.ok_or_else(no_sim_table)?;
             if !robot_is_sim {
-                tracing::warn!("the simulated Kinect sees the simulated body, which a real lower computer does not move");
+                tracing::warn!("{}", SIM_SENSOR_BLIND);
             }
             let mut kinect = SimKinectConfig {
                 seed: parts.sim.seed,

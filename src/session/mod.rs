@@ -20,7 +20,7 @@
 mod plan;
 mod run;
 
-pub use plan::{Plan, RecordedPose};
+pub use plan::{Plan, RecordedPose, STALL_LIMIT};
 pub use run::{run, verify, SessionError, SessionOutcome, VerifyOutcome};
 
 pub use crate::verify::{GravityReading, VisitedPose};

@@ -61,7 +61,25 @@ pub struct Plan {
     /// captured, when they are not `1..=N` and `frames_per_pose`: a replayed
     /// recording's own, so that the session asks for what was recorded.
     pub recorded_poses: Option<Vec<RecordedPose>>,
+    /// Nothing may move: no SET_POSE, HOME or HALT, and the Kinect's motor
+    /// left where it is. The session reads the stance the robot already
+    /// stands in, and refuses ([`super::SessionError::WouldMove`]) when the
+    /// lower computer does not report it at its home stance or the motor is
+    /// not at the plan's tilt. The check at the service's start, which no
+    /// person asked for, is such a session.
+    pub stand_still: bool,
+    /// The longest the session's own thread may be stopped (SIGSTOP, a
+    /// suspended machine, a starved scheduler) before the run ends as
+    /// aborted when it resumes: beyond it the lower computer's watchdog (1 s)
+    /// has halted a moving body, and whoever pressed Abort meanwhile could
+    /// not reach the service. Real time, whatever the simulator's speed.
+    pub stall_limit: Duration,
 }
+
+/// The default [`Plan::stall_limit`]: twice the lower computer's watchdog,
+/// and far above any scheduling delay of a busy robot computer (the
+/// session's loop wakes at least every 200 ms).
+pub const STALL_LIMIT: Duration = Duration::from_secs(2);
 
 /// A pose as a recording has it: its id and how many frames it holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,6 +146,8 @@ impl Plan {
             accelerometer_readings: 10,
             verify: config.verify.settings(c),
             recorded_poses: None,
+            stand_still: false,
+            stall_limit: STALL_LIMIT,
         };
         if let Some(recording) = replay {
             plan.schedule = Schedule {

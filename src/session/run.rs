@@ -64,6 +64,10 @@ pub enum SessionError {
     /// The operator or a signal stopped the session.
     #[error("aborted: {0}")]
     Aborted(String),
+    /// A session that must not move anything ([`Plan::stand_still`]) would
+    /// have had to: nothing was commanded.
+    #[error("{0}")]
+    WouldMove(String),
 }
 
 impl SessionError {
@@ -94,6 +98,61 @@ impl SessionError {
 impl From<WriteError> for SessionError {
     fn from(e: WriteError) -> Self {
         SessionError::Recording(e.to_string())
+    }
+}
+
+/// Watches the session's own thread for a stall: a loop that wakes every
+/// [`StallWatch::PERIOD`] and notes when it did. A gap longer than the plan's
+/// limit means the process was stopped or starved; the run must not simply go
+/// on from where it was (the robot may have been halted by its watchdog, and
+/// an Abort pressed meanwhile could not arrive). The session asks
+/// [`StallWatch::check`] before every motion it commands, so that a command
+/// queued before the stall is not sent after it, whichever of the two runs
+/// first when the thread resumes.
+struct StallWatch {
+    limit: Duration,
+    last: std::cell::Cell<std::time::Instant>,
+}
+
+impl StallWatch {
+    const PERIOD: Duration = Duration::from_millis(100);
+
+    fn new(limit: Duration) -> Self {
+        Self {
+            limit,
+            last: std::cell::Cell::new(std::time::Instant::now()),
+        }
+    }
+
+    /// Why the run must end, when the thread stalled longer than the limit.
+    fn stalled(&self) -> Option<String> {
+        let gap = self.last.get().elapsed();
+        (gap > self.limit).then(|| {
+            format!(
+                "the service stalled for {:.1} s (more than {:.1} s): the run does not go on from where it stopped",
+                gap.as_secs_f64(),
+                self.limit.as_secs_f64()
+            )
+        })
+    }
+
+    /// Before a command that moves the robot.
+    fn check(&self) -> Result<(), SessionError> {
+        match self.stalled() {
+            Some(why) => Err(SessionError::Aborted(why)),
+            None => Ok(()),
+        }
+    }
+
+    /// Completes, with the reason, when the thread has stalled.
+    async fn watch(&self) -> String {
+        loop {
+            tokio::time::sleep(Self::PERIOD).await;
+            if let Some(why) = self.stalled() {
+                return why;
+            }
+            self.last.set(std::time::Instant::now());
+        }
     }
 }
 
@@ -341,6 +400,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
     plan: &Plan,
     events: &UnboundedSender<Event>,
     pending: &mut Vec<PendingFit>,
+    stall: &StallWatch,
 ) -> Result<Visited, SessionError> {
     let schedule = &plan.schedule;
     let of = schedule.poses.len();
@@ -380,10 +440,20 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         },
     );
 
-    // 2. Home stance and its feet; the Kinect tilted and still.
-    let home = go_home(controller, plan).await?;
+    // 2. Home stance and its feet; the Kinect tilted and still. A session
+    // that must not move takes the stance and the tilt as they are, or none.
+    let home = if plan.stand_still {
+        standing_at_home(controller).await?
+    } else {
+        stall.check()?;
+        go_home(controller, plan).await?
+    };
     send(events, Event::AtHome);
-    bounded(plan, "tilting the Kinect", sensor.set_tilt(plan.tilt_deg)).await?;
+    if plan.stand_still {
+        motor_at_tilt(sensor, plan).await?;
+    } else {
+        bounded(plan, "tilting the Kinect", sensor.set_tilt(plan.tilt_deg)).await?;
+    }
     let _ = bounded(plan, "the LED", sensor.set_led(Led::BlinkGreen)).await;
     send(
         events,
@@ -456,23 +526,33 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
                 commanded: *commanded,
             },
         );
-        controller
-            .set_pose(index, commanded, millis(plan.motion))
-            .await
-            .map_err(SessionError::robot)?;
-        wait_for(
-            controller,
-            plan,
-            plan.motion_deadline(plan.motion),
-            &format!("pose {index}"),
-            |s| s.state == MotionState::Settled && s.pose_id == index,
-        )
-        .await?;
-        tokio::time::sleep(plan.settle).await;
+        // The stance it stands in, for a session that must not move.
+        let still = if plan.stand_still {
+            Some(standing_at_home(controller).await?)
+        } else {
+            stall.check()?;
+            controller
+                .set_pose(index, commanded, millis(plan.motion))
+                .await
+                .map_err(SessionError::robot)?;
+            wait_for(
+                controller,
+                plan,
+                plan.motion_deadline(plan.motion),
+                &format!("pose {index}"),
+                |s| s.state == MotionState::Settled && s.pose_id == index,
+            )
+            .await?;
+            tokio::time::sleep(plan.settle).await;
+            None
+        };
         // The feet once the body has been still for the settle delay; never
         // feet reported before it settled (hexapod-udp.md).
-        let settled = controller.state().await.map_err(SessionError::robot)?;
-        if settled.state != MotionState::Settled || settled.pose_id != index {
+        let settled = match still {
+            Some(state) => state,
+            None => controller.state().await.map_err(SessionError::robot)?,
+        };
+        if still.is_none() && (settled.state != MotionState::Settled || settled.pose_id != index) {
             return Err(SessionError::Robot {
                 kind: ErrorKind::Protocol,
                 message: format!(
@@ -523,7 +603,10 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
     }
 
     // 4. Home; the fits finish.
-    go_home(controller, plan).await?;
+    if !plan.stand_still {
+        stall.check()?;
+        go_home(controller, plan).await?;
+    }
     let _ = bounded(plan, "the LED", sensor.set_led(Led::Green)).await;
     if plan.calibrating {
         send(events, Event::Solving);
@@ -638,6 +721,64 @@ async fn go_home<C: BodyController>(
         .await
         .map_err(SessionError::robot)?;
     wait_until_home(controller, plan).await
+}
+
+/// The body's state, when the lower computer reports it standing at its
+/// home stance with no target (idle); otherwise the refusal of a session that
+/// must not move it.
+async fn standing_at_home<C: BodyController>(
+    controller: &mut C,
+) -> Result<BodyState, SessionError> {
+    let state = controller.state().await.map_err(SessionError::robot)?;
+    if state.state == MotionState::Idle {
+        return Ok(state);
+    }
+    Err(SessionError::WouldMove(format!(
+        "the lower computer does not report the robot standing at its home stance ({}): a check that moves nothing cannot be made now; it waits for a person to press Check",
+        motion_in_words(state.state)
+    )))
+}
+
+/// A motion state in an operator's words.
+fn motion_in_words(state: MotionState) -> String {
+    match state {
+        MotionState::Idle => "at home".into(),
+        MotionState::Moving => "moving".into(),
+        MotionState::Settled => "holding a pose away from home".into(),
+        MotionState::Halted => "halted where it stood".into(),
+        MotionState::Fault(code) => format!("fault {code}"),
+    }
+}
+
+/// Whether the Kinect's motor already stands at the plan's tilt (within a
+/// degree), for a session that must not turn it.
+async fn motor_at_tilt<S: DepthSensor>(sensor: &mut S, plan: &Plan) -> Result<(), SessionError> {
+    let reading = tokio::time::timeout(plan.sensor_timeout, sensor.tilt_state()).await;
+    let tilt_deg = match reading {
+        Ok(Ok(state)) => state.tilt_deg,
+        Ok(Err(e)) => {
+            return Err(SessionError::WouldMove(format!(
+                "the Kinect's motor angle cannot be read ({e}): a check that turns nothing cannot tell whether it stands at the calibration's {:.1}°; it waits for a person to press Check",
+                plan.tilt_deg
+            )))
+        }
+        Err(_) => {
+            return Err(SessionError::Sensor {
+                kind: ErrorKind::Timeout,
+                message: format!(
+                    "the tilt motor: no answer from the depth sensor in {} s",
+                    plan.sensor_timeout.as_secs_f64()
+                ),
+            })
+        }
+    };
+    if (tilt_deg - plan.tilt_deg).abs() > 1.0 {
+        return Err(SessionError::WouldMove(format!(
+            "the Kinect's motor stands at {tilt_deg:.1}°, the calibration's tilt is {:.1}°: turning it waits for a person to press Check",
+            plan.tilt_deg
+        )));
+    }
+    Ok(())
 }
 
 /// Waits until the body reports the home stance (idle).
@@ -846,26 +987,45 @@ async fn guarded<S: DepthSensor, C: BodyController>(
     abort: impl Future<Output = String>,
 ) -> Result<Visited, SessionError> {
     let mut pending = Vec::new();
+    let stall = StallWatch::new(plan.stall_limit);
     let outcome = {
-        let work = visit_poses(sensor, controller, plan, events, &mut pending);
+        let work = visit_poses(sensor, controller, plan, events, &mut pending, &stall);
         tokio::pin!(work);
+        // A stall is looked at first: after one, the run ends as aborted
+        // before anything else it was waiting for goes on.
         tokio::select! {
-            outcome = &mut work => outcome,
+            biased;
+            reason = stall.watch() => Err(SessionError::Aborted(reason)),
             reason = abort => Err(SessionError::Aborted(reason)),
+            outcome = &mut work => outcome,
         }
     };
     match outcome {
         Ok(o) => Ok(o),
-        Err(SessionError::Refused(reason)) => {
+        Err(e @ (SessionError::Refused(_) | SessionError::WouldMove(_))) => {
             // Nothing moved: nothing to stop.
             send(
                 events,
                 Event::Aborted {
-                    reason: reason.clone(),
+                    reason: e.cause(),
                     robot_left: RobotLeft::NotMoved,
                 },
             );
-            Err(SessionError::Refused(reason))
+            Err(e)
+        }
+        Err(e) if plan.stand_still => {
+            // Nothing was commanded to move: nothing to halt or send home.
+            for fit in pending {
+                fit.handle.abort();
+            }
+            send(
+                events,
+                Event::Aborted {
+                    reason: format!("{}; nothing was moved", e.cause()),
+                    robot_left: RobotLeft::NotMoved,
+                },
+            );
+            Err(e)
         }
         Err(e) => {
             send(events, Event::Halting { why: e.cause() });

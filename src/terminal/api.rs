@@ -4,7 +4,7 @@
 use std::collections::VecDeque;
 use std::time::Instant;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::quality::Gates;
@@ -221,7 +221,7 @@ pub enum RunState {
 }
 
 /// What a running session does: calibrate, or check the active calibration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Task {
     #[default]
@@ -266,13 +266,16 @@ pub enum AbortState {
     },
 }
 
-/// A run that the service's last stop cut off (a kill, a crash, a power
-/// cut): said until the next calibration starts.
+/// A run that a stop of the service cut off (a kill, a crash, a power
+/// cut): said through any number of restarts, until a person starts the
+/// next calibration or check.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Interrupted {
     /// Who started it, and when (RFC 3339).
     pub by: String,
     pub started: String,
+    /// A calibration or a check.
+    pub task: Task,
 }
 
 /// What pressing Calibrate or Check will do to the robot, for the page's
@@ -282,8 +285,15 @@ pub struct MotionPlan {
     /// Body poses visited (the home stance not counted).
     pub poses: usize,
     /// About how long the robot moves, in seconds (the poses' motion, settle
-    /// and capture, at the simulator's speed when it is simulated).
+    /// and capture, at the simulator's speed when it is simulated in
+    /// process; the real robot's otherwise).
     pub about_s: f64,
+    /// `about_s` is the in-process simulator's time (faster than the robot).
+    pub simulated: bool,
+    /// How long the last such run that went through all its poses took
+    /// here, in seconds (None: none yet since the service started). A lower
+    /// computer that runs faster than the robot (a simulator) shows here.
+    pub last_s: Option<f64>,
 }
 
 /// What the two buttons that move the robot will do.
@@ -293,7 +303,9 @@ pub struct MotionPlans {
     pub check: MotionPlan,
 }
 
-/// What became of the check at the service's start.
+/// What became of the check at the service's start. That check moves
+/// nothing: it reads the stance the robot already stands in, with the
+/// Kinect's motor where it is; otherwise it waits for a person.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum StartupCheck {
@@ -302,22 +314,29 @@ pub enum StartupCheck {
     Off,
     /// Nothing to check: no calibration is active, or the hardware did not open.
     NotPossible,
-    /// It ran (see `check`).
+    /// It ran, moving nothing (see `check`).
     Started,
-    /// Held: the last run was interrupted, so nothing moves until a person
-    /// asks for it (Check on the page).
+    /// Held: a run was interrupted, so nothing happens until a person asks
+    /// for it (Check on the page).
     HeldForAPerson,
+    /// Held: the robot did not stand at its home stance, or the Kinect's
+    /// motor not at the calibration's tilt, so a check that moves nothing
+    /// could not be made; it waits for a person (Check on the page).
+    HeldNotStanding,
 }
 
-/// The last check of the active calibration (`verify`), at the service's
-/// start or on "Check".
-#[derive(Debug, Clone, Serialize)]
+/// A check of the active calibration (`verify`), at the service's start or
+/// on "Check". The last one that reached a verdict is kept in the store.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CheckStatus {
     /// The calibration checked (its store id): the outcome holds for it only.
     pub calibration_id: Option<String>,
     /// `running`, `consistent`, `drift` or `failed`.
     pub outcome: String,
     pub by: String,
+    /// Started by the service at its start (moving nothing), not by a person.
+    #[serde(default)]
+    pub started_by_service: bool,
     pub started: String,
     pub finished: Option<String>,
     /// Why it drifted, in an operator's words.
@@ -374,8 +393,13 @@ pub struct Status {
     pub state: RunState,
     /// What the running (or last) session does.
     pub task: Task,
-    /// The last check of the active calibration.
+    /// The last check of the active calibration (running, or how it ended).
     pub check: Option<CheckStatus>,
+    /// The last check that reached a verdict (consistent or drift), kept in
+    /// the store across any stop: a check that could not be made does not
+    /// replace it, so a knock once found stays said until a new verdict or
+    /// a new active calibration (its `calibration_id` is not the active one).
+    pub verdict: Option<CheckStatus>,
     /// Who started the current (or last) calibration.
     pub by: Option<String>,
     pub started: Option<String>,

@@ -138,10 +138,21 @@ pub async fn post_activate(
                 ),
             ));
         }
-        let activated = store.activate(&id, &now()).map_err(store_error)?;
+        let activated = store.activate(&id, &now(), &by).map_err(store_error)?;
         drop(status);
         activated
     };
+    // The result on the page that this replaced says so at once.
+    let shown = state.status().result.map(|r| r.id);
+    if let Some(shown) = shown.filter(|shown| *shown != activated.id) {
+        if let Ok(stored) = store.get(&shown) {
+            if let Some(result) = state.status_mut().result.as_mut() {
+                if result.id == shown {
+                    result.replaced = stored.replaced;
+                }
+            }
+        }
+    }
     state.publish(EventJson::Activated {
         id: activated.id.clone(),
         activated: activated.activated.clone(),
@@ -189,7 +200,7 @@ pub async fn post_start(
     ConnectInfo(addr): ConnectInfo<SocketAddr>,
 ) -> Result<Response, ApiError> {
     let by = client_name(&headers, addr);
-    let started = start(&state, by.clone(), Task::Calibration)?;
+    let started = start(&state, Starter::Person(by.clone()), Task::Calibration)?;
     Ok((
         StatusCode::ACCEPTED,
         Json(json!({ "state": "running", "by": by, "started": started })),
@@ -210,7 +221,7 @@ pub async fn post_check(
         ));
     }
     let by = client_name(&headers, addr);
-    let started = start(&state, by.clone(), Task::Check)?;
+    let started = start(&state, Starter::Person(by.clone()), Task::Check)?;
     Ok((
         StatusCode::ACCEPTED,
         Json(json!({ "state": "running", "task": "check", "by": by, "started": started })),
@@ -218,10 +229,43 @@ pub async fn post_check(
         .into_response())
 }
 
+/// Who starts a run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Starter {
+    /// A person, on the page or through the API (as the request names itself).
+    Person(String),
+    /// The service's own start: only a check, and one that moves nothing
+    /// (no person asked for it, and nobody may be watching the robot).
+    ServiceStart,
+}
+
+impl Starter {
+    /// The name the status and the store give the starter.
+    pub fn name(&self) -> String {
+        match self {
+            Starter::Person(by) => by.clone(),
+            Starter::ServiceStart => SERVICE_START.into(),
+        }
+    }
+}
+
+/// How the status names the service's own start as a check's starter.
+pub const SERVICE_START: &str = "the service's start";
+
 /// Starts a session on its own thread, unless one runs or the service
 /// stops; returns when it started. A calibration replaces the last result
-/// on the page; a check keeps it.
-pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiError> {
+/// on the page; a check keeps it. A person's start ends the notice of an
+/// interrupted run (they have seen it: the page shows it beside the
+/// buttons); the service's own start leaves it.
+pub fn start(state: &AppState, starter: Starter, task: Task) -> Result<String, ApiError> {
+    let by = starter.name();
+    let by_a_person = matches!(starter, Starter::Person(_));
+    if !by_a_person && task != Task::Check {
+        return Err(ApiError(
+            StatusCode::FORBIDDEN,
+            "only a person starts a calibration".into(),
+        ));
+    }
     if state.is_stopping() {
         return Err(ApiError(
             StatusCode::SERVICE_UNAVAILABLE,
@@ -247,11 +291,10 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             ));
         }
         let previous = std::mem::take(&mut *status);
-        // A check keeps the notice of an interrupted run on screen: only a
-        // new calibration, which a person asked for, replaces it.
-        let interrupted = match task {
-            Task::Check => previous.interrupted,
-            Task::Calibration => None,
+        let interrupted = if by_a_person {
+            None
+        } else {
+            previous.interrupted
         };
         let mut next = Status {
             state: RunState::Running,
@@ -264,6 +307,7 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             gates: previous.gates,
             hardware: previous.hardware,
             check: previous.check,
+            verdict: previous.verdict,
             interrupted,
             startup_check: previous.startup_check,
             motion: previous.motion,
@@ -278,6 +322,7 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
                 calibration_id: next.active.as_ref().map(|a| a.id.clone()),
                 outcome: "running".into(),
                 by: by.clone(),
+                started_by_service: !by_a_person,
                 started: started.clone(),
                 finished: None,
                 reasons: Vec::new(),
@@ -288,10 +333,18 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
         *status = next;
         state.set_abort(abort_tx);
     }
-    // Written once the status is released: a write waits for the disk.
-    if task == Task::Calibration {
-        if let Err(e) = state.store().mark_running(&by, &started) {
-            tracing::warn!("cannot mark the calibration as running: {e}");
+    // Written once the status is released: a write waits for the disk. A
+    // run that moves the robot is marked, so that a stop that cuts it off is
+    // said at the next start; it replaces the marker of an interrupted run,
+    // which this person has now seen. The service's own check moves
+    // nothing and leaves the marker as it is.
+    let task_name = match task {
+        Task::Calibration => "calibration",
+        Task::Check => "check",
+    };
+    if by_a_person {
+        if let Err(e) = state.store().mark_running(&by, &started, task_name) {
+            tracing::warn!("cannot mark the {task_name} as running: {e}");
         }
     }
     // A finished worker of an earlier session is joined here.
@@ -301,13 +354,15 @@ pub fn start(state: &AppState, by: String, task: Task) -> Result<String, ApiErro
             .name("groundcal-session".into())
             .spawn(move || match task {
                 Task::Calibration => worker::run_session(worker_state, abort_rx),
-                Task::Check => worker::run_check(worker_state, abort_rx),
+                Task::Check => worker::run_check(worker_state, abort_rx, by_a_person),
             })
     });
     match spawned {
         Ok(()) => Ok(started),
         Err(e) => {
-            state.store().clear_running();
+            if by_a_person {
+                state.store().clear_running();
+            }
             let mut status = state.status_mut();
             status.state = RunState::Idle;
             status.error = Some(format!("cannot start the session: {e}"));

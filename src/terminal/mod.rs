@@ -138,11 +138,15 @@ async fn protective_headers(mut response: Response) -> Response {
 
 /// Checks the active calibration against the sensor once, as the service
 /// starts (when one is active): on the session's thread, so that systemd's
-/// READY is not delayed by it. The outcome goes to the journal and the status.
+/// READY is not delayed by it. The outcome goes to the journal, the status
+/// and, when it is a verdict, the store.
 ///
-/// Not after an unclean stop: a run was cut off, the robot may stand
-/// anywhere and people may be near it, so nothing moves until a person asks
-/// for it (Check on the page, which asks to keep clear first).
+/// It moves nothing: nobody asked for it, and nobody may be near the robot
+/// at power-on. It reads the stance the robot already stands in, when the
+/// lower computer reports it at home, with the Kinect's motor at the
+/// calibration's tilt; otherwise it waits for a person (Check on the page,
+/// which asks to keep clear first). Nor does it run after a run was cut off:
+/// the robot may stand anywhere, and a person must see that first.
 pub fn check_at_start(state: &AppState) {
     if let Some(cut_off) = state.status().interrupted {
         tracing::warn!(
@@ -155,7 +159,7 @@ pub fn check_at_start(state: &AppState) {
     }
     match state.store().active() {
         Ok(Some(_)) => {
-            match handlers::start(state, "the service's start".into(), api::Task::Check) {
+            match handlers::start(state, handlers::Starter::ServiceStart, api::Task::Check) {
                 Ok(_) => {
                     state.set_startup_check(api::StartupCheck::Started);
                     tracing::info!("checking the active calibration against the sensor")

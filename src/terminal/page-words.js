@@ -49,6 +49,15 @@ const WORDS = {
     rolledBack: (made) => 'Rolled back: the calibration of ' + made + ' is now the active one.',
     madeActive: (made) => 'Made active: the calibration of ' + made + ' is now the active one.',
     rollBack: 'Roll back',
+    // Abort that could not be sent, kept and sent when contact returns.
+    abortPending: (timedOut, seconds, kept) => 'Abort could not be sent yet: the robot\'s computer '
+      + (timedOut ? 'did not answer within ' + seconds + ' s' : 'cannot be reached')
+      + '. It is sent the moment the robot\'s computer answers'
+      + (kept ? ' (kept on this device: another device does not know of it).' : '; this page cannot keep it if it is reloaded.')
+      + ' If the robot moves meanwhile, use its emergency stop.',
+    abortPendingTitle: 'Abort pending: sending when the robot answers',
+    abortNothingRunning: 'Abort: the run had already ended (see above how).',
+    abortedTitle: (left) => 'aborted: ' + left,
 
     // Times.
     seconds: (s) => s + ' s',
@@ -112,7 +121,31 @@ const WORDS = {
     axes: { forward: 'forward', up: 'up', right: 'right' },
     checksPassed: (n, of) => 'The checks: ' + n + ' of ' + of + ' passed',
     checkFigure: (name, measured, allowed, passed) => name + ' ' + measured + ' (allowed ' + allowed + ')' + (passed ? '' : ' — too far'),
-    checkNames: { 'ground angle θ': 'ground angle θ', 'ground height e_d': 'ground height e_d', 'gravity angle': 'gravity angle' },
+    checkNames: {
+      'ground tilt θ': 'ground tilt θ',
+      'height e_d': 'height e_d',
+      yaw: 'yaw',
+      'forward position': 'forward position',
+      'sideways position': 'sideways position',
+      gravity: 'gravity',
+    },
+    // The six directions a check can see (what it could not see is listed).
+    directionNames: { roll: 'roll', yaw: 'yaw', pitch: 'pitch', forward: 'forward', height: 'height', sideways: 'sideways' },
+    // A drift's change in words: positive is right (roll), left (yaw), up
+    // (pitch), forward, higher, right (sideways).
+    driftChange: (direction, amount, positive) => ({
+      roll: 'tilted ' + amount + '° more to the ' + (positive ? 'right' : 'left'),
+      yaw: 'turned ' + amount + '° more to the ' + (positive ? 'left' : 'right'),
+      pitch: 'pitched ' + amount + '° more ' + (positive ? 'up' : 'down'),
+      forward: amount + ' mm farther ' + (positive ? 'forward' : 'back'),
+      height: amount + ' mm ' + (positive ? 'higher' : 'lower'),
+      sideways: amount + ' mm farther ' + (positive ? 'right' : 'left'),
+    })[direction] || direction,
+    groundSays: (changes) => 'the ground says the sensor is ' + changes,
+    gravitySays: (changes) => 'the accelerometer says the sensor is ' + changes,
+    gravitySaysNotGround: (changes) => 'the accelerometer says the sensor is ' + changes + ', but the ground does not (a slope, or the accelerometer moved in the Kinect)',
+    andJoin: ' and ',
+    sentenceJoin: '; ',
 
     // Charts.
     pose: 'pose',
@@ -158,7 +191,7 @@ const WORDS = {
     soFar: (d) => d + ' so far',
     left_: (d) => 'about ' + d + ' left',
     afterFirstPose: 'time left: after the first pose',
-    hardwareAtStart: (words) => 'Hardware at the service\'s start: ' + words,
+    hardwareAtStart: 'Hardware at the service\'s start: ',
     opening: 'opening the Kinect and connecting to the robot',
     phases: {
       started: 'schedule checked; connecting to the robot',
@@ -189,6 +222,9 @@ const WORDS = {
     listJoin: ', ',
     confirmCalibrate: (poses, about) => 'Start a calibration? The robot will move its body through ' + poses + ' poses for ' + about + '.',
     confirmCheck: (tilts, about) => 'Check the active calibration? The robot will walk to its home stance' + (tilts ? ' and tilt its body ' + tilts + ' times' : '') + ', for ' + about + '.',
+    asLastTook: (about) => about + ', as the last one took',
+    atNominalSpeed: (about) => about + ' at the robot\'s nominal speed',
+    atSimulatorSpeed: (about) => about + ' at the simulator\'s speed',
     keepClear: ' Keep everyone clear of the robot and its legs until it is back at home.',
     yesCalibrate: 'Yes, calibrate',
     yesCheck: 'Yes, check',
@@ -201,9 +237,11 @@ const WORDS = {
     active: 'Active',
     since: (when) => ' since ' + when,
     notActiveYet: 'Not active yet: Accept makes it the calibration the robot uses.',
+    wasActive: (at, by, made) => 'It was the active calibration until ' + at + ', when ' + by + ' made the calibration of ' + made + ' active instead. To use it again, roll back to it in the history.',
     cannotBecomeActive: 'It failed its checks, so it cannot become active.',
     calibrationOf: (made) => 'calibration of ' + made,
     cutOff: (by, when) => 'The calibration started by ' + by + ' on ' + when + ' was cut off: the service stopped before it finished.',
+    cutOffCheck: (by, when) => 'The check started by ' + by + ' on ' + when + ' was cut off: the service stopped before it finished.',
     cutOffWatchdog: 'The robot\'s own watchdog halts the body within 1 s once groundcal falls silent, so it stands where the run was cut off. Check that it stands safely and that nobody is near it.',
     heldForPerson: 'Nothing moves until someone asks: the check at start was held. Press Check (the robot walks home first) or Calibrate when the robot is clear.',
     nothingMoves: 'Nothing moves until someone presses Calibrate or Check.',
@@ -215,6 +253,8 @@ const WORDS = {
     notChecked: 'Not checked since it became active or since the service started: Check compares it with the sensor now.',
     checkingNow: 'Checking it against the sensor now…',
     checkFailed: (when, why) => 'The last check (' + when + ') could not be made: ' + why,
+    startCheckHeld: (when, why) => 'The check at the service\'s start (' + when + ') moves nothing, and was not made: ' + why + '.',
+    serviceStart: 'the service\'s start',
     noReason: 'no reason given',
     checkedAt: (when, by, drift) => 'Checked ' + when + (by ? ' (' + by + ')' : '') + ': '
       + (drift ? 'the sensor has moved since it was calibrated.' : 'the sensor agrees with it.'),
@@ -287,6 +327,14 @@ const WORDS = {
     rolledBack: (made) => '已回退：' + made + ' 的标定现在是当前标定。',
     madeActive: (made) => '已启用：' + made + ' 的标定现在是当前标定。',
     rollBack: '回退',
+    abortPending: (timedOut, seconds, kept) => '“中止”暂时没有发出去：机器人的计算机'
+      + (timedOut ? seconds + ' 秒内没有回应' : '无法访问')
+      + '。机器人的计算机一回应，就会立即发出'
+      + (kept ? '（保存在这台设备上：其他设备不知道这个中止）。' : '；如果重新加载页面，这个页面无法保留它。')
+      + '如果机器人在此期间移动，请按它的急停按钮。',
+    abortPendingTitle: '中止待发送：机器人一回应就发出',
+    abortNothingRunning: '中止：运行已经结束（结束方式见上方）。',
+    abortedTitle: (left) => '已中止：' + left,
 
     seconds: (s) => s + ' 秒',
     minutesSeconds: (m, s) => m + ' 分 ' + String(s).padStart(2, '0') + ' 秒',
@@ -346,7 +394,28 @@ const WORDS = {
     axes: { forward: '前后', up: '上下', right: '左右' },
     checksPassed: (n, of) => '检查项：' + of + ' 项中通过 ' + n + ' 项',
     checkFigure: (name, measured, allowed, passed) => name + ' ' + measured + '（允许 ' + allowed + '）' + (passed ? '' : ' —— 超出'),
-    checkNames: { 'ground angle θ': '地面夹角 θ', 'ground height e_d': '地面高度 e_d', 'gravity angle': '重力方向夹角' },
+    checkNames: {
+      'ground tilt θ': '地面倾角 θ',
+      'height e_d': '高度 e_d',
+      yaw: '偏航',
+      'forward position': '前后位置',
+      'sideways position': '左右位置',
+      gravity: '重力方向',
+    },
+    directionNames: { roll: '横滚', yaw: '偏航', pitch: '俯仰', forward: '前后', height: '高度', sideways: '左右' },
+    driftChange: (direction, amount, positive) => ({
+      roll: '向' + (positive ? '右' : '左') + '多横滚了 ' + amount + '°',
+      yaw: '向' + (positive ? '左' : '右') + '多转了 ' + amount + '°',
+      pitch: '向' + (positive ? '上多仰了 ' : '下多俯了 ') + amount + '°',
+      forward: '向' + (positive ? '前' : '后') + '多移了 ' + amount + ' 毫米',
+      height: (positive ? '高了 ' : '低了 ') + amount + ' 毫米',
+      sideways: '向' + (positive ? '右' : '左') + '多移了 ' + amount + ' 毫米',
+    })[direction] || direction,
+    groundSays: (changes) => '地面表明传感器比当前标定所说的' + changes,
+    gravitySays: (changes) => '加速度计表明传感器比当前标定所说的' + changes,
+    gravitySaysNotGround: (changes) => '加速度计表明传感器比当前标定所说的' + changes + '，但地面并不这样表明（可能是斜坡，或者加速度计在 Kinect 内移动了）',
+    andJoin: '，并且',
+    sentenceJoin: '；',
 
     pose: '姿态',
     gate: (value) => '门限 ' + value,
@@ -389,7 +458,7 @@ const WORDS = {
     soFar: (d) => '已用 ' + d,
     left_: (d) => '约剩 ' + d,
     afterFirstPose: '剩余时间：第一个姿态之后显示',
-    hardwareAtStart: (words) => '服务启动时的硬件状态：' + words,
+    hardwareAtStart: '服务启动时的硬件状态：',
     opening: '正在打开 Kinect 并连接机器人',
     phases: {
       started: '姿态计划已检查；正在连接机器人',
@@ -420,6 +489,9 @@ const WORDS = {
     confirmCalibrate: (poses, about) => '开始标定吗？机器人会让机身依次经过 ' + poses + ' 个姿态，持续' + about + '。',
     confirmCheck: (tilts, about) => '检查当前标定吗？机器人会走到初始站姿' + (tilts ? '，并倾斜机身 ' + tilts + ' 次' : '') + '，持续' + about + '。',
     keepClear: '在机器人回到初始站姿之前，所有人都要远离机器人和它的腿。',
+    asLastTook: (about) => about + '（与上次实际用时相同）',
+    atNominalSpeed: (about) => about + '（按机器人的标称速度）',
+    atSimulatorSpeed: (about) => about + '（按模拟器的速度）',
     yesCalibrate: '是，开始标定',
     yesCheck: '是，开始检查',
 
@@ -430,9 +502,11 @@ const WORDS = {
     active: '当前',
     since: (when) => ' 自 ' + when + ' 起',
     notActiveYet: '尚未启用：按“接受”后，机器人才会使用这个标定。',
+    wasActive: (at, by, made) => '它曾是当前标定，直到 ' + at + '，' + by + ' 把 ' + made + ' 的标定设为了当前标定。要再次使用它，请在历史记录中回退到它。',
     cannotBecomeActive: '它没有通过检查，所以不能启用。',
     calibrationOf: (made) => made + ' 的标定',
     cutOff: (by, when) => by + ' 于 ' + when + ' 启动的标定被中断了：服务在标定完成前停止了。',
+    cutOffCheck: (by, when) => by + ' 于 ' + when + ' 启动的检查被中断了：服务在检查完成前停止了。',
     cutOffWatchdog: 'groundcal 一旦没有消息，机器人自己的看门狗会在 1 秒内让机身停下，所以它停在标定被中断的地方。请确认它站得安全，附近没有人。',
     heldForPerson: '在有人要求之前什么都不会动：启动时的检查被暂缓了。机器人周围清空后，请按“检查”（机器人会先走回初始站姿）或“标定”。',
     nothingMoves: '在有人按“标定”或“检查”之前，什么都不会动。',
@@ -444,6 +518,8 @@ const WORDS = {
     notChecked: '启用以来或服务启动以来还没有检查过：按“检查”会把它与传感器现在的状态相比较。',
     checkingNow: '正在用传感器检查它…',
     checkFailed: (when, why) => '上次检查（' + when + '）无法完成：' + why,
+    startCheckHeld: (when, why) => '服务启动时的检查（' + when + '）不会让任何东西移动，所以没有进行：' + why + '。',
+    serviceStart: '服务启动时',
     noReason: '没有给出原因',
     checkedAt: (when, by, drift) => when + ' 检查过' + (by ? '（' + by + '）' : '') + '：'
       + (drift ? '传感器在标定之后被移动过。' : '传感器与它一致。'),

@@ -60,7 +60,13 @@ const model = {
   sending: null, // a button's request on its way: 'Abort', 'Calibrate', …
   confirm: null, // {kind: 'accept' | 'rollback', id}
   confirmRun: null, // 'calibration' | 'check': a button that moves the robot, asked first
+  starting: null, // 'calibration' | 'check': confirmed, until the daemon says it runs
   message: null, // {text, kind: 'error' | 'ok'}
+  abortNote: null, // {text, kind: 'error' | 'pending' | 'ok'}: what became of Abort
+  // An Abort that could not be sent: {started, at} of the run it stops. It
+  // is kept in this device's storage (a reload keeps it) and sent the
+  // moment the daemon answers again.
+  pendingAbort: null,
   statusAt: 0, // when the status was read (for the time so far)
 };
 
@@ -146,28 +152,117 @@ async function call(method, url, what) {
 }
 
 // Calibrate and Check move a legged robot: each asks first, saying for how
-// long and to keep clear. Cancel sends nothing.
-$('calibrate').onclick = () => { model.confirm = null; model.confirmRun = 'calibration'; render(); };
+// long and to keep clear. Cancel sends nothing. Without a token nothing can
+// start, so that is said first, before any question.
+function askToRun(kind) {
+  model.confirm = null;
+  if (!tokenField.value.trim()) {
+    model.confirmRun = null;
+    model.message = { text: t('tokenFirst'), kind: 'error' };
+    $('token-card').open = true;
+    tokenField.focus();
+  } else {
+    model.message = null;
+    model.confirmRun = kind;
+  }
+  render();
+}
+$('calibrate').onclick = () => askToRun('calibration');
 // A check of the active calibration against the sensor now (the robot holds
 // its home stance, or tilts a little with [verify] poses).
-$('check').onclick = () => { model.confirm = null; model.confirmRun = 'check'; render(); };
+$('check').onclick = () => askToRun('check');
 $('confirm-run-no').onclick = () => { model.confirmRun = null; render(); };
 $('confirm-run-yes').onclick = async () => {
   const kind = model.confirmRun;
   model.confirmRun = null;
   if (!kind) return;
+  // Until the daemon says it runs, the page says it is starting (not the
+  // last run's outcome).
+  model.starting = kind;
+  model.abortNote = null;
   const started = kind === 'calibration'
     ? await call('POST', '/api/calibrations', t('calibrate'))
     : await call('POST', '/api/check', t('check'));
-  if (started) refresh();
+  if (started) await refresh();
+  model.starting = null;
+  render();
 };
+
+// ---- Abort ---------------------------------------------------------------
+
 // Abort is never pretended: the page says "aborting…" only once the daemon
-// has it (the status's `abort`), and says so when it could not be sent.
-$('abort').onclick = async () => {
+// has it (the status's `abort`). An Abort that could not be sent is not
+// forgotten: it is kept (in this device's storage, so a reload keeps it) and
+// sent the moment the daemon answers again, for the run it was pressed for.
+// Another device cannot know of it; the note says so.
+const PENDING_ABORT = 'groundcal-pending-abort';
+function keepPendingAbort(started) {
+  model.pendingAbort = { started, at: Date.now(), kept: true };
+  try { localStorage.setItem(PENDING_ABORT, JSON.stringify({ started, at: model.pendingAbort.at })); } catch (e) { model.pendingAbort.kept = false; }
+}
+function dropPendingAbort() {
+  model.pendingAbort = null;
+  try { localStorage.removeItem(PENDING_ABORT); } catch (e) { /* nothing kept */ }
+}
+try {
+  const kept = JSON.parse(localStorage.getItem(PENDING_ABORT) || 'null');
+  // An Abort older than a day stops nothing a person still waits on.
+  if (kept && Date.now() - kept.at < 86_400_000) model.pendingAbort = { started: kept.started, at: kept.at, kept: true };
+  else dropPendingAbort();
+} catch (e) { dropPendingAbort(); }
+
+async function sendAbort() {
   model.confirmRun = null;
-  await call('POST', '/api/calibrations/current/abort', t('abort'));
-  refresh();
-};
+  const s = model.status;
+  const started = (model.pendingAbort && model.pendingAbort.started) || (s && s.started) || null;
+  const headers = { 'Authorization': 'Bearer ' + tokenField.value.trim(), 'X-Groundcal-Client': encodeURIComponent(t('clientName')) };
+  // With no contact it is pending from the moment it is pressed: the
+  // request may take its whole time to fail.
+  if (model.contact === 'lost' && !model.pendingAbort) keepPendingAbort(started);
+  model.sending = t('abort');
+  render();
+  let response;
+  let body = {};
+  try {
+    response = await fetchWithin('/api/calibrations/current/abort', { method: 'POST', headers });
+    try { body = await response.json(); } catch (e) { body = {}; }
+  } catch (e) {
+    model.sending = null;
+    keepPendingAbort(started);
+    model.abortNote = { text: t('abortPending', e && e.name === 'AbortError', REQUEST_MS / 1000, model.pendingAbort.kept), kind: 'pending' };
+    lose();
+    return;
+  }
+  model.sending = null;
+  heard();
+  if (response.ok) {
+    dropPendingAbort();
+    model.abortNote = null;
+  } else if (response.status === 409) {
+    // Nothing runs any more: the run ended before the Abort reached it (the
+    // status says how: the daemon aborts by itself a run it stalled in).
+    dropPendingAbort();
+    model.abortNote = { text: t('abortNothingRunning'), kind: 'ok' };
+  } else {
+    model.abortNote = { text: explain(response, body), kind: 'error' };
+  }
+  await refresh();
+}
+$('abort').onclick = sendAbort;
+
+// Contact is back: a pending Abort goes at once, if its run still runs.
+async function flushPendingAbort() {
+  const p = model.pendingAbort;
+  if (!p || model.sending) return;
+  const s = model.status;
+  if (s && s.state === 'running' && (!p.started || s.started === p.started)) {
+    await sendAbort();
+  } else if (s) {
+    dropPendingAbort();
+    model.abortNote = { text: t('abortNothingRunning'), kind: 'ok' };
+    render();
+  }
+}
 $('accept').onclick = () => {
   const s = model.status;
   if (s && s.result_id) { model.confirm = { kind: 'accept', id: s.result_id }; render(); }
@@ -360,6 +455,20 @@ function gateLines(result) {
   });
 }
 
+// Why a check says the sensor moved: in English the daemon's own words;
+// in another language from the typed drifts ("the ground says the sensor is
+// pitched 0.30° more down"), each direction with its sign.
+function driftInWords(check) {
+  const report = check.report;
+  if (language === 'en' || !report || !report.drifts || !report.drifts.length) {
+    return check.reasons.map((r) => r.replace(' than the active calibration says', '')).join('; ');
+  }
+  return report.drifts.map((d) => {
+    const changes = d.changes.map((c) => t('driftChange', c.direction, Math.abs(c.change).toFixed(c.unit === 'deg' ? 2 : 1), c.change >= 0));
+    return t(d.from === 'gravity' ? (d.ground_disagrees ? 'gravitySaysNotGround' : 'gravitySays') : 'groundSays', changes.join(t('andJoin')));
+  }).join(t('sentenceJoin'));
+}
+
 // A check's figures in words: "ground tilt θ 0.003° (allowed 0.017°), …".
 function checkFigures(report) {
   if (!report) return [];
@@ -511,26 +620,27 @@ function render() {
   $('safety').textContent = unsafe ? t(aborted.robot_left === 'unknown' ? 'mayNotHaveStopped' : 'notAtHome', unsafe) : '';
 
   // A sensor that moved since its calibration: the terrain map is wrong. The
-  // check speaks only for the calibration it checked: after a new one is made
-  // active, its banner goes.
+  // banner stands on the last check that reached a verdict (kept by the
+  // daemon across any stop; a check that could not be made does not clear
+  // it), and speaks only for the calibration it checked: after a new one is
+  // made active, it goes.
   const ck = s && s.check && s.check.calibration_id === activeId ? s.check : null;
-  const drift = ck && ck.outcome === 'drift';
+  const lastVerdict = s && s.verdict && s.verdict.calibration_id === activeId ? s.verdict : null;
+  const drift = !!lastVerdict && lastVerdict.outcome === 'drift';
   $('drift').hidden = !drift;
-  // Why, in the daemon's words in English, else from the check's figures.
-  const driftWhy = !drift ? '' : language === 'en'
-    ? ck.reasons.map((r) => r.replace(' than the active calibration says', '')).join('; ')
-    : checkFigures(ck.report).filter((line, k) => !ck.report.checks[k].passed).join('；') || ck.reasons.join('; ');
-  $('drift-text').textContent = drift ? t('driftText', madeOn(activeId), driftWhy) : '';
-  redraw('drift-todo', drift ? 'drift' : '', () => list($('drift-todo'), drift ? t('driftTodo') : []));
+  $('drift-text').textContent = drift ? t('driftText', madeOn(activeId), driftInWords(lastVerdict)) : '';
+  redraw('drift-todo', drift ? 'drift ' + language : '', () => list($('drift-todo'), drift ? t('driftTodo') : []));
 
   // Progress.
   const checking = running && s.task === 'check';
   let title = t('connecting');
   if (s) {
     if (running) title = aborting ? t('aborting') : checking ? t('checkingSensor') : (s.pose ? t('poseOf', s.pose, s.of) : t('starting'));
-    else title = aborted ? t('left')[aborted.robot_left] || t('stopped') : (s.result ? t('finished') : t('idle'));
+    else if (model.starting) title = t('starting');
+    else title = aborted ? t('abortedTitle', t('left')[aborted.robot_left] || t('stopped')) : (s.result ? t('finished') : t('idle'));
   }
   if (model.sending === t('abort') && !aborting) title = t('sendingAbort');
+  if (model.pendingAbort && !aborting) title = t('abortPendingTitle');
   $('progress').textContent = title;
   $('bar').hidden = !running || aborting;
   if (running) $('bar-fill').style.width = (s.of ? 100 * Math.max(0, (s.pose || 1) - 1) / s.of : 0) + '%';
@@ -556,21 +666,43 @@ function render() {
   } else {
     $('times').textContent = '';
   }
-  $('hardware').textContent = s && !running && s.hardware ? t('hardwareAtStart', s.hardware) : '';
-  $('hardware').lang = 'en';
-  $('calibrate').disabled = lost || !s || running || !!model.sending;
-  $('check').disabled = lost || !s || running || !activeId || !!model.sending;
+  // The hardware as the service found it at start: its words are the
+  // daemon's, in English, marked so.
+  const hardware = $('hardware');
+  hardware.textContent = '';
+  if (s && !running && s.hardware) {
+    const words = document.createElement('span');
+    english(words, s.hardware + t('inEnglish'));
+    hardware.append(t('hardwareAtStart'), words);
+  }
+  $('calibrate').disabled = lost || !s || running || !!model.sending || !!model.starting;
+  $('check').disabled = lost || !s || running || !activeId || !!model.sending || !!model.starting;
   // Abort stays pressable while the last known state is running, even with
-  // no contact: pressing it then says that it could not be sent.
-  $('abort').disabled = !running || aborting || model.sending === t('abort');
+  // no contact (pressing it then keeps it pending), and while one is pending.
+  const pending = model.pendingAbort;
+  $('abort').disabled = !(running || pending) || aborting || model.sending === t('abort');
+  // Docked at the foot of the screen while it matters, with its outcome.
+  const docked = running || !!pending;
+  $('abort-dock').classList.toggle('docked', docked);
+  document.body.classList.toggle('docked', docked);
+  const note = $('abort-note');
+  const noteWords = pending && !(model.abortNote && model.abortNote.kind === 'pending')
+    ? { text: t('abortPending', false, REQUEST_MS / 1000, pending.kept), kind: 'pending' }
+    : model.abortNote;
+  note.textContent = noteWords ? noteWords.text : '';
+  note.className = noteWords ? noteWords.kind : '';
   const plans = s && s.motion;
   const cr = model.confirmRun;
   $('confirm-run').hidden = !cr || running || lost;
   if (cr && plans) {
     const plan = plans[cr];
+    // How long: as the last run of its kind took here, else the robot's
+    // nominal time (a faster simulator is not the robot).
+    const howLong = typeof plan.last_s === 'number' ? t('asLastTook', about(plan.last_s))
+      : t(plan.simulated ? 'atSimulatorSpeed' : 'atNominalSpeed', about(plan.about_s));
     $('confirm-run-text').textContent = (cr === 'calibration'
-      ? t('confirmCalibrate', plan.poses, about(plan.about_s))
-      : t('confirmCheck', plan.poses > 1 ? plan.poses - 1 : 0, about(plan.about_s)))
+      ? t('confirmCalibrate', plan.poses, howLong)
+      : t('confirmCheck', plan.poses > 1 ? plan.poses - 1 : 0, howLong))
       + t('keepClear');
     $('confirm-run-yes').textContent = cr === 'calibration' ? t('yesCalibrate') : t('yesCheck');
   }
@@ -622,9 +754,14 @@ function render() {
     activeHere = !!activeId && activeId === s.result_id;
     $('change').textContent = r.robot_from_sensor && !activeHere ? changeInWords(r.robot_from_sensor, activeDoc) : '';
     $('activeline').innerHTML = '';
+    const replaced = !activeHere && s.result.replaced;
     if (activeHere) {
       const badge = document.createElement('span'); badge.className = 'active-badge'; badge.textContent = t('active');
       $('activeline').append(badge, t('since', when(s.active.activated)));
+    } else if (replaced) {
+      // It was active until someone made another active (a rollback): one
+      // tap must not undo that. The history can still make it active again.
+      $('activeline').textContent = t('wasActive', when(replaced.at), replaced.by, madeOn(replaced.by_id));
     } else {
       $('activeline').textContent = passed ? t('notActiveYet') : t('cannotBecomeActive');
     }
@@ -640,7 +777,7 @@ function render() {
     verdict.textContent = cut ? t('interrupted') : t('noResult');
     verdict.className = cut ? 'interrupted' : 'failed';
     if (cut) {
-      say(t('cutOff', cut.by, when(cut.started)));
+      say(t(cut.task === 'check' ? 'cutOffCheck' : 'cutOff', cut.by, when(cut.started)));
       say(t('cutOffWatchdog'));
       say(s.startup_check === 'held_for_a_person' ? t('heldForPerson') : t('nothingMoves'));
     } else {
@@ -655,8 +792,9 @@ function render() {
     if (running && !checking) redraw('charts', JSON.stringify(['running', s.provisional, s.of, s.pose]), () => charts(s.provisional || [], s.of || 1, true));
     else redraw('charts', 'none', () => charts([], 1, false));
   }
-  $('accept').hidden = activeHere || !(r && r.status === 'accepted');
-  $('accept').disabled = lost || running || !r || r.status !== 'accepted' || !s.result_id || activeHere;
+  const wasReplaced = !!(r && s.result.replaced) && !activeHere;
+  $('accept').hidden = activeHere || wasReplaced || !(r && r.status === 'accepted');
+  $('accept').disabled = lost || running || !r || r.status !== 'accepted' || !s.result_id || activeHere || wasReplaced;
 
   const c = model.confirm;
   $('confirm').hidden = !c;
@@ -672,15 +810,25 @@ function render() {
   $('active').textContent = activeId ? t('activeLine', madeOn(activeId), when(s.active.activated)) : t('noneYet');
   $('active').dataset.id = activeId || '';
   $('active').title = activeId || '';
+  // The last check: running, how it ended, and (when it could not be made)
+  // the verdict before it, which still stands.
   const line = $('checkline');
-  line.className = ck ? ck.outcome : '';
-  if (!ck) line.textContent = a ? t('notChecked') : '';
-  else if (ck.outcome === 'running') line.textContent = t('checkingNow');
-  else if (ck.outcome === 'failed') line.textContent = t('checkFailed', when(ck.started), ck.error || t('noReason'));
-  else line.textContent = t('checkedAt', when(ck.finished), ck.by, drift);
-  redraw('checks', JSON.stringify(ck && ck.report ? [ck.finished, ck.report.checks] : null), () => {
-    const report = ck && ck.report;
-    const unseen = report && report.not_checked.length ? [t('notSeen', report.not_checked.join(', '))] : [];
+  const shownCheck = ck || lastVerdict;
+  line.className = shownCheck ? shownCheck.outcome : '';
+  const starter = (c) => c.started_by_service ? t('serviceStart') : c.by;
+  let checkText = '';
+  if (!shownCheck) checkText = a ? t('notChecked') : '';
+  else if (shownCheck.outcome === 'running') checkText = t('checkingNow');
+  else if (shownCheck.outcome === 'failed') {
+    const held = shownCheck.started_by_service && s.startup_check === 'held_not_standing';
+    checkText = t(held ? 'startCheckHeld' : 'checkFailed', when(shownCheck.started), (shownCheck.error || t('noReason')) + (shownCheck.error ? t('inEnglish') : ''));
+    if (lastVerdict && lastVerdict.finished !== shownCheck.finished) checkText += ' ' + t('checkedAt', when(lastVerdict.finished), starter(lastVerdict), drift);
+  } else checkText = t('checkedAt', when(shownCheck.finished), starter(shownCheck), shownCheck.outcome === 'drift');
+  line.textContent = checkText;
+  const reported = shownCheck && shownCheck.report ? shownCheck : lastVerdict;
+  redraw('checks', JSON.stringify(reported && reported.report ? [reported.finished, reported.report.checks, language] : null), () => {
+    const report = reported && reported.report;
+    const unseen = report && report.not_checked.length ? [t('notSeen', report.not_checked.map((d) => t('directionNames')[d] || d).join(t('listJoin')))] : [];
     list($('checks'), checkFigures(report).concat(unseen));
   });
   redraw('history', JSON.stringify([model.history.slice(0, 20), activeId, lost || running]), () => {
@@ -851,6 +999,10 @@ function heard() {
   model.lostSince = null;
   if (wasLost) { loadStore(); render(); }
 }
+// After each status read: an Abort waiting for contact goes now.
+function afterStatus() {
+  if (model.pendingAbort) flushPendingAbort();
+}
 function lose() {
   if (model.contact !== 'lost') { model.contact = 'lost'; model.lostSince = Date.now(); }
   render();
@@ -875,6 +1027,7 @@ async function refresh() {
     const activeNow = s.active ? s.active.id : null;
     if (activeNow !== activeBefore || (activeNow && (!model.active || model.active.id !== activeNow))) loadStore();
     render();
+    afterStatus();
     return true;
   } catch (e) { lose(); return false; }
 }

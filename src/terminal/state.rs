@@ -8,7 +8,9 @@ use std::time::{Instant, SystemTime};
 
 use tokio::sync::{broadcast, oneshot, watch};
 
-use super::api::{ActiveRef, EventJson, Interrupted, MotionPlan, MotionPlans, RunState, Status};
+use super::api::{
+    ActiveRef, CheckStatus, EventJson, Interrupted, MotionPlan, MotionPlans, RunState, Status, Task,
+};
 use super::preview::{PreviewThread, ViewSlot};
 use crate::config::Config;
 use crate::hardware::Selection;
@@ -63,14 +65,40 @@ impl AppState {
             ),
             Err(e) => tracing::warn!("cannot clean the store: {e}"),
         }
-        // A calibration cut off by the service's end (a kill, a crash, a
-        // power cut) is said, not forgotten.
-        let interrupted = store.take_interrupted().map(|(by, started)| {
+        // A run cut off by a stop of the service (a kill, a crash, a power
+        // cut) is said, not forgotten, at this start and every later one,
+        // until a person starts the next run.
+        let interrupted = store.interrupted().map(|cut| {
+            let task = if cut.task == "check" {
+                Task::Check
+            } else {
+                Task::Calibration
+            };
             tracing::warn!(
-                "the calibration started by {by} at {started} was interrupted: the service stopped before it finished. The robot's own watchdog halts the body once groundcal falls silent; nothing moves until a person asks for it on the page"
+                "the {} started by {} at {} was interrupted: the service stopped before it finished. The robot's own watchdog halts the body once groundcal falls silent; nothing moves until a person asks for it on the page",
+                cut.task, cut.by, cut.started
             );
-            Interrupted { by, started }
+            Interrupted {
+                by: cut.by,
+                started: cut.started,
+                task,
+            }
         });
+        // The last verdict of a check, as it was before the stop.
+        let verdict = match store.last_check::<CheckStatus>() {
+            Ok(verdict) => verdict,
+            Err(e) => {
+                tracing::warn!("cannot read the last check: {e}");
+                None
+            }
+        };
+        if let Some(v) = verdict.as_ref().filter(|v| v.outcome == "drift") {
+            tracing::warn!(
+                "the last check of calibration {} found drift: {}",
+                v.calibration_id.as_deref().unwrap_or("?"),
+                v.reasons.join("; ")
+            );
+        }
         let active = match store.active() {
             Ok(active) => active.as_ref().map(ActiveRef::of),
             Err(e) => {
@@ -92,6 +120,8 @@ impl AppState {
                 step: "idle".into(),
                 gates: Some(gates),
                 interrupted,
+                check: verdict.clone(),
+                verdict,
                 active,
                 motion: Some(motion),
                 ..Status::default()
@@ -273,6 +303,21 @@ impl AppState {
         lock(&self.0.view).json(live_at_rest)
     }
 
+    /// A run of `task` went through all its poses: how long it took since
+    /// it started, for the next confirmation's "about how long".
+    pub(super) fn note_run_took(&self, task: Task) {
+        let mut status = self.status_mut();
+        let Some(took) = status.clock.map(|c| c.started.elapsed().as_secs_f64()) else {
+            return;
+        };
+        if let Some(motion) = status.motion.as_mut() {
+            match task {
+                Task::Calibration => motion.calibration.last_s = Some(took),
+                Task::Check => motion.check.last_s = Some(took),
+            }
+        }
+    }
+
     /// The session's loop beats: it is alive now.
     pub(super) fn beat(&self) {
         *lock(&self.0.heartbeat) = Some(Instant::now());
@@ -302,6 +347,8 @@ fn motion_plans(config: &Config, schedule: &Schedule) -> MotionPlans {
     let plan = |poses: usize| MotionPlan {
         poses,
         about_s: (poses + 2) as f64 * per_pose_s / scale,
+        simulated: scale != 1.0,
+        last_s: None,
     };
     MotionPlans {
         calibration: plan(schedule.poses.len()),

@@ -104,13 +104,29 @@ async fn forward(state: &AppState, mut events: tokio::sync::mpsc::UnboundedRecei
     }
 }
 
+/// Why a check ended without a verdict.
+enum CheckFailure {
+    /// A check that must not move anything would have had to (the robot
+    /// not at its home stance, the motor not at the tilt).
+    WouldMove(String),
+    Other(String),
+}
+
+impl From<String> for CheckFailure {
+    fn from(e: String) -> Self {
+        CheckFailure::Other(e)
+    }
+}
+
 /// The check thread: the active calibration against the sensor now, as
-/// `groundcal verify` with the configuration's `[verify] poses`.
-pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
+/// `groundcal verify`. A person's check visits the configuration's `[verify]
+/// poses`; the service's own (`by_a_person` false) moves nothing: it reads
+/// the stance the robot stands in, or waits for a person.
+pub fn run_check(state: AppState, abort: oneshot::Receiver<String>, by_a_person: bool) {
     state.stop_preview();
     let runtime = match session_runtime() {
         Ok(r) => r,
-        Err(e) => return finish_check(&state, Err(e)),
+        Err(e) => return finish_check(&state, Err(CheckFailure::Other(e)), by_a_person),
     };
     let outcome = runtime.block_on(async {
         let work = async {
@@ -126,21 +142,23 @@ pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
                 .check
                 .and_then(|c| c.calibration_id);
             if calibration.id != expected {
-                return Err(format!(
+                return Err(CheckFailure::Other(format!(
                     "the active calibration changed to {} before the check began; press Check again",
                     calibration.id.as_deref().unwrap_or("one without an id")
-                ));
+                )));
             }
             let (mut sensor, mut controller) = hardware::open(state.config(), state.selection())
                 .await
                 .map_err(|e| e.to_string())?;
             let config = state.config();
+            let tilted = if by_a_person { config.verify.poses } else { 0 };
             let schedule = check_schedule(
                 state.schedule().home,
-                config.verify.poses,
+                tilted,
                 config.verify.tilt_deg(&config.robot.limits),
             );
-            let plan = session::Plan::for_check(config, schedule, &calibration, None)?;
+            let mut plan = session::Plan::for_check(config, schedule, &calibration, None)?;
+            plan.stand_still = !by_a_person;
             let (tx, rx) = tokio::sync::mpsc::unbounded_channel::<Event>();
             let session = async {
                 let r = session::verify(
@@ -155,10 +173,11 @@ pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
                 drop(tx);
                 r
             };
-            let outcome = tokio::join!(session, forward(&state, rx))
-                .0
-                .map_err(|e| e.to_string())?;
-            Ok::<_, String>((
+            let outcome = tokio::join!(session, forward(&state, rx)).0.map_err(|e| match e {
+                session::SessionError::WouldMove(why) => CheckFailure::WouldMove(why),
+                other => CheckFailure::Other(other.to_string()),
+            })?;
+            Ok::<_, CheckFailure>((
                 VerifyJson::new(
                     &outcome.report,
                     &outcome.poses,
@@ -171,12 +190,21 @@ pub fn run_check(state: AppState, abort: oneshot::Receiver<String>) {
         beating(&state, work).await
     });
     state.clear_heartbeat();
-    finish_check(&state, outcome);
+    finish_check(&state, outcome, by_a_person);
 }
 
-/// A check's outcome, to the status, the journal and the live stream.
-fn finish_check(state: &AppState, outcome: Result<(VerifyJson, String), String>) {
+/// A check's outcome, to the status, the journal and the live stream; a
+/// verdict also to the store, where it outlives any stop.
+fn finish_check(
+    state: &AppState,
+    outcome: Result<(VerifyJson, String), CheckFailure>,
+    by_a_person: bool,
+) {
+    if by_a_person {
+        state.store().clear_running();
+    }
     state.take_abort();
+    let mut held_not_standing = false;
     let (outcome_words, reasons, error, report) = match outcome {
         Ok((report, source)) => {
             if report.drifted() {
@@ -207,26 +235,50 @@ fn finish_check(state: &AppState, outcome: Result<(VerifyJson, String), String>)
             };
             (words, report.reasons.clone(), None, Some(report))
         }
-        Err(e) => {
+        Err(CheckFailure::WouldMove(e)) => {
+            tracing::warn!("the check at the service's start was not made: {e}");
+            held_not_standing = !by_a_person;
+            ("failed", Vec::new(), Some(e), None)
+        }
+        Err(CheckFailure::Other(e)) => {
             tracing::warn!("check of the active calibration failed: {e}");
             ("failed", Vec::new(), Some(e), None)
         }
     };
-    {
+    let verdict = {
         let mut status = state.status_mut();
         let previous = status.check.take();
-        status.check = Some(CheckStatus {
+        let check = CheckStatus {
             calibration_id: previous.as_ref().and_then(|c| c.calibration_id.clone()),
             outcome: outcome_words.into(),
             by: previous.as_ref().map_or_else(String::new, |c| c.by.clone()),
+            started_by_service: !by_a_person,
             started: previous.map_or_else(String::new, |c| c.started),
             finished: Some(now()),
             reasons: reasons.clone(),
             error,
             report,
-        });
+        };
+        let verdict = (check.outcome != "failed").then(|| check.clone());
+        if let Some(v) = &verdict {
+            status.verdict = Some(v.clone());
+        }
+        status.check = Some(check);
+        if held_not_standing {
+            status.startup_check = super::api::StartupCheck::HeldNotStanding;
+        }
         status.state = RunState::Idle;
         status.provisional = None;
+        verdict
+    };
+    if verdict.is_some() && by_a_person {
+        state.note_run_took(super::api::Task::Check);
+    }
+    // Kept once the status is released: a write waits for the disk.
+    if let Some(verdict) = verdict {
+        if let Err(e) = state.store().save_check(&verdict) {
+            tracing::warn!("cannot keep the check's verdict in the store: {e}");
+        }
     }
     state.publish(EventJson::Checked {
         outcome: outcome_words.into(),
@@ -242,6 +294,7 @@ fn finish(state: &AppState, result: Result<ResultJson, String>) {
     state.status_mut().provisional = None;
     match result {
         Ok(result) => {
+            state.note_run_took(super::api::Task::Calibration);
             let status_text = result.status.as_str().to_string();
             let created = now();
             match state.store().add(&result, &created) {
@@ -254,6 +307,7 @@ fn finish(state: &AppState, result: Result<ResultJson, String>) {
                             id: id.clone(),
                             created,
                             operator_rejection: None,
+                            replaced: None,
                             result: result.without_pattern_cells(),
                         });
                         status.result_id = Some(id.clone());
@@ -273,6 +327,7 @@ fn finish(state: &AppState, result: Result<ResultJson, String>) {
                             id: String::new(),
                             created,
                             operator_rejection: None,
+                            replaced: None,
                             result,
                         });
                         status.error = Some(error.clone());
@@ -283,6 +338,7 @@ fn finish(state: &AppState, result: Result<ResultJson, String>) {
             }
         }
         Err(error) => {
+            tracing::warn!("the calibration stopped without a result: {error}");
             {
                 let mut status = state.status_mut();
                 status.error = Some(error.clone());

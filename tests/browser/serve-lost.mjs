@@ -46,8 +46,8 @@ try {
   seen.buttonsDisabled = await page.evaluate(() => ['calibrate', 'check', 'accept'].every((id) => document.getElementById(id).disabled));
   // Abort stays pressable (the run may still go on) and says it did not get through.
   await page.click('#abort');
-  await page.waitForFunction(() => /could not be sent/.test(document.getElementById('message').textContent), null, { timeout: 10_000 });
-  seen.abortMessage = await page.locator('#message').innerText();
+  await page.waitForFunction(() => /could not be sent/.test(document.getElementById('abort-note').textContent), null, { timeout: 10_000 });
+  seen.abortMessage = await page.locator('#abort-note').innerText();
   await page.waitForTimeout(1200);
   await shot(page, '5-lost');
   if (seen.lostAfterMs > 3000) problems.push(`the page said contact was lost only after ${seen.lostAfterMs} ms`);

@@ -9,7 +9,7 @@
 // step in words and the live θ/e_d chart fill in, waits for the verdict with
 // the six values, presses Accept and confirms: the result shows as Active. A
 // second calibration is accepted, then the first is rolled back to from the
-// history. A third is aborted: "aborting…", then "at home". Last the same
+// history. A third is aborted: "aborting…", then "aborted: at home". Last the same
 // page at pad size (1024×1366) must show two columns. Checks: no console
 // error, no page error, no request leaving the server (the page works
 // offline), no page wider than the screen. Saves serve-1-idle.png, serve-1b-confirm-calibrate.png,
@@ -89,6 +89,14 @@ try {
     return question;
   };
 
+  // Without a token nothing can start: Calibrate says so first, before any
+  // question about the robot.
+  await page.click('#calibrate');
+  seen.noToken = {
+    message: await text('message'),
+    confirmHidden: await page.$eval('#confirm-run', (e) => e.hidden),
+    tokenOpen: await page.$eval('#token-card', (d) => d.open),
+  };
   if (!await page.$eval('#token-card', (d) => d.open)) await page.click('#token-card summary');
   await page.fill('#token', token);
   // Calibrate asks first; Cancel sends nothing and nothing starts.
@@ -152,8 +160,14 @@ try {
   await overflow('accepted');
   await shot(page, '4-accepted');
 
-  // A second calibration, accepted; then roll back to the first.
-  await calibrate();
+  // A second calibration, accepted; then roll back to the first. Its
+  // question says how long the first one took here; from the moment it is
+  // confirmed the page says it is starting, never the last run's end.
+  await page.click('#calibrate');
+  await page.waitForSelector('#confirm-run:not([hidden])');
+  seen.confirmSecond = await text('confirm-run-text');
+  await page.click('#confirm-run-yes');
+  seen.titleAtStart = await text('progress');
   await page.waitForFunction(() => /pose \d+ of \d+/.test(document.getElementById('progress').textContent)
     && document.getElementById('result').hidden, null, { timeout: 60_000 });
   const second = await verdict();
@@ -165,18 +179,26 @@ try {
     && /Active/.test(document.querySelector(`#history tr[title="${id}"]`)?.textContent || ''), first, { timeout: 30_000 });
   seen.afterRollback = { active: await page.$eval('#active', (e) => e.dataset.id), activeText: await text('active'), first, second, history: await page.$$eval('#history tr', (rows) => rows.map((r) => r.innerText)) };
   await shot(page, '8-rollback');
+  // The second calibration, still on screen, was active until the rollback:
+  // it says so, and offers no Accept that would undo the rollback.
+  await page.waitForFunction(() => /was the active calibration until/.test(document.getElementById('activeline').textContent), null, { timeout: 10_000 });
+  seen.replaced = { line: await text('activeline'), acceptHidden: await page.$eval('#accept', (b) => b.hidden) };
 
   // A third calibration, aborted: "aborting…" once the daemon has the
   // Abort, while the robot halts and walks home, with no time left shown;
-  // then "at home".
+  // then "aborted: at home".
   await calibrate();
-  await page.waitForFunction(() => /pose [2-9]\d* of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000 });
+  // Pressed early in the run (poses 2 to 39 of 52), so that it cannot end
+  // before the Abort arrives.
+  await page.waitForFunction(() => /pose ([2-9]|[1-3]\d) of \d+/.test(document.getElementById('progress').textContent), null, { timeout: 60_000, polling: 50 });
+  seen.abortPressedAt = await text('progress');
   await page.click('#abort');
-  await page.waitForFunction(() => ['aborting…', 'at home'].includes(document.getElementById('progress').textContent), null, { timeout: 10_000 });
+  await page.waitForFunction(() => ['aborting…', 'aborted: at home'].includes(document.getElementById('progress').textContent), null, { timeout: 10_000 })
+    .catch(async (e) => { seen.abortTitles = [await text('progress'), await text('step'), await text('abort-note')]; throw e; });
   seen.aborting = await text('progress');
   seen.abortingTimes = await text('times');
   if (seen.aborting === 'aborting…' && seen.abortingTimes) problems.push(`while aborting the page said ${JSON.stringify(seen.abortingTimes)}`);
-  await page.waitForFunction(() => document.getElementById('progress').textContent === 'at home', null, { timeout: 60_000 });
+  await page.waitForFunction(() => document.getElementById('progress').textContent === 'aborted: at home', null, { timeout: 60_000 });
   seen.aborted = await text('step');
   if (/aborted: aborted/.test(seen.aborted)) problems.push(`the reason repeats itself: ${seen.aborted}`);
   await overflow('aborted');

@@ -661,9 +661,20 @@ pub fn spawn_serve_towards_sim_robot(
     token: &str,
     replacements: &[(&str, &str)],
 ) -> (Child, String, Child, PathBuf) {
+    spawn_serve_towards_sim_robot_at(dir, token, "50", replacements)
+}
+
+/// [`spawn_serve_towards_sim_robot`] with the lower computer at
+/// `robot_time_scale` times real time.
+pub fn spawn_serve_towards_sim_robot_at(
+    dir: &Path,
+    token: &str,
+    robot_time_scale: &str,
+    replacements: &[(&str, &str)],
+) -> (Child, String, Child, PathBuf) {
     let receipts = dir.join("receipts.jsonl");
     let (robot, robot_address) = spawn_sim_robot(
-        &["--time-scale", "50"],
+        &["--time-scale", robot_time_scale],
         &[("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str())],
     );
     let address_line = format!("\naddress = \"{robot_address}\"\n");
@@ -671,6 +682,59 @@ pub fn spawn_serve_towards_sim_robot(
     all.extend_from_slice(replacements);
     let (serve, address) = spawn_serve_with(dir, token, &all, &[], &[]);
     (serve, address, robot, receipts)
+}
+
+/// The datagrams the lower computer handled (its receipts log), in order:
+/// (kind, wall-clock milliseconds since the Unix epoch).
+pub fn received_at(receipts: &Path) -> Vec<(String, f64)> {
+    std::fs::read_to_string(receipts)
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["event"] == "datagram")
+        .filter_map(|v| Some((v["kind"].as_str()?.to_string(), v["unix_ms"].as_f64()?)))
+        .collect()
+}
+
+/// The motion commands among datagrams: SET_POSE, HOME and HALT.
+pub const MOTION: [&str; 3] = ["SET_POSE", "HOME", "HALT"];
+
+/// An active calibration of the simulated robot in the store in
+/// `state_dir` (`calibrate --config config/sim.toml`, accepted); its id.
+pub fn active_calibration_in_store(state_dir: &Path) -> String {
+    let sim = root().join("config/sim.toml");
+    let (code, out, err) = groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let result = groundcal::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
+        .expect("a result document");
+    let store = groundcal::store::Store::new(state_dir);
+    let id = store.add(&result, "2026-12-01T00:00:00Z").unwrap();
+    store
+        .activate(&id, "2026-12-01T00:00:01Z", "a test")
+        .unwrap();
+    id
+}
+
+/// config/sim.toml's `[sim] mount`, the simulated robot's true mount.
+pub const TRUE_MOUNT_LINE: &str = "mount = { alpha_deg = 0.8, beta_deg = -33.0, gamma_deg = 1.5, px_mm = 510.0, py_mm = 370.0, pz_mm = 15.0 }";
+
+/// [`TRUE_MOUNT_LINE`] knocked: pitched 0.3° down about the body's sideways
+/// axis (β of the fixed angles is the turn about it, α ≈ 0.8°).
+pub fn knocked_mount_line() -> String {
+    TRUE_MOUNT_LINE.replace("beta_deg = -33.0", "beta_deg = -33.3")
+}
+
+/// Waits (at most 60 s) until the daemon at `addr`'s status satisfies `done`.
+pub fn wait_for_status(addr: &str, done: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let (code, status) = http(addr, "GET", "/api/status", None);
+        if code == 200 && done(&status) {
+            return status;
+        }
+        assert!(std::time::Instant::now() < deadline, "{status:#}");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
 }
 
 /// The kinds of the datagrams the lower computer handled (its receipts

@@ -374,6 +374,9 @@ impl Impairment {
 struct ReceiptLine<'a> {
     event: &'a str,
     t_ms: f64,
+    /// Wall-clock time, milliseconds since the Unix epoch: a test lines the
+    /// datagrams up with what it did to the upper computer (a SIGCONT).
+    unix_ms: f64,
     life: u32,
     #[serde(skip_serializing_if = "Option::is_none")]
     from: Option<String>,
@@ -393,9 +396,13 @@ struct ReceiptLine<'a> {
 
 impl<'a> ReceiptLine<'a> {
     fn event(event: &'a str, t_ms: f64, life: u32) -> Self {
+        let unix_ms = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64() * 1000.0);
         Self {
             event,
             t_ms,
+            unix_ms,
             life,
             from: None,
             kind: None,
