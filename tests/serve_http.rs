@@ -603,3 +603,73 @@ async fn the_picture_shows_the_ground_at_rest_and_at_each_pose() {
     server.await.unwrap().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The check at the service's start moves nothing: when the lower computer
+/// (its own process) reports the body away from its home stance (another
+/// client left it at a pose), the check is not made, the status says why
+/// and that it waits for a person, and groundcal sends no SET_POSE, HOME or
+/// HALT.
+#[test]
+fn the_check_at_start_waits_for_a_person_when_the_robot_stands_elsewhere() {
+    use groundcal_hal::udp::{LinkConfig, UdpBodyController};
+    use groundcal_hal::{BodyController, MotionState};
+    let dir = temp_dir("start-elsewhere");
+    common::active_calibration_in_store(&dir.join("state.sim"));
+    let receipts = dir.join("receipts.jsonl");
+    let (robot, robot_address) = common::spawn_sim_robot(
+        &["--time-scale", "50"],
+        &[("GROUNDCAL_SIM_RECEIPTS", receipts.as_os_str())],
+    );
+    // Another upper computer leaves the body rolled 5° at a pose.
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        let link = LinkConfig::new(robot_address.parse().unwrap());
+        let mut other = UdpBodyController::connect(&link).await.unwrap();
+        other.hello().await.unwrap();
+        let pose =
+            groundcal::calib::geometry::PoseDegMm::from_values([0.0, 0.0, 5.0, 0.0, 600.0, 0.0]);
+        other.set_pose(1, &pose, 200).await.unwrap();
+        let start = Instant::now();
+        while other.state().await.unwrap().state != MotionState::Settled {
+            assert!(start.elapsed() < Duration::from_secs(10));
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    });
+    let mark = std::fs::read_to_string(&receipts).unwrap().lines().count();
+    let address_line = format!("\naddress = \"{robot_address}\"\n");
+    let (server, addr) = common::spawn_serve_with(
+        dir.path(),
+        TOKEN,
+        &[("\naddress = \"sim\"\n", address_line.as_str())],
+        &[],
+        &[],
+    );
+    let status = common::wait_for_status(&addr, |s| {
+        s["startup_check"] != "off" && s["startup_check"] != "started"
+            || s["check"]["outcome"] == "failed"
+    });
+    assert_eq!(status["startup_check"], "held_not_standing", "{status:#}");
+    let error = status["check"]["error"].as_str().unwrap_or_default();
+    assert!(
+        error.contains(
+            "does not report the robot standing at its home stance (holding a pose away from home)"
+        ) && error.contains("waits for a person"),
+        "{status:#}"
+    );
+    let since: Vec<String> = std::fs::read_to_string(&receipts)
+        .unwrap()
+        .lines()
+        .skip(mark)
+        .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+        .filter(|v| v["event"] == "datagram")
+        .filter_map(|v| v["kind"].as_str().map(String::from))
+        .collect();
+    assert!(since.iter().any(|k| k == "GET_STATE"), "{since:?}");
+    assert!(
+        !since.iter().any(|k| common::MOTION.contains(&k.as_str())),
+        "the check at start moved the robot: {since:?}"
+    );
+    let (code, stderr) = common::terminate(server);
+    assert_eq!(code, 0, "{stderr}");
+    common::stop_sim_robot(robot);
+}
