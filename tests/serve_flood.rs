@@ -382,3 +382,104 @@ fn event_streams_opened_without_a_token_do_not_lock_out_abort() {
 fn event_streams_and_half_open_connections_together_do_not_lock_out_abort() {
     abort_gets_through("serve-both-floods", 600, FLOOD);
 }
+
+/// The operator's page opens its live stream with the token's one-use
+/// ticket; ten other loopback addresses then hold eight streams each,
+/// opened without the token and reopened as fast as they are closed. For
+/// 10 s the operator's stream is never closed and hears every heartbeat;
+/// a used ticket opens nothing.
+#[test]
+fn streams_opened_without_the_token_never_close_the_operators() {
+    let dir = common::TempDir::new("flood-operator-stream");
+    let (server, address) = common::spawn_serve(dir.path(), TOKEN, &[], &[]);
+    let (code, body, _) = request(&address, "POST", "/api/stream-ticket", true);
+    assert_eq!(code, 200, "{body}");
+    let ticket = body["ticket"].as_str().unwrap().to_string();
+    let (code, _, _) = request(&address, "POST", "/api/stream-ticket", false);
+    assert_eq!(code, 401, "a ticket needs the token");
+
+    let mut operator = TcpStream::connect(&address).unwrap();
+    operator
+        .set_read_timeout(Some(Duration::from_secs(3)))
+        .unwrap();
+    write!(
+        operator,
+        "GET /api/events?ticket={ticket} HTTP/1.1\r\nHost: {address}\r\nAccept: text/event-stream\r\n\r\n"
+    )
+    .unwrap();
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let opened = Arc::new(AtomicUsize::new(0));
+    let strangers: Vec<_> = (2..12u8)
+        .map(|n| {
+            let (address, stop, opened) = (address.clone(), stop.clone(), opened.clone());
+            std::thread::spawn(move || {
+                let runtime = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build()
+                    .unwrap();
+                runtime.block_on(async move {
+                    use tokio::io::AsyncWriteExt;
+                    let mut open = std::collections::VecDeque::new();
+                    while !stop.load(Ordering::Relaxed) {
+                        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+                        socket
+                            .bind(format!("127.0.0.{n}:0").parse().unwrap())
+                            .unwrap();
+                        if let Ok(mut s) = socket.connect(address.parse().unwrap()).await {
+                            let request = format!(
+                                "GET /api/events HTTP/1.1\r\nHost: {address}\r\nAccept: text/event-stream\r\n\r\n"
+                            );
+                            let _ = s.write_all(request.as_bytes()).await;
+                            open.push_back(s);
+                            opened.fetch_add(1, Ordering::Relaxed);
+                        }
+                        if open.len() > 8 {
+                            open.pop_front();
+                        }
+                        tokio::time::sleep(Duration::from_millis(5)).await;
+                    }
+                });
+            })
+        })
+        .collect();
+
+    let started = Instant::now();
+    let mut heard = Vec::new();
+    let mut heartbeats = 0;
+    let mut buffer = [0u8; 4096];
+    while started.elapsed() < Duration::from_secs(10) {
+        match operator.read(&mut buffer) {
+            Ok(0) => panic!(
+                "the operator's stream was closed after {:?} ({} strangers' streams opened)",
+                started.elapsed(),
+                opened.load(Ordering::Relaxed)
+            ),
+            Ok(n) => {
+                heard.extend_from_slice(&buffer[..n]);
+                heartbeats = String::from_utf8_lossy(&heard)
+                    .matches("\"type\":\"heartbeat\"")
+                    .count();
+            }
+            Err(e) => panic!("the operator's stream fell silent: {e}"),
+        }
+    }
+    stop.store(true, Ordering::Relaxed);
+    for s in strangers {
+        s.join().unwrap();
+    }
+    let strangers_opened = opened.load(Ordering::Relaxed);
+    eprintln!("operator's stream: {heartbeats} heartbeats in 10 s, {strangers_opened} strangers' streams opened");
+    assert!(heartbeats >= 8, "{heartbeats} heartbeats");
+    assert!(strangers_opened >= 200, "{strangers_opened}");
+    // The ticket was used: it opens nothing again.
+    let (code, _, _) = request(
+        &address,
+        "GET",
+        &format!("/api/events?ticket={ticket}"),
+        false,
+    );
+    assert_eq!(code, 403);
+    let (code, stderr) = common::terminate(server);
+    assert_eq!(code, 0, "{stderr}");
+}

@@ -21,8 +21,13 @@
 //!   [`ConnectionLimits::max_streams_per_client`] from one address; a new
 //!   stream closes that client's oldest (or, over the whole budget, the
 //!   oldest of all) so that a page that reconnects always gets its stream;
-//! - the slots left, `max_connections - max_streams`, are for short requests
-//!   (status, Abort) and can never be taken by streams.
+//! - the operator's page, which shows the token (a one-use ticket for the
+//!   stream, `POST /api/stream-ticket`), has a budget of its own,
+//!   [`ConnectionLimits::max_operator_streams`]: a stream opened without the
+//!   token never closes one opened with it, however many addresses it
+//!   comes from, so strangers cannot starve the operator's live view;
+//! - the slots left, `max_connections` less both budgets, are for short
+//!   requests (status, Abort) and can never be taken by streams.
 //!
 //! A page whose stream is closed reconnects with a back-off and meanwhile
 //! polls the status (`page.js`).
@@ -58,6 +63,19 @@ pub struct ConnectionLimits {
     /// Live event streams open at once from one address: a few pages on one
     /// phone or pad.
     pub max_streams_per_client: usize,
+    /// Live event streams of the operator's pages (opened with the token's
+    /// ticket) open at once, beside `max_streams`.
+    pub max_operator_streams: usize,
+}
+
+/// Whose a live event stream is, for the streams' budgets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StreamOwner {
+    /// Anyone on the network: no token was shown.
+    #[default]
+    Anyone,
+    /// A page that showed the token (`POST /api/stream-ticket`).
+    Operator,
 }
 
 impl Default for ConnectionLimits {
@@ -68,6 +86,7 @@ impl Default for ConnectionLimits {
             idle_timeout: Duration::from_secs(60),
             max_streams: 32,
             max_streams_per_client: 4,
+            max_operator_streams: 8,
         }
     }
 }
@@ -80,6 +99,8 @@ struct Connection {
     client: IpAddr,
     /// Carries a live event stream (since when, µs since `opened`; 0: none).
     stream_since_us: AtomicU64,
+    /// Its stream is the operator's ([`StreamOwner::Operator`]).
+    operator_stream: AtomicBool,
     /// Whether a whole request has arrived on it.
     served: AtomicBool,
     /// Requests whose response is not yet fully sent.
@@ -152,15 +173,30 @@ impl Connections {
             .count()
     }
 
-    /// Marks `connection` as carrying a live event stream, within the
-    /// streams' budget: over the client's share its own oldest stream is
-    /// told to close, else over the whole budget the oldest of all.
-    fn start_stream(&self, connection: &Arc<Connection>, limits: &ConnectionLimits) {
+    /// Marks `connection` as carrying a live event stream of `owner`, within
+    /// that owner's budget (streams of the other owner are never touched):
+    /// over the client's share its own oldest stream is told to close, else
+    /// over the whole budget the oldest of all.
+    fn start_stream(
+        &self,
+        connection: &Arc<Connection>,
+        limits: &ConnectionLimits,
+        owner: StreamOwner,
+    ) {
+        let operator = owner == StreamOwner::Operator;
+        let budget = if operator {
+            limits.max_operator_streams
+        } else {
+            limits.max_streams
+        };
         let open = self.lock();
         let streams: Vec<&Arc<Connection>> = open
             .values()
             .filter(|c| {
-                c.is_stream() && !c.leaving.load(Ordering::Relaxed) && !Arc::ptr_eq(c, connection)
+                c.is_stream()
+                    && c.operator_stream.load(Ordering::Relaxed) == operator
+                    && !c.leaving.load(Ordering::Relaxed)
+                    && !Arc::ptr_eq(c, connection)
             })
             .collect();
         let own: Vec<&&Arc<Connection>> = streams
@@ -171,7 +207,7 @@ impl Connections {
             own.into_iter()
                 .min_by_key(|c| c.stream_started())
                 .map(|c| (*c).clone())
-        } else if streams.len() >= limits.max_streams {
+        } else if streams.len() >= budget {
             streams
                 .iter()
                 .min_by_key(|c| c.stream_started())
@@ -183,6 +219,9 @@ impl Connections {
             victim.leaving.store(true, Ordering::Relaxed);
             victim.evicted.notify_one();
         }
+        connection
+            .operator_stream
+            .store(operator, Ordering::Relaxed);
         let since_open = Instant::now().saturating_duration_since(connection.opened);
         connection.stream_since_us.store(
             u64::try_from(since_open.as_micros())
@@ -224,6 +263,7 @@ impl Connections {
             opened: Instant::now(),
             client,
             stream_since_us: AtomicU64::new(0),
+            operator_stream: AtomicBool::new(false),
             served: AtomicBool::new(false),
             in_flight: AtomicUsize::new(0),
             last_done_ms: AtomicU64::new(0),
@@ -315,7 +355,12 @@ pub fn spawn(
                 if HttpBody::size_hint(response.body()).exact().is_some() {
                     return Ok(response);
                 }
-                registry.start_stream(&tracked, &limits);
+                let owner = response
+                    .extensions()
+                    .get::<StreamOwner>()
+                    .copied()
+                    .unwrap_or_default();
+                registry.start_stream(&tracked, &limits, owner);
                 let streaming = StreamSlot(tracked);
                 Ok::<_, std::convert::Infallible>(response.map(|body| {
                     Body::from_stream(body.into_data_stream().map(move |chunk| {
@@ -386,7 +431,7 @@ mod tests {
         let stream = |ip| {
             let (_, c) = connections.admit(&l, ip).unwrap();
             let _request = InFlight::new(&c);
-            connections.start_stream(&c, &l);
+            connections.start_stream(&c, &l, StreamOwner::Anyone);
             std::thread::sleep(Duration::from_millis(2));
             c
         };
@@ -405,6 +450,41 @@ mod tests {
         // A stream that ended frees its place.
         a3.stream_since_us.store(0, Ordering::Relaxed);
         assert_eq!(connections.streams(), 2);
+    }
+
+    /// Streams opened without the token, from any number of addresses,
+    /// never close the operator's; the operator's pages keep to a budget of
+    /// their own.
+    #[test]
+    fn strangers_streams_never_close_the_operators() {
+        let connections = Connections::default();
+        let l = ConnectionLimits {
+            max_streams: 4,
+            max_streams_per_client: 2,
+            max_operator_streams: 2,
+            ..ConnectionLimits::default()
+        };
+        let stream = |n: u8, owner| {
+            let ip = IpAddr::V4(std::net::Ipv4Addr::new(127, 0, 0, n));
+            let (_, c) = connections.admit(&l, ip).unwrap();
+            let _request = InFlight::new(&c);
+            connections.start_stream(&c, &l, owner);
+            std::thread::sleep(Duration::from_millis(2));
+            c
+        };
+        let operator = stream(1, StreamOwner::Operator);
+        let strangers: Vec<_> = (0..40)
+            .map(|k| stream(2 + (k % 10) as u8, StreamOwner::Anyone))
+            .collect();
+        assert!(
+            !told(&operator),
+            "a stranger's stream closed the operator's"
+        );
+        assert!(strangers.iter().filter(|c| !told(c)).count() <= l.max_streams);
+        // The operator's own pages share its budget: a third closes the oldest.
+        let second = stream(1, StreamOwner::Operator);
+        let third = stream(1, StreamOwner::Operator);
+        assert!(told(&operator) && !told(&second) && !told(&third));
     }
 
     fn limits(max: usize) -> ConnectionLimits {

@@ -61,8 +61,49 @@ pub async fn get_status(State(state): State<AppState>) -> Json<Status> {
     Json(state.status())
 }
 
+/// `POST /api/stream-ticket` (with the token): a one-use ticket that opens
+/// the operator's live stream, `GET /api/events?ticket=…`, within 30 s.
+pub async fn post_stream_ticket(
+    State(state): State<AppState>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let ticket = state.stream_ticket().map_err(|e| {
+        ApiError(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("cannot make a stream ticket: {e}"),
+        )
+    })?;
+    Ok(Json(json!({ "ticket": ticket, "expires_in_s": 30 })))
+}
+
+/// `GET /api/events`: the live stream. With a valid `?ticket=` it is the
+/// operator's, with a budget of streams that no stream opened without the
+/// token can take (`super::connections`); an unknown or used ticket is
+/// refused rather than quietly demoted.
 pub async fn get_events(
     State(state): State<AppState>,
+    axum::extract::RawQuery(query): axum::extract::RawQuery,
+) -> Result<Response, ApiError> {
+    let ticket = query
+        .as_deref()
+        .and_then(|q| q.split('&').find_map(|pair| pair.strip_prefix("ticket=")));
+    let owner = match ticket {
+        None => super::connections::StreamOwner::Anyone,
+        Some(t) if state.take_stream_ticket(t) => super::connections::StreamOwner::Operator,
+        Some(_) => {
+            return Err(ApiError(
+                StatusCode::FORBIDDEN,
+                "this stream ticket is unknown, used or expired: ask for a new one (POST /api/stream-ticket)".into(),
+            ))
+        }
+    };
+    let mut response = event_stream(&state).into_response();
+    response.extensions_mut().insert(owner);
+    Ok(response)
+}
+
+/// The live stream of events, with a heartbeat every second.
+fn event_stream(
+    state: &AppState,
 ) -> Sse<impl tokio_stream::Stream<Item = Result<SseEvent, Infallible>>> {
     // Each item: Some(Some(event)), Some(None) for nothing, None once the
     // service stops (which ends the stream, so graceful shutdown can finish).

@@ -90,6 +90,7 @@ pub fn router(state: AppState) -> Router {
         )
         .route("/api/status", get(get_status))
         .route("/api/events", get(get_events))
+        .route("/api/stream-ticket", post(post_stream_ticket))
         .route("/api/calibrations", get(get_history).post(post_start))
         .route("/api/calibrations/current/abort", post(post_abort))
         .route("/api/calibrations/{id}", get(get_calibration))

@@ -94,6 +94,8 @@ const tokenField = $('token');
 tokenField.value = localStorage.getItem('groundcal-token') || '';
 $('token-card').open = !tokenField.value;
 tokenField.addEventListener('input', () => localStorage.setItem('groundcal-token', tokenField.value.trim()));
+// A token typed now makes the live stream the operator's: it is opened again.
+tokenField.addEventListener('change', () => { if (events) { events.close(); listen(); } });
 
 // What an error answer means for an operator.
 function explain(response, body) {
@@ -1052,9 +1054,26 @@ function loadStore() {
   return loading;
 }
 
+// The live stream. With the token, a one-use ticket makes it the
+// operator's: no stream opened without the token can take its place under a
+// flood (an EventSource cannot send the token itself).
 let events = null;
-function listen() {
-  events = new EventSource('/api/events');
+async function streamUrl() {
+  const token = tokenField.value.trim();
+  if (!token) return '/api/events';
+  try {
+    const r = await fetchWithin('/api/stream-ticket', { method: 'POST', headers: { 'Authorization': 'Bearer ' + token } }, 2000);
+    if (r.ok) {
+      const { ticket } = await r.json();
+      if (ticket) return '/api/events?ticket=' + encodeURIComponent(ticket);
+    }
+  } catch (e) {
+    // No contact: the status polls say so; the stream is tried as anyone's.
+  }
+  return '/api/events';
+}
+async function listen() {
+  events = new EventSource(await streamUrl());
   events.onopen = () => { retry = 1000; refresh(); };
   events.onerror = () => {
     // EventSource retries by itself, but not after some failures: start over

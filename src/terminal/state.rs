@@ -37,7 +37,15 @@ struct Shared {
     view: Arc<Mutex<ViewSlot>>,
     /// The thread taking pictures while no session runs.
     preview: Mutex<Option<PreviewThread>>,
+    /// One-use tickets for the operator's live stream, and when each was
+    /// given ([`AppState::stream_ticket`]).
+    stream_tickets: Mutex<std::collections::VecDeque<(String, Instant)>>,
 }
+
+/// How long a stream ticket may wait for its stream.
+const STREAM_TICKET_LIFE: std::time::Duration = std::time::Duration::from_secs(30);
+/// Tickets kept at once: a few pages reconnecting; the oldest goes first.
+const STREAM_TICKETS: usize = 64;
 
 /// The daemon's state, shared by every request.
 #[derive(Clone)]
@@ -130,6 +138,7 @@ impl AppState {
             heartbeat: Mutex::new(None),
             view: Arc::default(),
             preview: Mutex::new(None),
+            stream_tickets: Mutex::default(),
             abort: Mutex::new(None),
             worker: Mutex::new(None),
             shutdown,
@@ -315,6 +324,38 @@ impl AppState {
                 Task::Calibration => motion.calibration.last_s = Some(took),
                 Task::Check => motion.check.last_s = Some(took),
             }
+        }
+    }
+
+    /// A new one-use ticket for a live stream of the operator's page (one
+    /// that has shown the token): 128 bits from the kernel's random source.
+    /// An `EventSource` cannot send the token itself, and a token in a URL
+    /// would outlive the page in histories.
+    pub(super) fn stream_ticket(&self) -> std::io::Result<String> {
+        use std::io::Read;
+        let mut bytes = [0u8; 16];
+        std::fs::File::open("/dev/urandom")?.read_exact(&mut bytes)?;
+        let ticket: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+        let mut tickets = lock(&self.0.stream_tickets);
+        while tickets.len() >= STREAM_TICKETS {
+            tickets.pop_front();
+        }
+        tickets.push_back((ticket.clone(), Instant::now()));
+        Ok(ticket)
+    }
+
+    /// Whether `ticket` was given and not yet used nor expired; it is used now.
+    pub(super) fn take_stream_ticket(&self, ticket: &str) -> bool {
+        let mut tickets = lock(&self.0.stream_tickets);
+        tickets.retain(|(_, given)| given.elapsed() < STREAM_TICKET_LIFE);
+        match tickets.iter().position(|(t, _)| {
+            t.len() == ticket.len() && blake3::hash(t.as_bytes()) == blake3::hash(ticket.as_bytes())
+        }) {
+            Some(k) => {
+                tickets.remove(k);
+                true
+            }
+            None => false,
         }
     }
 
