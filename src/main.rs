@@ -582,6 +582,7 @@ fn run(args: Args) -> ExitStatus {
 }
 
 fn main() -> ExitCode {
+    cli::guard_standard_descriptors();
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_env_filter(

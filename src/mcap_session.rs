@@ -86,11 +86,21 @@ pub enum McapError {
     Input(#[from] InputError),
     #[error(transparent)]
     File(#[from] FileError),
-    #[error("{path}: cannot write MCAP: {source}")]
+    #[error("{path}: cannot write MCAP: {}", innermost(source))]
     Mcap {
         path: String,
         source: mcap::McapError,
     },
+}
+
+/// What an MCAP error comes down to: the system's own words for an I/O
+/// error ("No space left on device"), not the library's wrapper around them.
+fn innermost(error: &mcap::McapError) -> String {
+    let mut cause: &dyn std::error::Error = error;
+    while let Some(deeper) = cause.source() {
+        cause = deeper;
+    }
+    cause.to_string()
 }
 
 /// What was written: messages per topic, and the file's size.
@@ -107,6 +117,7 @@ pub fn write_replay(
     recording: &Recording,
     replay: &Replay,
 ) -> Result<McapSummary, McapError> {
+    writable_place(path)?;
     let mut file = AtomicFile::create(path)?;
     let mcap_error = |source| McapError::Mcap {
         path: path.display().to_string(),
@@ -129,6 +140,26 @@ pub fn write_replay(
     };
     file.commit()?;
     Ok(summary)
+}
+
+/// Refuses an MCAP path whose directory does not exist: it is a typing
+/// mistake to say, not a directory to make (as any other unwritable path).
+pub fn writable_place(path: &Path) -> Result<(), McapError> {
+    let dir = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    if dir.is_dir() {
+        return Ok(());
+    }
+    Err(McapError::File(FileError {
+        path: path.to_path_buf(),
+        action: "create",
+        source: std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("its directory {} does not exist", dir.display()),
+        ),
+    }))
 }
 
 enum WriteError {
@@ -558,6 +589,21 @@ fn plane_points(plane: &Plane, intrinsics: &Intrinsics) -> Vec<[f32; 3]> {
 
 #[cfg(test)]
 mod tests {
+
+    /// A full disk is said in the system's words, not the library's.
+    #[test]
+    fn a_write_error_says_what_the_system_said() {
+        let e = McapError::Mcap {
+            path: "/tmp/x.mcap".into(),
+            source: mcap::McapError::Io(std::io::Error::from_raw_os_error(28)),
+        };
+        let said = e.to_string();
+        assert!(
+            said.starts_with("/tmp/x.mcap: cannot write MCAP: No space left on device"),
+            "{said}"
+        );
+    }
+
     use super::*;
     use crate::calib::geometry::PoseParams;
 

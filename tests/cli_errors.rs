@@ -85,6 +85,56 @@ fn a_fifo_as_an_input_file_is_refused_not_waited_on() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A result printed to a closed standard output (`>&-`) is a failure, exit
+/// 1, said on stderr; to `/dev/null` it is printed as asked (exit 0).
+#[test]
+fn a_result_printed_to_a_closed_output_is_a_failure() {
+    let sample = common::shared().join("data/sample-12");
+    let run = |redirect: &str| {
+        let out = std::process::Command::new("sh")
+            .arg("-c")
+            .arg(format!("exec \"$0\" replay \"$1\" --json {redirect}"))
+            .arg(env!("CARGO_BIN_EXE_groundcal"))
+            .arg(&sample)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, stderr) = run(">&-");
+    assert_eq!(code, 1, "{stderr}");
+    assert!(stderr.contains("standard output is closed"), "{stderr}");
+    let (code, stderr) = run(">/dev/null");
+    assert_eq!(code, 0, "{stderr}");
+}
+
+/// `--mcap` into a directory that does not exist is refused before anything
+/// is replayed, as any other unwritable path; the directory is not made.
+#[test]
+fn an_mcap_path_in_a_missing_directory_is_refused() {
+    let missing =
+        std::env::temp_dir().join(format!("groundcal-no-such-dir-{}", std::process::id()));
+    let path = missing.join("x.mcap");
+    let sample = common::shared().join("data/sample-12");
+    let (code, stdout, stderr) = groundcal(&[
+        "replay",
+        sample.to_str().unwrap(),
+        "--json",
+        "--mcap",
+        path.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(stdout.is_empty(), "{stdout}");
+    assert!(
+        stderr.contains("x.mcap: cannot create: its directory")
+            && stderr.contains("does not exist"),
+        "{stderr}"
+    );
+    assert!(!missing.exists(), "the missing directory was made");
+}
+
 #[test]
 fn solve_names_a_missing_file() {
     assert_bad_input(

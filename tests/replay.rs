@@ -304,6 +304,27 @@ fn a_recording_cut_off_mid_record_is_named_and_replayed_only_when_asked() {
     );
 }
 
+/// Control characters in what a file says (a name in INDEX.txt: a
+/// terminal title, a screen clear, a NUL) are escaped in the message, never
+/// written raw to the operator's terminal.
+#[test]
+fn control_characters_from_a_file_are_escaped_in_messages() {
+    let copy = Copy::new("escapes");
+    copy.edit("kinect/INDEX.txt", |t| {
+        format!("{t}\u{1b}]0;owned\u{7}\u{1b}[2Jd-1.0-\u{0}2.pgm\nmore\n")
+    });
+    let (code, _, stderr) = copy.replay();
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        !stderr.chars().any(|c| c.is_control() && c != '\n'),
+        "raw control characters on stderr: {stderr:?}"
+    );
+    assert!(
+        stderr.contains("\\u{1b}]0;owned\\u{7}\\u{1b}[2J"),
+        "{stderr}"
+    );
+}
+
 /// An empty `poses.jsonl` is bad input (exit 2, named), not a rejected
 /// calibration (exit 3).
 #[test]

@@ -135,6 +135,19 @@ fn a_bad_bag_is_refused_with_what_and_where() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("no depth image on /nothing"), "{stderr}");
 
+    // A number no camera has: named, exit 2 (not a calibration rejected
+    // for a sensor height of NaN).
+    for (poison, said) in [
+        ("fx-inf", "/camera/depth/camera_info: K[0] (fx) = inf is not a camera's focal length"),
+        ("camera-nan", "the transform of frame \"camera_depth_optical_frame\" from \"base_link\": translation.x = NaN"),
+    ] {
+        let poisoned = work.join(format!("{poison}.mcap"));
+        make_bag(&python, &shared().join("data/sample-12"), &poisoned, &["--poison", poison]);
+        let (code, _, stderr) = groundcal(&["replay", poisoned.to_str().unwrap()]);
+        assert_eq!(code, 2, "{poison}: {stderr}");
+        assert!(stderr.contains(said), "{poison}: {stderr}");
+    }
+
     // Cut in the middle of a chunk: the byte where it ends is named.
     let bytes = std::fs::read(&bag).unwrap();
     let cut = work.join("cut.mcap");

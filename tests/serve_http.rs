@@ -424,6 +424,20 @@ async fn a_page_elsewhere_can_neither_read_nor_write() {
     .await
     .unwrap();
     assert_eq!(status_of(&head), "403", "{head}");
+    // The daemon's own host under another scheme is another origin.
+    let head = ask(
+        "POST",
+        "/api/calibrations/current/abort",
+        format!("Host: {addr}\r\nOrigin: https://{addr}\r\n{auth}"),
+    )
+    .await
+    .unwrap();
+    assert_eq!(status_of(&head), "403", "{head}");
+    // A request that names no host, or an empty one, is refused.
+    for host in ["", "Host: \r\n", "Host:    \r\n"] {
+        let head = ask("GET", "/api/status", host.into()).await.unwrap();
+        assert_eq!(status_of(&head), "400", "{host:?}: {head}");
+    }
     // The same write from the daemon's own page reaches the endpoint (no
     // calibration runs: 409).
     let head = ask(

@@ -138,9 +138,14 @@ impl<R: std::io::Read> std::io::Read for Hashing<R> {
     }
 }
 
-/// Why a bag could not be used; names the file and what was wrong.
+/// Why a bag could not be used; names the file and what was wrong (with
+/// the control characters of anything the bag said escaped).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{path}: {what}")]
+#[error(
+    "{}: {}",
+    crate::recording::printable(path),
+    crate::recording::printable(what)
+)]
 pub struct BagError {
     pub path: String,
     pub what: String,
@@ -161,9 +166,32 @@ struct TfEdge {
 }
 
 impl TfTree {
-    fn add(&mut self, message: &TfMessage, is_static: bool) {
+    /// Adds a message's transforms; one that is not a rigid transform (a
+    /// NaN or infinite value, a zero quaternion) is an error naming it.
+    fn add(&mut self, message: &TfMessage, is_static: bool) -> Result<(), String> {
         for t in &message.transforms {
             let [x, y, z, w] = t.transform.rotation;
+            let named = [
+                ("translation.x", t.transform.translation[0]),
+                ("translation.y", t.transform.translation[1]),
+                ("translation.z", t.transform.translation[2]),
+                ("rotation.x", x),
+                ("rotation.y", y),
+                ("rotation.z", z),
+                ("rotation.w", w),
+            ];
+            if let Some((field, value)) = named.iter().find(|(_, v)| !v.is_finite()) {
+                return Err(format!(
+                    "the transform of frame \"{}\" from \"{}\": {field} = {value} is not a number a rigid transform can have",
+                    t.child_frame_id, t.header.frame_id
+                ));
+            }
+            if x * x + y * y + z * z + w * w < 1e-12 {
+                return Err(format!(
+                    "the transform of frame \"{}\" from \"{}\": its rotation is the zero quaternion",
+                    t.child_frame_id, t.header.frame_id
+                ));
+            }
             let rotation = UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z));
             let [tx, ty, tz] = t.transform.translation;
             let pose = Isometry3::from_parts(Translation3::new(tx, ty, tz), rotation);
@@ -184,6 +212,7 @@ impl TfTree {
                 edge.samples.push((stamp, pose));
             }
         }
+        Ok(())
     }
 
     fn sort(&mut self) {
@@ -396,7 +425,8 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
                     check_type(&m, TfMessage::NAME)?;
                     let message = TfMessage::decode(m.data)
                         .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
-                    tree.add(&message, m.topic == "/tf_static");
+                    tree.add(&message, m.topic == "/tf_static")
+                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
                 } else if m.topic == options.camera_info_topic {
                     check_type(&m, CameraInfo::NAME)?;
                     if camera_info.is_none() {
@@ -438,13 +468,26 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         width: info.width as usize,
         height: info.height as usize,
     };
-    if !(intrinsics.fx > 0.0
-        && intrinsics.fy > 0.0
-        && intrinsics.cx.is_finite()
-        && intrinsics.cy.is_finite())
-        || intrinsics.width == 0
-        || intrinsics.height == 0
-    {
+    // Each of K's four numbers named when it cannot be a camera's.
+    for (field, value, positive) in [
+        ("K[0] (fx)", intrinsics.fx, true),
+        ("K[4] (fy)", intrinsics.fy, true),
+        ("K[2] (cx)", intrinsics.cx, false),
+        ("K[5] (cy)", intrinsics.cy, false),
+    ] {
+        if !value.is_finite() || (positive && value <= 0.0) {
+            return Err(fail(format!(
+                "{}: {field} = {value} is not a camera's {}",
+                options.camera_info_topic,
+                if positive {
+                    "focal length (a positive number of pixels)"
+                } else {
+                    "principal point (a number of pixels)"
+                }
+            )));
+        }
+    }
+    if intrinsics.width == 0 || intrinsics.height == 0 {
         return Err(fail(format!(
             "{}: K = {:?} for {}×{} is not a camera",
             options.camera_info_topic, info.k, info.width, info.height

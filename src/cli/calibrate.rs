@@ -199,6 +199,14 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
     if let Some(scale) = options.depth_scale {
         config.calibration.depth_scale = scale;
     }
+    // An MCAP file that could not be written at the end is refused before
+    // the robot moves.
+    if let Some(path) = &options.record_mcap {
+        if let Err(e) = crate::mcap_session::writable_place(path) {
+            eprintln!("groundcal calibrate: --record-mcap: {e}");
+            return ExitStatus::RuntimeFailure;
+        }
+    }
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

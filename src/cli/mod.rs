@@ -56,6 +56,33 @@ pub fn ends_quietly_on_a_closed_pipe() {
     }
 }
 
+/// Whether standard output was closed when the process started (`>&-`).
+static STDOUT_WAS_CLOSED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Notes whether standard output was closed when the process started
+/// (`>&-`). Rust's runtime gives a closed standard descriptor `/dev/null`,
+/// opened read and write, before `main` (so that no file opened later takes
+/// its number), and its stdout then reports every print as written. A
+/// shell's `>/dev/null` opens it for writing only; so `/dev/null` opened
+/// read and write on descriptor 1 is taken for a closed output, and
+/// printing the result to it is a failure ([`print_stdout`]).
+pub fn guard_standard_descriptors() {
+    use std::os::unix::fs::{FileTypeExt, MetadataExt};
+    let Ok(null) = std::fs::metadata("/dev/null") else {
+        return;
+    };
+    let Ok(out) = std::fs::metadata("/proc/self/fd/1") else {
+        return;
+    };
+    // SAFETY: F_GETFL reads descriptor 1's status flags; no memory is passed.
+    #[allow(unsafe_code)]
+    let flags = unsafe { libc::fcntl(libc::STDOUT_FILENO, libc::F_GETFL) };
+    let is_null = out.file_type().is_char_device() && out.rdev() == null.rdev();
+    if is_null && flags != -1 && flags & libc::O_ACCMODE == libc::O_RDWR {
+        STDOUT_WAS_CLOSED.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// Parses `X,Y,Z`-style lists of numbers from a flag.
 pub fn parse_numbers<const N: usize>(flag: &str, text: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -123,6 +150,11 @@ pub fn print_json<T: serde::Serialize>(value: &T) -> Result<(), String> {
 /// returned, not a panic as `print!`'s would be.
 pub fn print_stdout(text: &str) -> Result<(), String> {
     use std::io::Write;
+    // Rust's stdout takes a closed descriptor (`>&-`) for a sink and
+    // reports success: a result written nowhere must be a failure.
+    if STDOUT_WAS_CLOSED.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err("cannot print the result: standard output is closed".into());
+    }
     let mut stdout = std::io::stdout().lock();
     stdout
         .write_all(text.as_bytes())

@@ -36,6 +36,12 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
             return ExitStatus::BadInput;
         }
     }
+    if let Some(path) = outputs.mcap {
+        if let Err(e) = crate::mcap_session::writable_place(path) {
+            eprintln!("groundcal replay: --mcap: {e}");
+            return ExitStatus::RuntimeFailure;
+        }
+    }
     let opened = if outputs.cut_off {
         Recording::open_cut_off(dir)
     } else {

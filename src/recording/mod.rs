@@ -38,11 +38,34 @@ impl InputError {
 
 impl fmt::Display for InputError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // A message quotes what the file holds (a name in INDEX.txt, a key):
+        // on a terminal its control characters would act, not show.
+        let path = self.path.display().to_string();
+        let (path, message) = (printable(&path), printable(&self.message));
         match self.line {
-            Some(line) => write!(f, "{}:{}: {}", self.path.display(), line, self.message),
-            None => write!(f, "{}: {}", self.path.display(), self.message),
+            Some(line) => write!(f, "{path}:{line}: {message}"),
+            None => write!(f, "{path}: {message}"),
         }
     }
+}
+
+/// `text` with its control characters (ESC, NUL, a newline, …) written as
+/// escapes (`\u{1b}`), so that text read from a file can be quoted on a
+/// terminal without setting its title or clearing its screen; everything
+/// else, non-ASCII letters and signs included, is left as it is.
+pub fn printable(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.chars().any(char::is_control) {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut escaped = String::with_capacity(text.len() + 8);
+    for c in text.chars() {
+        if c.is_control() {
+            escaped.extend(c.escape_default());
+        } else {
+            escaped.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(escaped)
 }
 
 impl std::error::Error for InputError {}

@@ -97,6 +97,19 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
             }
             let pose = &record.robot_pose;
             if let Some((name, value)) = [
+                ("alpha_deg", pose.alpha_deg),
+                ("beta_deg", pose.beta_deg),
+                ("gamma_deg", pose.gamma_deg),
+            ]
+            .into_iter()
+            .find(|(_, v)| v.abs() > MAX_ANGLE_DEG)
+            {
+                return Err(at(&format!(
+                    "robot_pose.{name} = {}° is not a body's attitude (at most ±{MAX_ANGLE_DEG}°)",
+                    compact(value)
+                )));
+            }
+            if let Some((name, value)) = [
                 ("px_mm", pose.px_mm),
                 ("py_mm", pose.py_mm),
                 ("pz_mm", pose.pz_mm),
@@ -105,7 +118,8 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
             .find(|(_, v)| v.abs() > MAX_DISTANCE_MM)
             {
                 return Err(at(&format!(
-                    "robot_pose.{name} = {value} mm is not where a body stands over its feet (at most ±{MAX_DISTANCE_MM} mm)"
+                    "robot_pose.{name} = {} mm is not where a body stands over its feet (at most ±{MAX_DISTANCE_MM} mm)",
+                    compact(value)
                 )));
             }
             let p = &record.plane;
@@ -113,7 +127,7 @@ pub fn parse_planes(path: &Path, text: &str) -> Result<Vec<Observation>, InputEr
             if normal.is_finite() && normal > 0.0 && (p.d_m / normal).abs() > MAX_HEIGHT_M {
                 return Err(at(&format!(
                     "plane: d_m = {} m is not a sensor's height above the ground (at most {MAX_HEIGHT_M} m)",
-                    p.d_m
+                    compact(p.d_m)
                 )));
             }
             let plane = Plane::from_coefficients(p.a, p.b, p.c, p.d_m)
@@ -135,6 +149,20 @@ pub const MAX_OBSERVATIONS: usize = 2000;
 /// Largest body position accepted, mm: a hundred metres, far beyond any
 /// legged robot's reach, so that absurd numbers are named as such.
 const MAX_DISTANCE_MM: f64 = 100_000.0;
+
+/// Largest body angle accepted, degrees: a turn and more, so that absurd
+/// numbers are named as such (as positions are), not set aside as an outlier.
+const MAX_ANGLE_DEG: f64 = 360.0;
+
+/// A number as a message quotes it: as written for ordinary magnitudes,
+/// in exponent form for huge or tiny ones (1e300 is not 301 digits).
+fn compact(value: f64) -> String {
+    if value != 0.0 && !(1e-4..1e6).contains(&value.abs()) {
+        format!("{value:e}")
+    } else {
+        format!("{value}")
+    }
+}
 
 /// Largest sensor height above the ground accepted, metres.
 const MAX_HEIGHT_M: f64 = 100.0;
@@ -230,11 +258,20 @@ mod tests {
     fn absurd_magnitudes_are_named_for_what_they_are() {
         let e = parse(&ONE.replace("-0.9916", "1e15")).unwrap_err();
         assert!(
-            e.message
-                .contains("d_m = 1000000000000000 m is not a sensor's height"),
+            e.message.contains("d_m = 1e15 m is not a sensor's height"),
             "{e}"
         );
         let e = parse(&ONE.replace("\"py_mm\": 615", "\"py_mm\": 1e300")).unwrap_err();
-        assert!(e.message.contains("robot_pose.py_mm"), "{e}");
+        assert!(
+            e.message.contains("robot_pose.py_mm = 1e300 mm is not"),
+            "{e}"
+        );
+        // An angle as absurd is named the same way, not set aside as a pose.
+        let e = parse(&ONE.replace("\"beta_deg\": 2", "\"beta_deg\": 1e300")).unwrap_err();
+        assert!(
+            e.message
+                .contains("robot_pose.beta_deg = 1e300° is not a body's attitude"),
+            "{e}"
+        );
     }
 }

@@ -104,8 +104,9 @@ fn bearer_token(value: &str) -> Option<&str> {
     scheme.eq_ignore_ascii_case("bearer").then(|| token.trim())
 }
 
-/// The layer: a request must name this daemon as its host, and a browser's
-/// write must come from one of its pages.
+/// The layer: a request must name this daemon as its host (a missing or
+/// empty `Host` is refused), and a browser's write must come from one of its
+/// pages: origin `http://` and that host, scheme included.
 pub async fn same_site_only(
     State(state): State<AppState>,
     request: Request,
@@ -123,7 +124,14 @@ pub async fn same_site_only(
         .and_then(|h| h.to_str().ok())
         .unwrap_or_default()
         .to_string();
-    if !host.is_empty() && !names_this_daemon(&host, allowed, machine_name()) {
+    if host.trim().is_empty() {
+        return ApiError(
+            StatusCode::BAD_REQUEST,
+            "a request must name this daemon in its Host header (HTTP/1.1)".into(),
+        )
+        .into_response();
+    }
+    if !names_this_daemon(&host, allowed, machine_name()) {
         return ApiError(
             StatusCode::MISDIRECTED_REQUEST,
             format!(
@@ -135,9 +143,10 @@ pub async fn same_site_only(
     let writes = ![Method::GET, Method::HEAD].contains(request.method());
     if let Some(origin) = request.headers().get(header::ORIGIN) {
         let origin = origin.to_str().unwrap_or_default();
+        // The daemon speaks plain HTTP: its pages' origin is `http://` and
+        // its host; `https://` on the same host is another origin.
         let same = origin
             .strip_prefix("http://")
-            .or_else(|| origin.strip_prefix("https://"))
             .is_some_and(|o| o.eq_ignore_ascii_case(&host));
         if writes && !same {
             return ApiError(

@@ -4,7 +4,7 @@ groundcal recording, with the MCAP project's own ROS 2 writer
 (`mcap-ros2-support`), not groundcal's code:
 
     make_bag.py RECORDING_DIR OUT.mcap [--encoding 16UC1|32FC1]
-                [--compression zstd|lz4|none]
+                [--compression zstd|lz4|none] [--poison fx-inf|camera-nan]
 
 The bag has what a hexapod's drivers publish, at their own rates:
 - /camera/depth/image_raw (sensor_msgs/msg/Image): 16UC1 millimetres or 32FC1
@@ -20,6 +20,9 @@ The bag has what a hexapod's drivers publish, at their own rates:
 
 Frames follow REP 103 (conventions.md's axes turned). The home stance comes
 first, 1 s with no image; each pose is 1 s of motion, then 0.6 s still.
+With --poison, one number a reader must refuse: fx = inf in every
+CameraInfo, or NaN in the camera's static transform.
+
 Prints one JSON object (counts) on stdout.
 """
 import argparse
@@ -137,6 +140,7 @@ def main():
     parser.add_argument("out")
     parser.add_argument("--encoding", choices=["16UC1", "32FC1"], default="16UC1")
     parser.add_argument("--compression", choices=["zstd", "lz4", "none"], default="zstd")
+    parser.add_argument("--poison", choices=["fx-inf", "camera-nan"])
     args = parser.parse_args()
     recording = Path(args.recording)
     session = json.loads((recording / "session.json").read_text())
@@ -185,8 +189,9 @@ def main():
                 )
             ] + [[0, 0, 0, 1]]
             m = matmul(matmul(ROS_FROM_GROUNDCAL, robot_from_sensor), SENSOR_FROM_OPTICAL)
+            x = math.nan if args.poison == "camera-nan" else m[0][3]
             static.append(
-                transform(START_NS, "base_link", OPTICAL, (m[0][3], m[1][3], m[2][3]), quaternion(m))
+                transform(START_NS, "base_link", OPTICAL, (x, m[1][3], m[2][3]), quaternion(m))
             )
         writer.write_message("/tf_static", tf_schema, {"transforms": static}, START_NS, START_NS)
 
@@ -213,6 +218,8 @@ def main():
                 "data": data,
             }
             fx, fy, cx, cy = intrinsics["fx"], intrinsics["fy"], intrinsics["cx"], intrinsics["cy"]
+            if args.poison == "fx-inf":
+                fx = math.inf
             info = {
                 "header": header,
                 "height": height,
