@@ -10,8 +10,6 @@
 pub mod session;
 pub mod stream;
 
-use rayon::prelude::*;
-
 use crate::calib::depth::DepthEncoding;
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::observe::{BodyPoseSource, PoseObserver};
@@ -60,30 +58,58 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
         .iter()
         .map(|pose| feet.body_pose(&PoseDegMm::from_values([0.0; 6]), &pose.feet_body_mm))
         .collect();
-    let work = || {
-        bag.poses
-            .par_iter()
-            .zip(&bodies)
-            .with_max_len(1)
-            .map(|(pose, body)| {
-                let body = body
-                    .as_ref()
-                    .map_err(|e| format!("pose {}: feet: {e}", pose.index))?;
-                let frames: Vec<&[u16]> = pose.frames.iter().map(Vec::as_slice).collect();
-                observer
-                    .observe(pose.index, body, &frames, &mut FitBuffers::default())
-                    .map_err(|e| format!("no ground found: {e}"))
-            })
-            .collect::<Vec<_>>()
-    };
-    let fits = match options.threads {
-        Some(threads) => rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.max(1))
-            .build()
-            .map_err(|e| fail(format!("cannot start worker threads: {e}")))?
-            .install(work),
-        None => work(),
-    };
+    // Each pose is fitted on the worker threads as soon as its frames are
+    // read, and its frames freed: at most two poses a thread wait, so a bag
+    // of any length takes the memory of a few poses. The results do not
+    // depend on the number of threads (each pose is fitted alone).
+    let threads = options
+        .threads
+        .unwrap_or_else(rayon::current_num_threads)
+        .max(1);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| fail(format!("cannot start worker threads: {e}")))?;
+    let results: std::sync::Mutex<Vec<Option<Result<crate::calib::solve::Observation, String>>>> =
+        std::sync::Mutex::new(vec![None; bag.poses.len()]);
+    let in_flight = (std::sync::Mutex::new(0usize), std::sync::Condvar::new());
+    let frames_read = pool.in_place_scope(|scope| {
+        bag.read_frames(|k, frames| {
+            {
+                let (count, freed) = &in_flight;
+                let mut count = count.lock().unwrap_or_else(|p| p.into_inner());
+                while *count >= 2 * threads {
+                    count = freed.wait(count).unwrap_or_else(|p| p.into_inner());
+                }
+                *count += 1;
+            }
+            let (observer, bodies, results, in_flight) = (&observer, &bodies, &results, &in_flight);
+            let pose = &bag.poses[k];
+            scope.spawn(move |_| {
+                let fit = match &bodies[k] {
+                    Err(e) => Err(format!("pose {}: feet: {e}", pose.index)),
+                    Ok(body) => {
+                        let frames: Vec<&[u16]> = frames.iter().map(Vec::as_slice).collect();
+                        observer
+                            .observe(pose.index, body, &frames, &mut FitBuffers::default())
+                            .map_err(|e| format!("no ground found: {e}"))
+                    }
+                };
+                drop(frames);
+                results.lock().unwrap_or_else(|p| p.into_inner())[k] = Some(fit);
+                let (count, freed) = in_flight;
+                *count.lock().unwrap_or_else(|p| p.into_inner()) -= 1;
+                freed.notify_one();
+            });
+            Ok(())
+        })
+    })?;
+    let fits: Vec<Result<crate::calib::solve::Observation, String>> = results
+        .into_inner()
+        .unwrap_or_else(|p| p.into_inner())
+        .into_iter()
+        .map(|fit| fit.unwrap_or_else(|| Err("no frame of this pose was read".into())))
+        .collect();
     let mut observations = Vec::new();
     let mut failed = Vec::new();
     for (pose, fit) in bag.poses.iter().zip(fits) {
@@ -101,7 +127,7 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     let mut notes = bag.notes.clone();
     notes.extend(observer.prior_note());
     result.notes.splice(0..0, notes);
-    let frames_per_pose = bag.poses.iter().map(|p| p.frames.len() as u32).max();
+    let frames_per_pose = bag.poses.iter().map(|p| p.stamps.len() as u32).max();
     result.setup = Some(SetupJson {
         robot: None,
         schedule: None,
@@ -120,7 +146,7 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     Ok(Replay {
         result,
         input_digest: Some(bag.digest.clone()),
-        frames: bag.poses.iter().map(|p| p.frames.len()).sum(),
+        frames: frames_read,
         ground_from_robot: bodies
             .iter()
             .map(|b| b.as_ref().ok().map(|b| b.ground_from_robot))

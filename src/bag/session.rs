@@ -99,9 +99,8 @@ pub struct BagPose {
     pub end: u64,
     /// The feet in groundcal's body frame (mm), averaged over the span.
     pub feet_body_mm: [[f64; 3]; 6],
-    /// The frames' stamps and values (in [`BagSession::units`]).
+    /// The stamps of the frames fitted (the span's last ones).
     pub stamps: Vec<u64>,
-    pub frames: Vec<Vec<u16>>,
 }
 
 /// A bag, read.
@@ -122,6 +121,18 @@ pub struct BagSession {
     pub images_seen: usize,
     /// BLAKE3 of the bytes of the file up to the end of its data (hex).
     pub digest: String,
+    /// Where the chosen frames are, for [`BagSession::read_frames`].
+    frames: FramePlan,
+}
+
+/// What the second pass over a bag reads: the chosen frames' stamps (and
+/// their pose), the chunks that hold them, and the declarations seen.
+#[derive(Debug, Clone)]
+struct FramePlan {
+    chosen: HashMap<u64, usize>,
+    needed: BTreeSet<u64>,
+    stream: McapStream,
+    depth_topic: String,
 }
 
 /// A reader that hashes what passes through it.
@@ -600,7 +611,6 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
             end,
             feet_body_mm,
             stamps,
-            frames: Vec::new(),
         });
     }
     if poses.is_empty() {
@@ -610,7 +620,8 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         )));
     }
 
-    // Second pass: the chosen frames.
+    // The chosen frames are read in a second pass (`read_frames`), a pose
+    // at a time, so that a bag's frames are never all in memory.
     let chosen: HashMap<u64, usize> = poses
         .iter()
         .enumerate()
@@ -622,29 +633,6 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         .filter(|h| chosen.contains_key(&h.stamp))
         .filter_map(|h| h.chunk)
         .collect();
-    stream
-        .read(
-            std::io::BufReader::new(open()?),
-            |topic| topic == options.depth_topic,
-            |chunk| !needed.contains(&chunk),
-            |m| -> Result<(), String> {
-                let head = image_head(m.data).map_err(|e| format!("{}: {e}", m.topic))?;
-                let Some(&k) = chosen.get(&head.stamp) else {
-                    return Ok(());
-                };
-                let pose = &mut poses[k];
-                if pose.frames.len() >= pose.stamps.len() {
-                    return Ok(()); // two images of one stamp: the first
-                }
-                let image = Image::decode(m.data)
-                    .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
-                let values = depth_values(&image, units)
-                    .map_err(|e| format!("{} at {} ns: {e}", m.topic, head.stamp))?;
-                pose.frames.push(values);
-                Ok(())
-            },
-        )
-        .map_err(stream_failed)?;
 
     let nominal_mount = tree.chain(&camera_frame, &options.body_frame).map(|chain| {
         let base_link_from_optical = tree.at(&chain, heads[0].stamp);
@@ -666,5 +654,76 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         notes,
         images_seen: heads.len(),
         digest: hashing.hasher.finalize().to_hex().to_string(),
+        frames: FramePlan {
+            chosen,
+            needed,
+            stream,
+            depth_topic: options.depth_topic.clone(),
+        },
     })
+}
+
+impl BagSession {
+    /// Reads the chosen frames again, in file order, and hands each pose's
+    /// (its index in [`BagSession::poses`] and its frames, in the bag's
+    /// units) to `each` as soon as they are all read: a pose's frames are
+    /// freed by `each`, never all of a bag's at once. A pose whose frames did
+    /// not all come is handed what came, at the end. Returns how many frames
+    /// were read.
+    pub fn read_frames(
+        &self,
+        mut each: impl FnMut(usize, Vec<Vec<u16>>) -> Result<(), String>,
+    ) -> Result<usize, BagError> {
+        let fail = |what: String| BagError {
+            path: self.path.display().to_string(),
+            what,
+        };
+        let plan = &self.frames;
+        let mut stream = plan.stream.clone();
+        let mut pending: Vec<Option<Vec<Vec<u16>>>> = vec![Some(Vec::new()); self.poses.len()];
+        let mut read = 0;
+        let file = crate::files::open_regular(&self.path)
+            .map_err(|e| fail(format!("cannot {}: {}", e.action, e.source)))?;
+        stream
+            .read(
+                std::io::BufReader::new(file),
+                |topic| topic == plan.depth_topic,
+                |chunk| !plan.needed.contains(&chunk),
+                |m| -> Result<(), String> {
+                    let head = image_head(m.data).map_err(|e| format!("{}: {e}", m.topic))?;
+                    let Some(&k) = plan.chosen.get(&head.stamp) else {
+                        return Ok(());
+                    };
+                    let wanted = self.poses[k].stamps.len();
+                    // Handed on already, or two images of one stamp: the first.
+                    let Some(frames) = pending[k].as_mut() else {
+                        return Ok(());
+                    };
+                    if frames.len() >= wanted {
+                        return Ok(());
+                    }
+                    let image = Image::decode(m.data)
+                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, m.log_time))?;
+                    let values = depth_values(&image, self.units)
+                        .map_err(|e| format!("{} at {} ns: {e}", m.topic, head.stamp))?;
+                    frames.push(values);
+                    read += 1;
+                    if frames.len() == wanted {
+                        let frames = pending[k].take().unwrap_or_default();
+                        each(k, frames)?;
+                    }
+                    Ok(())
+                },
+            )
+            .map_err(|e| match e {
+                ReadError::Stream(e) => fail(e.to_string()),
+                ReadError::Stopped(what) => fail(what),
+            })?;
+        for (k, frames) in pending.into_iter().enumerate() {
+            if let Some(frames) = frames {
+                each(k, frames).map_err(fail)?;
+            }
+        }
+        Ok(read)
+    }
 }

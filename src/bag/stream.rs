@@ -28,12 +28,17 @@ pub struct Limits {
 }
 
 impl Default for Limits {
-    /// 512 MiB each: rosbag2 writes chunks of about 1 MiB, and a whole
-    /// 640 × 480 image is 1.2 MB.
+    /// 32 MiB each, what a real rosbag2 writes with room to spare: its MCAP
+    /// plugin closes a chunk at 768 KiB by default (one message larger than
+    /// that is a chunk of its own), and the largest depth image of a camera
+    /// in use is a few MB (640 × 480 at 32FC1 is 1.2 MB, 1280 × 720 is
+    /// 3.7 MB). A reader that took what a hostile file claims (a zstd chunk
+    /// of 512 MiB made of 16 kB) would need a robot computer's whole memory:
+    /// with these, any input peaks under 256 MB (docs/reliability.md).
     fn default() -> Self {
         Self {
-            record_bytes: 512 << 20,
-            chunk_bytes: 512 << 20,
+            record_bytes: 32 << 20,
+            chunk_bytes: 32 << 20,
         }
     }
 }
@@ -77,7 +82,7 @@ struct ChannelInfo {
 }
 
 /// The schemas and channels declared so far.
-#[derive(Default)]
+#[derive(Debug, Clone, Default)]
 struct Declarations {
     schemas: HashMap<u16, String>,
     channels: HashMap<u16, ChannelInfo>,
@@ -86,7 +91,7 @@ struct Declarations {
 /// Reads the messages of MCAP files; the schemas and channels it has seen
 /// are kept from one pass over a file to the next, so that a second pass
 /// can skip chunks (and the declarations in them) it does not need.
-#[derive(Default)]
+#[derive(Debug, Clone, Default)]
 pub struct McapStream {
     limits: Limits,
     declared: Declarations,
@@ -450,6 +455,9 @@ fn decompress(
     }
     let size = header.uncompressed_size as usize;
     out.clear();
+    // Reserved once, at the size allowed above: read_to_end would otherwise
+    // double its buffer past it, and hold both while it copies.
+    out.reserve_exact(size + 1);
     let read = |reader: &mut dyn Read, out: &mut Vec<u8>| -> Result<(), String> {
         // One byte more than the header says, to catch a longer chunk.
         reader

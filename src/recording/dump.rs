@@ -56,22 +56,41 @@ pub fn parse_entry_name(name: &str) -> Result<DumpEntry, String> {
     })
 }
 
+/// The most files an `INDEX.txt` may name: as many as [`MAX_POSES`] poses
+/// of 30 depth frames and 10 accelerometer readings name, and as many colour
+/// frames again (fakenect records those too), with room to spare.
+///
+/// [`MAX_POSES`]: super::poses::MAX_POSES
+pub const MAX_INDEX_ENTRIES: usize = 200_000;
+
 /// Parses `INDEX.txt`: one file name per line, in capture order.
 ///
 /// A recorder appends a name after its file is written, so a last line cut
 /// off by power loss (no newline, not a valid name) is left out rather than
 /// condemning the whole recording.
 pub fn parse_index(path: &Path, text: &str) -> Result<Vec<DumpEntry>, InputError> {
-    let lines: Vec<&str> = text.split_inclusive('\n').collect();
-    let mut entries = Vec::with_capacity(lines.len());
-    for (k, raw) in lines.iter().enumerate() {
+    let mut entries = Vec::new();
+    // Lines are not collected: a file of newlines would cost 16 bytes a line.
+    let mut lines = text.split_inclusive('\n').enumerate().peekable();
+    while let Some((k, raw)) = lines.next() {
+        let last = lines.peek().is_none();
         let line = raw.trim_end_matches('\n');
         if line.is_empty() {
             continue;
         }
+        if entries.len() == MAX_INDEX_ENTRIES {
+            return Err(InputError::new(
+                path,
+                Some(k + 1),
+                format!(
+                    "more than {MAX_INDEX_ENTRIES} files: a recording's poses name at most {} (its depth frames and accelerometer readings), and a dump of that length holds about as many colour frames",
+                    MAX_INDEX_ENTRIES / 2
+                ),
+            ));
+        }
         match parse_entry_name(line) {
             Ok(entry) => entries.push(entry),
-            Err(_) if k + 1 == lines.len() && !raw.ends_with('\n') => break,
+            Err(_) if last && !raw.ends_with('\n') => break,
             Err(e) => return Err(InputError::new(path, Some(k + 1), e)),
         }
     }
@@ -174,6 +193,23 @@ mod tests {
     fn index_errors_name_the_line() {
         let err = parse_index(Path::new("INDEX.txt"), "d-1-2.pgm\nbogus\n").unwrap_err();
         assert_eq!(err.line, Some(2));
+    }
+
+    /// An INDEX longer than any recording's is refused at the line past the
+    /// bound, before its entries fill the memory; blank lines cost nothing.
+    #[test]
+    fn an_index_longer_than_any_recordings_is_refused() {
+        let line = "d-1-2.pgm\n";
+        let mut text = line.repeat(MAX_INDEX_ENTRIES);
+        assert_eq!(
+            parse_index(Path::new("INDEX.txt"), &text).unwrap().len(),
+            MAX_INDEX_ENTRIES
+        );
+        text.push_str(&"\n".repeat(1000));
+        text.push_str(line);
+        let err = parse_index(Path::new("INDEX.txt"), &text).unwrap_err();
+        assert_eq!(err.line, Some(MAX_INDEX_ENTRIES + 1001), "{err}");
+        assert!(err.message.contains("more than 200000 files"), "{err}");
     }
 
     #[test]

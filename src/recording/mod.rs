@@ -117,8 +117,15 @@ pub fn read_bounded_into(
     })
 }
 
-/// Largest `session.json`, `poses.jsonl` or `INDEX.txt` accepted.
-const MAX_TEXT_BYTES: u64 = 64 << 20;
+/// Largest `session.json` accepted: a few kilobytes in any recording.
+const MAX_SESSION_BYTES: u64 = 1 << 20;
+/// Largest `poses.jsonl` accepted: [`poses::MAX_POSES`] records of at most
+/// [`poses::MAX_FILES_PER_POSE`] names each of each kind fit in about 20 MB.
+const MAX_POSES_BYTES: u64 = 32 << 20;
+/// Largest `INDEX.txt` accepted: [`dump::MAX_INDEX_ENTRIES`] names of about
+/// 40 bytes. These bounds keep a hostile recording's open under 256 MB
+/// (docs/reliability.md).
+const MAX_INDEX_BYTES: u64 = 16 << 20;
 
 /// A recording (recording.md), checked when opened: its text files parsed,
 /// every frame a pose names present in `INDEX.txt` and on disk with the size
@@ -132,15 +139,15 @@ pub struct Recording {
     /// (only a recording opened with [`Recording::open_cut_off`]).
     pub cut_off: Option<poses::CutOff>,
     pub index: Vec<DumpEntry>,
-    /// The raw text files, for the input digest.
-    texts: [Vec<u8>; 3],
+    /// The text files, for the input digest.
+    texts: [String; 3],
 }
 
-fn read_text(path: &Path) -> Result<(Vec<u8>, String), InputError> {
-    let bytes = read_bounded(path, MAX_TEXT_BYTES)?;
-    let text = String::from_utf8(bytes.clone())
-        .map_err(|e| InputError::new(path, None, format!("not UTF-8 text: {e}")))?;
-    Ok((bytes, text))
+/// A text file of at most `max_bytes`, kept once (its bytes are the text's).
+fn read_text(path: &Path, max_bytes: u64) -> Result<String, InputError> {
+    let bytes = read_bounded(path, max_bytes)?;
+    String::from_utf8(bytes)
+        .map_err(|e| InputError::new(path, None, format!("not UTF-8 text: {e}")))
 }
 
 impl Recording {
@@ -174,13 +181,13 @@ impl Recording {
             ));
         }
         let session_path = dir.join("session.json");
-        let (session_bytes, session_text) = read_text(&session_path)?;
+        let session_text = read_text(&session_path, MAX_SESSION_BYTES)?;
         let session = Session::parse(&session_path, &session_text)?;
         let poses_path = dir.join("poses.jsonl");
-        let (poses_bytes, poses_text) = read_text(&poses_path)?;
+        let poses_text = read_text(&poses_path, MAX_POSES_BYTES)?;
         let poses_file = parse_poses(&poses_path, &poses_text)?;
         let index_path = dir.join("kinect").join("INDEX.txt");
-        let (index_bytes, index_text) = read_text(&index_path)?;
+        let index_text = read_text(&index_path, MAX_INDEX_BYTES)?;
         let index = parse_index(&index_path, &index_text)?;
 
         let intrinsics = session.kinect.intrinsics;
@@ -251,7 +258,7 @@ impl Recording {
             poses: poses_file.poses,
             cut_off: poses_file.cut_off,
             index,
-            texts: [session_bytes, poses_bytes, index_bytes],
+            texts: [session_text, poses_text, index_text],
         })
     }
 
@@ -347,7 +354,11 @@ impl Recording {
 
     /// The text files' bytes (session.json, poses.jsonl, INDEX.txt).
     pub fn text_files(&self) -> [&[u8]; 3] {
-        [&self.texts[0], &self.texts[1], &self.texts[2]]
+        [
+            self.texts[0].as_bytes(),
+            self.texts[1].as_bytes(),
+            self.texts[2].as_bytes(),
+        ]
     }
 }
 

@@ -76,10 +76,12 @@ pub const MAX_FILES_PER_POSE: usize = 100;
 pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
     let mut poses: Vec<PoseRecord> = Vec::new();
     let mut cut_off = None;
-    let lines: Vec<&str> = text.split_inclusive('\n').collect();
-    let last_record = lines.iter().rposition(|l| !l.trim().is_empty());
+    // Where the last line that is not blank starts (lines are not collected:
+    // a file of newlines would cost 16 bytes a line).
+    let trimmed = text.trim_end();
+    let last_record = trimmed.rfind('\n').map_or(0, |i| i + 1);
     let mut byte = 0;
-    for (k, raw) in lines.iter().enumerate() {
+    for (k, raw) in text.split_inclusive('\n').enumerate() {
         let number = k + 1;
         let starts_at = byte;
         byte += raw.len();
@@ -89,7 +91,7 @@ pub fn parse_poses(path: &Path, text: &str) -> Result<PosesFile, InputError> {
         }
         let mut record: PoseRecord = match serde_json::from_str(line) {
             Ok(r) => r,
-            Err(e) if e.is_eof() && Some(k) == last_record => {
+            Err(e) if e.is_eof() && starts_at == last_record && !trimmed.is_empty() => {
                 cut_off = Some(CutOff {
                     line: number,
                     byte: starts_at,
