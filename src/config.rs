@@ -281,10 +281,35 @@ pub struct SimConfig {
     /// check): `{ from_pose = 26, degrees = 1.0 }`.
     #[serde(default)]
     pub motor_slip: Option<MotorSlipConfig>,
-    /// A fixed pattern the simulated Kinect adds to its raw depth (tests of
-    /// the depth distortion): `{ shape = "radial", amplitude_raw = 0.5 }`.
+    /// The fixed pattern the simulated Kinect adds to its raw depth:
+    /// by default one drawn as a real unit's (`shape = "measured"`, 0.8 raw
+    /// units RMS with its plane part); `{ shape = "radial", amplitude_raw =
+    /// 0.5 }` and the other shapes for tests; `{ shape = "none" }` for none.
     #[serde(default)]
     pub depth_distortion: Option<SimDistortionConfig>,
+    /// The simulated Kinect's depth noise: `kinect` (the default: measured
+    /// on real frames, correlated over the image and held through a pose)
+    /// or `white` (independent per pixel and frame, the former model).
+    #[serde(default, deserialize_with = "sim_noise")]
+    pub depth_noise: SimNoise,
+}
+
+/// `[sim] depth_noise`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SimNoise {
+    #[default]
+    Kinect,
+    White,
+}
+
+fn sim_noise<'de, D: serde::Deserializer<'de>>(d: D) -> Result<SimNoise, D::Error> {
+    match String::deserialize(d)?.as_str() {
+        "kinect" => Ok(SimNoise::Kinect),
+        "white" => Ok(SimNoise::White),
+        other => Err(serde::de::Error::custom(format!(
+            "\"{other}\" is not a noise of the simulated Kinect (kinect, white)"
+        ))),
+    }
 }
 
 /// `[sim] depth_distortion`: the simulated Kinect's fixed pattern.
@@ -292,7 +317,15 @@ pub struct SimConfig {
 #[serde(deny_unknown_fields)]
 pub struct SimDistortionConfig {
     pub shape: SimDistortionShape,
-    pub amplitude_raw: f64,
+    /// Raw units: the shapes' peak, or the measured pattern's RMS (0.8 by
+    /// default); not needed for `none`.
+    #[serde(default)]
+    pub amplitude_raw: Option<f64>,
+    /// For `measured`: whether the pattern keeps the plane part a real
+    /// unit's carries (default true), which only the poses' heights tell
+    /// from the mount.
+    #[serde(default)]
+    pub plane_part: Option<bool>,
     /// Herrera's weakening with depth, per metre; default 0.
     #[serde(default)]
     pub decay_per_m: f64,
@@ -305,6 +338,8 @@ pub struct SimDistortionConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SimDistortionShape {
+    None,
+    Measured,
     Radial,
     Tilted,
     Saddle,
@@ -526,6 +561,24 @@ impl Config {
                     "sim.mount",
                     "has a value that is not a finite number".into(),
                 ));
+            }
+            if let Some(d) = &sim.depth_distortion {
+                let needs_amplitude = !matches!(
+                    d.shape,
+                    SimDistortionShape::None | SimDistortionShape::Measured
+                );
+                if needs_amplitude && d.amplitude_raw.is_none() {
+                    return Err(bad(
+                        "sim.depth_distortion.amplitude_raw",
+                        "is needed for this shape (raw units, e.g. 0.5)".into(),
+                    ));
+                }
+                if d.plane_part.is_some() && d.shape != SimDistortionShape::Measured {
+                    return Err(bad(
+                        "sim.depth_distortion.plane_part",
+                        "applies to shape = \"measured\" only".into(),
+                    ));
+                }
             }
             if let Some(sinking) = &sim.sinking_foot {
                 if !(1..=6).contains(&sinking.foot) {

@@ -344,7 +344,7 @@ fn among_obstacles_a_patterns_bend_is_predicted_from_the_residuals() {
                 depth_model: model,
                 seed,
                 distortion,
-                ..Default::default()
+                ..SimKinectConfig::independent_noise()
             })
             .expect("a valid simulated Kinect")
         };

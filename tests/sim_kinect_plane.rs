@@ -89,7 +89,7 @@ fn fit_frame(
     let config = SimKinectConfig {
         depth_model: model,
         seed,
-        ..Default::default()
+        ..SimKinectConfig::independent_noise()
     };
     let renderer = DepthRenderer::new(&config).unwrap();
     let raw = renderer.render(world, ground_from_sensor, 0);
@@ -229,7 +229,7 @@ fn the_disparity_fit_is_unbiased_where_the_papers_is_not() {
 fn ground_share(world: &World, model: DepthModel, ground_from_sensor: &Transform) -> f64 {
     let config = SimKinectConfig {
         depth_model: model,
-        ..Default::default()
+        ..SimKinectConfig::independent_noise()
     };
     let renderer = DepthRenderer::new(&config).unwrap();
     let scene = renderer.render(world, ground_from_sensor, 0);

@@ -261,6 +261,10 @@ fn sim_distortion(
     use crate::config::SimDistortionShape as Shape;
     use groundcal_hal::sim::kinect::{DepthDistortion, DistortionShape};
     let shape = match config.shape {
+        Shape::None => DistortionShape::None,
+        Shape::Measured => DistortionShape::Measured {
+            plane: config.plane_part.unwrap_or(true),
+        },
         Shape::Radial => DistortionShape::Radial,
         Shape::Tilted => DistortionShape::Tilted,
         Shape::Saddle => DistortionShape::Saddle,
@@ -269,9 +273,13 @@ fn sim_distortion(
         },
         Shape::Waves => DistortionShape::Waves,
     };
+    let default_amplitude = match config.shape {
+        Shape::Measured => DepthDistortion::measured().amplitude_raw,
+        _ => 0.0,
+    };
     DepthDistortion {
         shape,
-        amplitude_raw: config.amplitude_raw,
+        amplitude_raw: config.amplitude_raw.unwrap_or(default_amplitude),
         decay_per_m: config.decay_per_m,
     }
 }
@@ -312,12 +320,15 @@ fn sensor_from(
                     .sim
                     .depth_distortion
                     .map(|d| sim_distortion(&d))
-                    .unwrap_or_default(),
+                    .unwrap_or_else(groundcal_hal::sim::kinect::DepthDistortion::measured),
                 motor_slip: parts.sim.motor_slip.map(|m| (m.from_pose, m.degrees)),
                 ..SimKinectConfig::default()
             };
             if let Some(model) = config.sensor.depth_model {
                 kinect.depth_model = model;
+            }
+            if parts.sim.depth_noise == crate::config::SimNoise::White {
+                kinect.noise = groundcal_hal::sim::kinect::DepthNoise::white();
             }
             if let Some(intrinsics) = config.sensor.intrinsics {
                 kinect.intrinsics = intrinsics;

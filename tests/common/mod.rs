@@ -786,7 +786,7 @@ pub fn sim_renderer(
     let config = groundcal_hal::sim::kinect::SimKinectConfig {
         depth_model: model,
         seed,
-        ..Default::default()
+        ..groundcal_hal::sim::kinect::SimKinectConfig::independent_noise()
     };
     let renderer =
         groundcal_hal::sim::kinect::DepthRenderer::new(&config).expect("a valid simulated Kinect");

@@ -4,8 +4,10 @@
 //! The calibration must find `robot_from_sensor` from what a real Kinect would
 //! deliver, so the simulator renders what a real Kinect delivers: raw values of
 //! the configured [`DepthModel`] (quantised in disparity, so that a raw step is
-//! ~3 mm at 1 m and ~27 mm at 3 m), Gaussian noise in disparity (so growing
-//! as `z²` in depth, along each ray), scattered
+//! ~3 mm at 1 m and ~27 mm at 3 m), noise in disparity (so growing as `z²` in
+//! depth, along each ray) correlated over the image as a real unit's is, and
+//! the unit's own fixed pattern ([`crate::sim::noise`], measured on real
+//! frames; [`DepthNoise::White`] keeps the former independent noise), scattered
 //! dropouts and more of them at grazing angles, the shadows the 7.5 cm
 //! emitter–camera baseline makes boxes and walls cast, the dead columns at the
 //! right border, and "no reading" (2047) outside 0.5–5 m. Everything random is
@@ -20,8 +22,7 @@
 //! meant to find. [`SimKinect::true_robot_from_sensor`] is that truth, for tests
 //! to compare the result with; nothing in a calibration may call it.
 //!
-//! What is not modelled: lens distortion, the speckle's spatial correlation,
-//! the RGB camera, and the motor's pivot (a tilt turns the sensor about its
+//! What is not modelled: lens distortion, the RGB camera, and the motor's pivot (a tilt turns the sensor about its
 //! optical centre; a real Kinect's head pivots a few centimetres below it).
 //! The motor's angle is relative to the mount, where a real Kinect levels
 //! against gravity with its accelerometer; the calibration identifies the mount
@@ -38,14 +39,69 @@ use tokio::time::Instant;
 
 use crate::error::{Error, ErrorKind};
 use crate::sensor::{DepthFrame, DepthSensor, Led, SensorInfo, TiltState};
+use crate::sim::noise::{measured_pattern, KinectNoise, NoiseHeld, NoiseKey};
 use crate::sim::world::{RayHints, Surface, World};
 use crate::sim::TruePose;
 use groundcal_calib::depth::{DepthModel, Intrinsics, RAW_NO_READING};
 use groundcal_calib::geometry::{rot_z, sensor_from_optical, Transform};
 
-/// The Kinect's depth noise in disparity, 1/m: constant over the image, it is
-/// `σ(z) = 1.4·10⁻³·z²` m in depth (conventions.md), about half a raw step.
+/// The former model's depth noise in disparity, 1/m, independent from pixel
+/// to pixel: `σ(z) = 1.4·10⁻³·z²` m in depth (conventions.md), about half a
+/// raw step ([`DepthNoise::White`]).
 pub const DISPARITY_SIGMA: f64 = 1.4e-3;
+
+/// The simulated Kinect's depth noise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DepthNoise {
+    /// As a real Kinect's, measured on real frames: correlated over the
+    /// image, held through a pose, growing with depth (the default).
+    Kinect(KinectNoise),
+    /// Independent per pixel and frame, σ in disparity, 1/m (the former
+    /// model, for tests that need noise without structure):
+    /// [`DISPARITY_SIGMA`], 0.456 raw units of the inverse-linear model.
+    White { disparity_sigma: f64 },
+}
+
+impl Default for DepthNoise {
+    fn default() -> Self {
+        DepthNoise::Kinect(KinectNoise::default())
+    }
+}
+
+impl DepthNoise {
+    /// The former model's white noise ([`DISPARITY_SIGMA`]).
+    pub fn white() -> Self {
+        DepthNoise::White {
+            disparity_sigma: DISPARITY_SIGMA,
+        }
+    }
+
+    /// The largest σ of a reading at depths up to `max_depth_m`, in
+    /// disparity (1/m), for a model of `disparity_per_raw`.
+    fn max_disparity_sigma(&self, max_depth_m: f64, disparity_per_raw: f64) -> f64 {
+        match self {
+            DepthNoise::Kinect(k) => {
+                (k.smooth_sigma_raw() + k.white_raw) * k.gain(max_depth_m) * disparity_per_raw.abs()
+            }
+            DepthNoise::White { disparity_sigma } => *disparity_sigma,
+        }
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        match self {
+            DepthNoise::Kinect(k) => k.validate(),
+            DepthNoise::White { disparity_sigma } => {
+                if disparity_sigma.is_finite() && (0.0..=0.1).contains(disparity_sigma) {
+                    Ok(())
+                } else {
+                    Err(format!(
+                        "the white noise's disparity_sigma must lie in [0, 0.1] /m, not {disparity_sigma}"
+                    ))
+                }
+            }
+        }
+    }
+}
 
 /// Accelerometer counts per g (recording.md).
 pub const ACCELEROMETER_COUNTS_PER_G: f64 = 819.0;
@@ -74,9 +130,9 @@ pub struct SimKinectConfig {
     /// [`DepthSensor::info`] reports it.
     pub depth_model: DepthModel,
     pub intrinsics: Intrinsics,
-    /// Multiplies the depth noise, drawn in disparity: `σ = 1.4·10⁻³` /m of
-    /// `1/z`, which is `1.4·10⁻³·z²` m in depth (conventions.md); 0 renders
-    /// exact depths, quantised.
+    /// The depth noise, drawn in disparity (raw units of the depth model).
+    pub noise: DepthNoise,
+    /// Multiplies the depth noise; 0 renders exact depths, quantised.
     pub noise_scale: f64,
     /// Fraction of pixels lost at random anywhere (real frames: about 1 %).
     pub dropout_rate: f64,
@@ -121,7 +177,8 @@ pub struct SimKinectConfig {
     /// normal and its distance is multiplied by it.
     pub depth_scale: f64,
     /// A fixed pattern over the image added to every raw value (a real
-    /// unit's depth distortion); none by default.
+    /// unit's depth distortion): by default one drawn as a real unit's
+    /// ([`DistortionShape::Measured`], 0.8 raw units RMS and its plane part).
     pub distortion: DepthDistortion,
 }
 
@@ -155,6 +212,13 @@ pub enum DistortionShape {
     Bands { period_px: f64 },
     /// Smooth waves across the image, `sin(π·x̂)·cos(π·ŷ)`.
     Waves,
+    /// A real unit's, drawn for the simulator's seed as measured on real
+    /// frames ([`measured_pattern`]): a smooth field whose RMS (its plane
+    /// part left out) is the amplitude (0.8 measured), sawtooth stripes
+    /// 42 pixels apart and a fine texture; with `plane`, the plane part the
+    /// smooth field carries, which only the poses' heights can tell from the
+    /// mount.
+    Measured { plane: bool },
 }
 
 impl DepthDistortion {
@@ -177,8 +241,19 @@ impl DepthDistortion {
             DistortionShape::Waves => {
                 (std::f64::consts::PI * x).sin() * (std::f64::consts::PI * y).cos()
             }
+            // Drawn over the whole image at once ([`distortion_image`]).
+            DistortionShape::Measured { .. } => 0.0,
         };
         self.amplitude_raw * shape
+    }
+
+    /// A real unit's pattern as measured (0.8 raw units RMS, its plane part).
+    pub fn measured() -> Self {
+        Self {
+            shape: DistortionShape::Measured { plane: true },
+            amplitude_raw: 0.8,
+            decay_per_m: 0.0,
+        }
     }
 
     fn validate(&self) -> Result<(), String> {
@@ -210,6 +285,7 @@ impl Default for SimKinectConfig {
         Self {
             depth_model: DepthModel::default(),
             intrinsics: Intrinsics::default(),
+            noise: DepthNoise::default(),
             noise_scale: 1.0,
             dropout_rate: 0.01,
             grazing_dropout: 0.5,
@@ -225,12 +301,23 @@ impl Default for SimKinectConfig {
             accelerometer_noise_g: ACCELEROMETER_NOISE_G,
             motor_slip: None,
             depth_scale: 1.0,
-            distortion: DepthDistortion::default(),
+            distortion: DepthDistortion::measured(),
         }
     }
 }
 
 impl SimKinectConfig {
+    /// The former model: noise independent per pixel and frame
+    /// ([`DepthNoise::White`]) and no pattern; for tests of what a fit does
+    /// with noise that has no structure (its bias, its σ against its errors).
+    pub fn independent_noise() -> Self {
+        Self {
+            noise: DepthNoise::white(),
+            distortion: DepthDistortion::default(),
+            ..Self::default()
+        }
+    }
+
     /// Whether every setting is usable.
     pub fn validate(&self) -> Result<(), SimKinectError> {
         let bad = |m: String| Err(SimKinectError::Config(m));
@@ -282,6 +369,7 @@ impl SimKinectConfig {
             }
         }
         self.distortion.validate().map_err(SimKinectError::Config)?;
+        self.noise.validate().map_err(SimKinectError::Config)?;
         if !(0.5..=2.0).contains(&self.depth_scale) {
             return bad(format!(
                 "depth_scale must lie in [0.5, 2], not {}",
@@ -442,6 +530,9 @@ pub struct DepthRenderer {
     /// The distortion per pixel at 1 m in disparity (1/m), row-major; empty
     /// without one.
     distortion: Vec<f64>,
+    /// Disparity (1/m) per raw unit: the model's `b` (negative: more raw is
+    /// farther).
+    disparity_per_raw: f64,
 }
 
 impl DepthRenderer {
@@ -455,7 +546,22 @@ impl DepthRenderer {
             ray_x: (0..k.width).map(|u| (u as f64 - k.cx) / k.fx).collect(),
             ray_y: (0..k.height).map(|v| (v as f64 - k.cy) / k.fy).collect(),
             distortion: distortion_image(config),
+            disparity_per_raw: config.depth_model.inverse_depth_affine().1,
         })
+    }
+
+    /// The smooth part of the noise drawn for `index` (a pose's, or a
+    /// frame's), raw units, to hand to [`DepthRenderer::render_with`]; None
+    /// for noise without one.
+    pub fn smooth_noise(&self, key: NoiseKey) -> Option<Vec<f32>> {
+        match self.config.noise {
+            DepthNoise::Kinect(k) if self.config.noise_scale > 0.0 => Some(k.smooth_field(
+                self.config.intrinsics.width,
+                self.config.intrinsics.height,
+                key,
+            )),
+            _ => None,
+        }
     }
 
     /// The configuration rendered.
@@ -469,18 +575,47 @@ impl DepthRenderer {
     }
 
     /// One raw frame, row-major, top row first, of `world` seen from
-    /// `ground_from_sensor`; `frame_index` selects the frame's noise.
-    ///
-    /// Each pixel's ray is the optical `((u-cx)/fx, (v-cy)/fy, 1)`, turned
-    /// into G by `ground_from_sensor · sensor_from_optical`: with an optical
-    /// z of 1 the ray parameter of the hit is the depth `z` itself.
+    /// `ground_from_sensor`; `frame_index` selects the frame's noise, all of
+    /// it drawn for this frame (the smooth part too: [`DepthRenderer::render_with`]
+    /// holds it through a pose, as [`SimKinect`] does).
     pub fn render(
         &self,
         world: &World,
         ground_from_sensor: &Transform,
         frame_index: u64,
     ) -> Vec<u16> {
+        let smooth = self.smooth_noise(NoiseKey::frame(self.config.seed, frame_index));
+        self.render_with(world, ground_from_sensor, frame_index, smooth.as_deref())
+    }
+
+    /// [`DepthRenderer::render`] with the smooth part of the noise given
+    /// (from [`DepthRenderer::smooth_noise`]); the white part is the frame's.
+    ///
+    /// Each pixel's ray is the optical `((u-cx)/fx, (v-cy)/fy, 1)`, turned
+    /// into G by `ground_from_sensor · sensor_from_optical`: with an optical
+    /// z of 1 the ray parameter of the hit is the depth `z` itself.
+    pub fn render_with(
+        &self,
+        world: &World,
+        ground_from_sensor: &Transform,
+        frame_index: u64,
+        smooth: Option<&[f32]>,
+    ) -> Vec<u16> {
         let c = &self.config;
+        // The noise in disparity (1/m) of a reading at depth z, from its
+        // frame's standard normal draw and its pose's smooth part (raw units,
+        // more is farther). The former model's white draw enters as
+        // `+σ·gaussian` in disparity; the measured one's in raw units.
+        let noise = |z: f64, gaussian: f64, smooth_raw: f64| match c.noise {
+            DepthNoise::Kinect(k) => {
+                self.disparity_per_raw
+                    * c.noise_scale
+                    * k.gain(z)
+                    * (smooth_raw - k.white_raw * gaussian)
+            }
+            DepthNoise::White { disparity_sigma } => c.noise_scale * disparity_sigma * gaussian,
+        };
+        let smooth = smooth.filter(|s| s.len() == c.intrinsics.width * c.intrinsics.height);
         let width = c.intrinsics.width;
         let ground_from_optical: Matrix3<f64> =
             ground_from_sensor.rotation.matrix() * sensor_from_optical();
@@ -492,9 +627,16 @@ impl DepthRenderer {
         let origin = Point3::from(ground_from_sensor.translation.vector);
         // The emitter sits at optical (baseline, 0, 0): sensor Z (right).
         let emitter = ground_from_sensor * Point3::new(0.0, 0.0, c.emitter_baseline_m);
-        // Past this depth even 5σ of noise cannot bring a reading into range.
+        // Past this depth even 5σ of noise and the whole pattern cannot bring
+        // a reading into range.
         let far = self.quantiser.farthest_in_range();
-        let near_enough = 1.0 / far - 5.0 * c.noise_scale * DISPARITY_SIGMA;
+        let pattern_reach = self.distortion.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+        let near_enough = 1.0 / far
+            - 5.0
+                * c.noise_scale
+                * c.noise
+                    .max_disparity_sigma(c.max_depth_m, self.disparity_per_raw)
+            - pattern_reach;
         let t_max = if near_enough > 0.0 {
             1.0 / near_enough
         } else {
@@ -547,9 +689,10 @@ impl DepthRenderer {
                 }
                 let z = hit.t;
                 // The noise is in disparity, as the Kinect's correlation
-                // measures it: constant in 1/z, σ(z) ≈ 1.4·10⁻³·z² in depth.
-                let mut disparity =
-                    1.0 / (z * c.depth_scale) + c.noise_scale * DISPARITY_SIGMA * gaussian;
+                // measures it (raw units, more is farther): the frame's
+                // white part and the pose's smooth part, grown with depth.
+                let smooth_raw = smooth.map_or(0.0, |s| f64::from(s[v * width + u]));
+                let mut disparity = 1.0 / (z * c.depth_scale) + noise(z, gaussian, smooth_raw);
                 if let Some(pattern) = self.distortion.get(v * width + u) {
                     disparity += pattern * (-c.distortion.decay_per_m * (z - 1.0)).exp();
                 }
@@ -591,6 +734,18 @@ fn distortion_image(config: &SimKinectConfig) -> Vec<f64> {
     }
     let (_, b) = config.depth_model.inverse_depth_affine();
     let k = &config.intrinsics;
+    if let DistortionShape::Measured { plane } = config.distortion.shape {
+        return measured_pattern(
+            k.width,
+            k.height,
+            config.seed,
+            config.distortion.amplitude_raw,
+            plane,
+        )
+        .into_iter()
+        .map(|raw| b * f64::from(raw))
+        .collect();
+    }
     (0..k.height)
         .flat_map(|v| (0..k.width).map(move |u| (u, v)))
         .map(|(u, v)| b * config.distortion.raw_at(u as f64, v as f64, k))
@@ -729,6 +884,11 @@ pub struct SimKinect {
     readings: u64,
     /// The slip of the motor now, degrees (see `SimKinectConfig::motor_slip`).
     slipped_deg: f64,
+    /// The pose now (0 at rest, before the first pose): the smooth noise is
+    /// the pose's ([`NoiseHeld::PerPose`]).
+    pose: u64,
+    /// The smooth noise of the pose it was drawn for.
+    pose_noise: Option<(u64, Arc<Vec<f32>>)>,
     /// Started at the first frame requested (inside the runtime whose clock
     /// counts, paused or not).
     clock: Option<Clock>,
@@ -755,9 +915,29 @@ impl SimKinect {
             frames_delivered: 0,
             readings: 0,
             slipped_deg: 0.0,
+            pose: 0,
+            pose_noise: None,
             clock: None,
             last_tick: None,
         })
+    }
+
+    /// The smooth noise of the next frame: the pose's, drawn once and held
+    /// while the sensor holds still (`Ok`, when it is drawn already), or
+    /// the key to draw it by, and whether to keep it for the pose.
+    fn smooth_noise(&self, frame_index: u64) -> Result<Option<Arc<Vec<f32>>>, (NoiseKey, bool)> {
+        let seed = self.config().seed;
+        let held = match self.config().noise {
+            DepthNoise::Kinect(k) => k.held,
+            DepthNoise::White { .. } => return Ok(None),
+        };
+        match held {
+            NoiseHeld::PerFrame => Err((NoiseKey::frame(seed, frame_index), false)),
+            NoiseHeld::PerPose => match &self.pose_noise {
+                Some((pose, noise)) if *pose == self.pose => Ok(Some(Arc::clone(noise))),
+                _ => Err((NoiseKey::pose(seed, self.pose), true)),
+            },
+        }
     }
 
     /// The configuration.
@@ -867,8 +1047,10 @@ impl DepthSensor for SimKinect {
         Ok(())
     }
 
-    /// The motor slips at its configured pose (and stays slipped).
+    /// The motor slips at its configured pose (and stays slipped); the
+    /// smooth noise is drawn afresh for the new view.
     fn begin_pose(&mut self, pose_id: u16) {
+        self.pose = u64::from(pose_id);
         if let Some((from, degrees)) = self.config().motor_slip {
             if pose_id >= from {
                 self.slipped_deg = degrees;
@@ -902,11 +1084,30 @@ impl DepthSensor for SimKinect {
         let ground_from_sensor = self.true_ground_from_sensor();
         let frame_index = self.frames_delivered;
         let (world, renderer) = (Arc::clone(&self.world), Arc::clone(&self.renderer));
-        let raw = tokio::task::spawn_blocking(move || {
-            renderer.render(&world, &ground_from_sensor, frame_index)
+        let smooth = self.smooth_noise(frame_index);
+        let (raw, drawn) = tokio::task::spawn_blocking(move || {
+            // A new pose's noise is drawn here too, off the session's thread.
+            let (smooth, drawn) = match smooth {
+                Ok(held) => (held, None),
+                Err((key, keep)) => {
+                    let noise = renderer.smooth_noise(key).map(Arc::new);
+                    let kept = noise.clone().filter(|_| keep);
+                    (noise, kept)
+                }
+            };
+            let raw = renderer.render_with(
+                &world,
+                &ground_from_sensor,
+                frame_index,
+                smooth.as_deref().map(Vec::as_slice),
+            );
+            (raw, drawn)
         })
         .await
         .map_err(|e| SimKinectError::Render(e.to_string()))?;
+        if let Some(noise) = drawn {
+            self.pose_noise = Some((self.pose, noise));
+        }
         self.frames_delivered += 1;
 
         let c = self.config();

@@ -16,6 +16,7 @@
 
 pub mod kinect;
 pub mod lower_computer;
+pub mod noise;
 pub mod recorded_robot;
 pub mod robot;
 pub mod world;
