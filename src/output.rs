@@ -442,8 +442,24 @@ pub struct DepthPatternJson {
     /// The shape against none, χ² per degree of freedom (about 1: none).
     pub shape_chi2_per_dof: f64,
     /// The residuals cell by cell and pose by pose after the pattern, χ² per
-    /// degree of freedom (about 1: a pattern fixed in the image).
+    /// degree of freedom against the noise the poses' own scatter shows
+    /// (about 1 by that noise's construction: a check, not a test).
     pub consistency_chi2_per_dof: f64,
+    /// The shape's size in noise's σ above what the poses make with random
+    /// signs: the test that there is a shape.
+    #[serde(default)]
+    pub shape_sigmas: f64,
+    /// The share by which the pattern weakens a metre farther, and its σ.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub changes_with_depth: Option<[f64; 2]>,
+    /// How far the residuals stay with the ground as the poses move, in
+    /// noise's σ (uneven ground).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fixed_in_the_ground_sigmas: Option<f64>,
+    /// Why a warp was not corrected: `changes_with_depth`,
+    /// `ground_not_flat` or `cells_change`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncorrected_because: Option<String>,
     /// Its plane part from the geometry across poses (raw units at the
     /// principal point, per 100 pixels along u and along v), with σ.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -470,6 +486,16 @@ pub struct DepthPatternJson {
     pub raw_per_inverse_depth: f64,
 }
 
+/// A figure the document can carry: JSON has no infinity (a test whose
+/// null had no spread says "beyond any" as 10⁹).
+fn finite_or_zero(value: f64) -> f64 {
+    if value.is_nan() {
+        0.0
+    } else {
+        value.clamp(-1e9, 1e9)
+    }
+}
+
 impl DepthPatternJson {
     /// The pattern as the result carries it (cells to 0.001 raw units).
     pub fn from_pattern(p: &crate::calib::outcome::DepthPattern) -> Self {
@@ -486,6 +512,18 @@ impl DepthPatternJson {
             shape_rms_raw: p.shape_rms_raw,
             shape_chi2_per_dof: p.shape_chi2_per_dof,
             consistency_chi2_per_dof: p.consistency_chi2_per_dof,
+            shape_sigmas: finite_or_zero(p.shape_sigmas),
+            changes_with_depth: p.changes_with_depth,
+            fixed_in_the_ground_sigmas: p.fixed_in_the_ground_sigmas.map(finite_or_zero),
+            uncorrected_because: p.uncorrected_because.map(|c| {
+                use crate::calib::outcome::WarpCause;
+                match c {
+                    WarpCause::ChangesWithDepth { .. } => "changes_with_depth",
+                    WarpCause::GroundNotFlat { .. } => "ground_not_flat",
+                    WarpCause::CellsChange { .. } => "cells_change",
+                }
+                .to_string()
+            }),
             plane_part_raw: p.plane_part,
             plane_part_sigma_raw: p.plane_part_sigma,
             plane_part_taken: p.plane_part_taken,

@@ -374,8 +374,13 @@ fn a_pattern_that_changes_with_depth_is_rejected_in_words() {
         let reasons = result["reasons"].to_string();
         assert!(
             reasons.contains("the depth image is warped")
-                && reasons.contains("changes from pose to pose"),
+                && reasons.contains("it changes with the distance (weaker by")
+                && reasons.contains("the ground you calibrated on is not the cause"),
             "{how}: {reasons}"
+        );
+        assert_eq!(
+            result["depth_pattern"]["uncorrected_because"], "changes_with_depth",
+            "{how}"
         );
         let check = gate_check(result, "warp_max_mm");
         assert_eq!(check["passed"], false, "{how}: {check}");
@@ -425,7 +430,7 @@ fn the_papers_fit_does_not_hide_a_warped_depth() {
                 std::fs::create_dir_all(&case).unwrap();
                 common::sim_config_unmeasured(&case, &[("world = \"flat\"", "world = \"uneven\"")])
             },
-            Expected::Warped("changes from pose to pose"),
+            Expected::Warped("so the ground is not flat"),
         ),
         (
             "flat",

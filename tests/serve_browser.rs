@@ -945,10 +945,13 @@ fn the_page_shows_what_the_camera_sees_and_speaks_chinese() {
     let (server, addr) = common::spawn_serve_with(
         &dir,
         TOKEN,
-        &[(
-            "world = \"flat\"",
-            "world = \"clutter\"\ndepth_distortion = { shape = \"waves\", amplitude_raw = 1.5 }",
-        )],
+        &[
+            ("world = \"flat\"", "world = \"clutter\""),
+            (
+                common::SIM_NO_PATTERN_LINE,
+                "depth_distortion = { shape = \"waves\", amplitude_raw = 1.5 }",
+            ),
+        ],
         &[],
         &[],
     );

@@ -27,6 +27,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Vector3};
 use rayon::prelude::*;
 
+use crate::cell_noise::{flip_test, CellNoise, Entry, FlipTest};
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;
 use crate::outcome::{DepthPattern, Solution};
@@ -42,17 +43,23 @@ const MIN_CELL_READINGS: f64 = 48.0;
 /// Fewest poses with residuals to estimate a pattern from.
 pub const MIN_PATTERN_POSES: usize = 10;
 
-/// A shape is taken as real when its χ² per degree of freedom exceeds 1 by
-/// this many of its standard deviations (√(2/dof)) and its RMS reaches
+/// A shape is taken as real when its size stands this many of noise's σ
+/// above the sizes of shapes made of the same poses with random signs
+/// ([`crate::cell_noise::flip_test`]) and its RMS reaches
 /// [`MIN_SHAPE_RMS_RAW`].
 const SHAPE_SIGNIFICANCE: f64 = 8.0;
 
-/// The residuals after a fixed pattern may be at most this many times the
-/// readings' noise (χ² per degree of freedom) for the pattern to be taken
-/// as the sensor's: fixed patterns of every simulated kind leave 1.01–1.04
-/// on open ground and 1.01–1.05 among boxes, walls and clutter; a pattern
-/// that weakens with depth 1.47–1.51 (docs/method.md).
-const MAX_CONSISTENCY: f64 = 1.25;
+/// A pattern is not the sensor's fixed one when a test of an alternative
+/// finds it by this many of its σ: a pattern that changes with the depth
+/// ([`DepthDependence`]), or residuals that stay with the ground as the
+/// poses move ([`ShapeEstimate::fixed_in_the_ground`]). The noise these σ
+/// are of comes from the poses' own scatter (a real Kinect's is correlated
+/// over the image, so no count of pixels can say it).
+const ALTERNATIVE_SIGMAS: f64 = 5.0;
+
+/// Bins of the ground, metres, in which the residuals are looked for
+/// where they stay with the ground: about a cell's footprint at 2 m.
+const GROUND_BIN_M: f64 = 0.05;
 
 /// At least this share of the cells seen must keep residuals fixed in the
 /// image for the pattern to be the sensor's.
@@ -78,11 +85,17 @@ pub struct ShapeEstimate {
     pub readings: Vec<f64>,
     /// Whether each cell entered the estimate.
     pub seen: Vec<bool>,
-    /// σ of one reading about its cell's mean, 1/m.
-    pub reading_sigma: f64,
-    /// The shape against none: Σ readings·shape²/σ², and its degrees of freedom.
+    /// The noise of a cell's mean at one pose, from the poses' own scatter.
+    pub noise: CellNoise,
+    /// The variance of each cell's shape from that noise, (1/m)² (0 where
+    /// not seen).
+    pub cell_variance: Vec<f64>,
+    /// The shape against none: Σ shape²/σ² over the cells, and its degrees
+    /// of freedom (the cells are correlated: [`ShapeEstimate::flips`] judges).
     pub shape_chi2: f64,
     pub shape_dof: f64,
+    /// The shape's size against the sizes the poses make with random signs.
+    pub flips: FlipTest,
     /// The residuals left by pattern and planes, cell by cell and pose by
     /// pose, against the readings' noise: about 1 per degree of freedom
     /// when the pattern is fixed in the image and the ground flat.
@@ -94,6 +107,13 @@ pub struct ShapeEstimate {
     /// The share of the cells seen that stayed in the estimate (the others'
     /// residuals changed from pose to pose).
     pub kept_fraction: f64,
+    /// Whether the pattern changes with the depth, as the cells' residuals
+    /// against the shape times their depth say.
+    pub depth: DepthDependence,
+    /// Whether the residuals left by pattern and planes stay with the
+    /// ground as the poses move (uneven ground), as flipping the poses'
+    /// signs over bins of the ground says; None without the poses' geometry.
+    pub fixed_in_the_ground: Option<FlipTest>,
     /// Raw units per 1/m.
     pub raw_per_inverse_depth: f64,
     pub intrinsics: Intrinsics,
@@ -113,26 +133,59 @@ impl ShapeEstimate {
     /// only the pattern's share is taken out, so that with no pattern nothing
     /// changes. Every sum the fit took counts, kept or not.
     pub fn plane_corrections(&self, poses: &[&GroundResiduals]) -> Vec<Vector3<f64>> {
+        let sigma = self.noise.of_reading().sqrt();
         poses
             .par_iter()
-            .map(|pose| -bend(pose, &self.shape, &self.seen, self.reading_sigma))
+            .map(|pose| -bend(pose, &self.shape, &self.seen, sigma))
             .collect()
     }
 
-    /// Whether the residuals are a pattern fixed in the image: what is left
-    /// after it is noise, cell by cell and pose by pose. Uneven ground and
-    /// clutter move in the image from pose to pose and are not.
+    /// Whether the residuals are a pattern fixed in the image: no test of
+    /// an alternative finds one (a pattern that changes with depth, ground
+    /// that is not flat), and most cells keep their residuals from pose to
+    /// pose (obstacles' feet and bumps do not).
     pub fn consistent(&self) -> bool {
-        self.kept_fraction >= MIN_KEPT_FRACTION
-            && self.consistency_dof > 0.0
-            && self.consistency_chi2 / self.consistency_dof <= MAX_CONSISTENCY
+        self.why_not_fixed().is_none()
+    }
+
+    /// Why the residuals are not the sensor's fixed pattern, when they are not.
+    pub fn why_not_fixed(&self) -> Option<crate::outcome::WarpCause> {
+        use crate::outcome::WarpCause;
+        if self.kept_fraction < MIN_KEPT_FRACTION {
+            return Some(WarpCause::CellsChange {
+                left_out: 1.0 - self.kept_fraction,
+            });
+        }
+        // Both alternatives leave traces of each other (a pattern weaker
+        // farther leaves residuals that follow the distance over the ground;
+        // bumps seen nearer and farther look like a change with depth): the
+        // one whose test stands farther out says why.
+        let ground = self
+            .fixed_in_the_ground
+            .map(|t| t.sigmas())
+            .filter(|s| *s > ALTERNATIVE_SIGMAS);
+        let depth = self
+            .depth
+            .significant()
+            .then(|| (self.depth.per_m / self.depth.sigma).abs());
+        match (ground, depth) {
+            (Some(g), Some(d)) if d > g => Some(WarpCause::ChangesWithDepth {
+                per_m: self.depth.per_m,
+                sigma: self.depth.sigma,
+            }),
+            (Some(g), _) => Some(WarpCause::GroundNotFlat { sigmas: g }),
+            (None, Some(_)) => Some(WarpCause::ChangesWithDepth {
+                per_m: self.depth.per_m,
+                sigma: self.depth.sigma,
+            }),
+            (None, None) => None,
+        }
     }
 
     /// Whether the shape stands out of the noise and matters.
     pub fn significant(&self) -> bool {
         self.shape_dof > 0.0
-            && self.shape_chi2 / self.shape_dof
-                > 1.0 + SHAPE_SIGNIFICANCE * (2.0 / self.shape_dof).sqrt()
+            && self.flips.sigmas() > SHAPE_SIGNIFICANCE
             && self.rms_raw() >= MIN_SHAPE_RMS_RAW
     }
 
@@ -151,6 +204,15 @@ impl ShapeEstimate {
 /// given the pattern) until the pattern moves by less than 10⁻⁴ raw units.
 /// `None` with fewer than [`MIN_PATTERN_POSES`] poses or cells of mixed sizes.
 pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
+    estimate_shape_seen_from(poses, None)
+}
+
+/// [`estimate_shape`], with each pose's `ground_from_sensor` when known: the
+/// residuals are then also looked for where they stay with the ground.
+pub fn estimate_shape_seen_from(
+    poses: &[&GroundResiduals],
+    ground_from_sensor: Option<&[crate::geometry::Transform]>,
+) -> Option<ShapeEstimate> {
     let first = poses.first()?;
     if poses.len() < MIN_PATTERN_POSES
         || poses
@@ -160,7 +222,7 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         return None;
     }
     let cells = first.cells.len();
-    let variance = reading_variance(poses);
+    let within = reading_variance(poses);
     let mut kept = Kept::all(poses);
     let seen_at_first = kept.seen.clone();
     let total: f64 = kept.readings.iter().sum();
@@ -168,40 +230,84 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
     // A cell's sum at one pose whose mean lies far from the pattern and the
     // plane is not the sensor's (an obstacle's foot in that cell at that
     // pose, a bump of the ground): it leaves the estimate, which is made
-    // again without it, until the sums kept stay the same.
+    // again without it, until the sums kept stay the same. "Far" is in the
+    // noise of a cell's mean as the poses' own scatter shows it.
     let mut fitted = alternate(poses, &kept, None);
     let all_cells_rms_raw =
         weighted_rms(&fitted.shape, &kept.readings, &kept.seen) * first.raw_per_inverse_depth.abs();
+    let mut noise = estimate_noise(poses, &kept, &fitted, within);
     for _ in 0..5 {
-        let next = Kept::within(poses, &fitted, variance, &seen_at_first);
+        let next = Kept::within(poses, &fitted, &noise, &seen_at_first);
         if next.out == kept.out {
             break;
         }
         kept = next;
         fitted = alternate(poses, &kept, Some(&fitted.shape));
+        noise = estimate_noise(poses, &kept, &fitted, within);
     }
     // A cell far from the cells above and below it is not the sensor's
     // either: a pattern is smooth down the image (a real unit's stripes run
     // down it), where the foot of a wall or a box lies along a row and sits
     // at the same place in the image at every pose.
     for _ in 0..3 {
-        let lone = lone_cells(&fitted.shape, &kept, first.raw_per_inverse_depth, variance);
+        let cell_variance = cell_variances(poses, &kept, &noise);
+        let lone = lone_cells(
+            &fitted.shape,
+            &kept,
+            first.raw_per_inverse_depth,
+            &cell_variance,
+        );
         if lone.is_empty() {
             break;
         }
         kept.leave_out(&lone);
         fitted = alternate(poses, &kept, Some(&fitted.shape));
+        noise = estimate_noise(poses, &kept, &fitted, within);
     }
     let Fitted {
         shape, iterations, ..
     } = &fitted;
     let seen = kept.seen.clone();
     let observed = seen.iter().filter(|s| **s).count() as f64;
+    let cell_variance = cell_variances(poses, &kept, &noise);
     let shape_chi2: f64 = (0..cells)
-        .filter(|&k| seen[k])
-        .map(|k| kept.readings[k] * shape[k].powi(2) / variance)
+        .filter(|&k| seen[k] && cell_variance[k] > 0.0)
+        .map(|k| shape[k].powi(2) / cell_variance[k])
         .sum();
-    let (consistency_chi2, entries) = consistency(poses, &kept, &fitted, variance);
+    let sums = entries(poses, &kept, &fitted);
+    let parameters = observed + 3.0 * poses.len() as f64;
+    let (consistency_chi2, consistency_dof) = noise.chi2(&sums, parameters);
+    let weights: Vec<f64> = (0..cells)
+        .map(|k| if seen[k] { kept.readings[k] } else { 0.0 })
+        .collect();
+    let shape_of = |per_cell: &[f64]| -> Vec<f64> {
+        let mut shape: Vec<f64> = per_cell
+            .iter()
+            .zip(&weights)
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect();
+        remove_plane_part(&mut shape, &kept.readings, &seen, first);
+        shape
+    };
+    let mut plain = vec![0.0; cells];
+    for e in &sums {
+        plain[e.cell as usize] += e.n * e.about_plane;
+    }
+    let flips = flip_test(&sums, poses.len(), &weights, &shape_of(&plain), shape_of);
+    let depth = depth_dependence(poses, &sums, shape, &noise);
+    // Residuals that stay with the ground are looked for beyond what a
+    // pattern changing with depth would leave: each alternative is asked
+    // what the other does not explain.
+    let fixed_in_the_ground = ground_from_sensor
+        .filter(|g| g.len() == poses.len())
+        .map(|g| {
+            let beyond_depth = if depth.significant() {
+                without_depth_dependence(poses, &sums, shape)
+            } else {
+                sums.clone()
+            };
+            ground_fixed(poses, &beyond_depth, g)
+        });
     let kept_readings: f64 = (0..cells)
         .filter(|&k| seen[k])
         .map(|k| kept.readings[k])
@@ -212,17 +318,21 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
         shape: shape.clone(),
         readings: kept.readings.clone(),
         seen,
-        reading_sigma: variance.sqrt(),
+        noise,
+        cell_variance,
         shape_chi2,
         shape_dof: observed - 3.0,
+        flips,
         consistency_chi2,
-        consistency_dof: entries - observed - 3.0 * poses.len() as f64,
+        consistency_dof,
         all_cells_rms_raw,
         kept_fraction: if total > 0.0 {
             kept_readings / total
         } else {
             0.0
         },
+        depth,
+        fixed_in_the_ground,
         raw_per_inverse_depth: first.raw_per_inverse_depth,
         intrinsics: first.intrinsics,
         iterations: *iterations,
@@ -236,7 +346,12 @@ pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
 const LONE_CELL_RAW: f64 = 0.15;
 
 /// The cells seen that lie far from those above and below them.
-fn lone_cells(shape: &[f64], kept: &Kept, raw_per_inverse_depth: f64, variance: f64) -> Vec<usize> {
+fn lone_cells(
+    shape: &[f64],
+    kept: &Kept,
+    raw_per_inverse_depth: f64,
+    cell_variance: &[f64],
+) -> Vec<usize> {
     let cells = shape.len();
     let columns = kept.columns;
     let k_raw = raw_per_inverse_depth.abs();
@@ -258,7 +373,7 @@ fn lone_cells(shape: &[f64], kept: &Kept, raw_per_inverse_depth: f64, variance: 
         around.sort_by(f64::total_cmp);
         let median = (around[(around.len() - 1) / 2] + around[around.len() / 2]) / 2.0;
         let off = (shape[k] - median).abs() * k_raw;
-        let sigma = (variance / kept.readings[k].max(1.0)).sqrt() * k_raw;
+        let sigma = cell_variance[k].max(0.0).sqrt() * k_raw;
         if off > LONE_CELL_RAW.max(6.0 * sigma) {
             lone.push(k);
         }
@@ -301,7 +416,7 @@ impl Kept {
     fn within(
         poses: &[&GroundResiduals],
         fitted: &Fitted,
-        variance: f64,
+        noise: &CellNoise,
         first_seen: &[bool],
     ) -> Self {
         let cells = first_seen.len();
@@ -314,7 +429,7 @@ impl Kept {
                     if first_seen[k] && cell.n > 0.0 {
                         let model =
                             fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
-                        let z = (cell.r - model) / (cell.n * variance).sqrt();
+                        let z = (cell.r - model) / cell.n / noise.of_mean(cell.n).sqrt();
                         out[k] = z.abs() > ENTRY_SIGMAS;
                     }
                 }
@@ -502,25 +617,281 @@ fn reading_variance(poses: &[&GroundResiduals]) -> f64 {
     }
 }
 
-/// χ² of the sums kept about pattern and plane, and how many sums.
-fn consistency(
+/// A pattern that changes with the depth (Herrera et al. 2012: weaker
+/// farther), to first order `D·(1 − per_m·(z − z̄))` about each cell's mean
+/// depth over the poses that saw it: found from the cells' residuals after
+/// the fixed shape, against the shape times their depth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DepthDependence {
+    /// The share by which the pattern weakens a metre farther.
+    pub per_m: f64,
+    /// Its σ, from the poses' own residuals (a sandwich by pose: the cells
+    /// of one pose share its noise).
+    pub sigma: f64,
+    /// What it changes in the cells over the depths the poses saw: the RMS
+    /// of `per_m·shape·(z − z̄)`, raw units.
+    pub effect_raw: f64,
+}
+
+impl DepthDependence {
+    /// Whether it differs from none, and by as much as a shape must to
+    /// matter ([`MIN_SHAPE_RMS_RAW`]).
+    pub fn significant(&self) -> bool {
+        self.sigma > 0.0
+            && (self.per_m / self.sigma).abs() > ALTERNATIVE_SIGMAS
+            && self.effect_raw >= MIN_SHAPE_RMS_RAW
+    }
+}
+
+/// A cell's centre, pixels from the principal point.
+fn cell_centre(k: usize, columns: usize, intrinsics: &Intrinsics) -> (f64, f64) {
+    let (column, row) = (k % columns, k / columns);
+    (
+        (column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - intrinsics.cx,
+        (row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - intrinsics.cy,
+    )
+}
+
+/// [`DepthDependence`] of the sums kept under the shape.
+fn depth_dependence(
     poses: &[&GroundResiduals],
-    kept: &Kept,
-    fitted: &Fitted,
-    variance: f64,
-) -> (f64, f64) {
-    let (mut chi2, mut entries) = (0.0, 0.0);
+    entries: &[Entry],
+    shape: &[f64],
+    noise: &CellNoise,
+) -> DepthDependence {
+    let none = DepthDependence {
+        per_m: 0.0,
+        sigma: f64::INFINITY,
+        effect_raw: 0.0,
+    };
+    let Some(first) = poses.first() else {
+        return none;
+    };
+    let depth = |e: &Entry| {
+        let (du, dv) = cell_centre(e.cell as usize, first.columns, &first.intrinsics);
+        let q = poses[e.pose as usize].plane.at(du, dv);
+        (q > 0.0).then(|| 1.0 / q)
+    };
+    // Each cell's mean depth over the poses that saw it.
+    let cells = shape.len();
+    let (mut sum, mut weight) = (vec![0.0; cells], vec![0.0; cells]);
+    for e in entries {
+        if let Some(z) = depth(e) {
+            let w = 1.0 / noise.of_mean(e.n);
+            sum[e.cell as usize] += w * z;
+            weight[e.cell as usize] += w;
+        }
+    }
+    // residual ≈ −per_m·x with x = shape·(z − z̄).
+    let mut rows = Vec::with_capacity(entries.len());
+    let (mut xx, mut xe, mut ww) = (0.0, 0.0, 0.0);
+    for e in entries {
+        let k = e.cell as usize;
+        let (Some(z), true) = (depth(e), weight[k] > 0.0) else {
+            continue;
+        };
+        let x = shape[k] * (z - sum[k] / weight[k]);
+        let w = 1.0 / noise.of_mean(e.n);
+        xx += w * x * x;
+        xe += w * x * e.residual;
+        ww += w;
+        rows.push((e.pose, w, x, e.residual));
+    }
+    if xx <= 0.0 {
+        return none;
+    }
+    let per_m = -xe / xx;
+    let mut by_pose = vec![0.0; poses.len()];
+    for (pose, w, x, residual) in rows {
+        by_pose[pose as usize] += w * x * (residual + per_m * x);
+    }
+    let meat: f64 = by_pose.iter().map(|s| s * s).sum();
+    DepthDependence {
+        per_m,
+        sigma: meat.sqrt() / xx,
+        effect_raw: per_m.abs() * (xx / ww).sqrt() * first.raw_per_inverse_depth.abs(),
+    }
+}
+
+/// Bins of depth in which the pattern's gain is found when it changes with
+/// depth (quantiles of the depths the cells were seen at).
+const DEPTH_BINS: usize = 8;
+
+/// The entries less what the pattern's change with depth accounts for: the
+/// shape times a gain per bin of depth (any change with depth, not only the
+/// linear one [`DepthDependence`] measures), each cell about its own mean
+/// gain, by least squares.
+fn without_depth_dependence(
+    poses: &[&GroundResiduals],
+    entries: &[Entry],
+    shape: &[f64],
+) -> Vec<Entry> {
+    use nalgebra::{SMatrix, SVector};
+    let first = poses[0];
+    let z = |e: &Entry| {
+        let (du, dv) = cell_centre(e.cell as usize, first.columns, &first.intrinsics);
+        let q = poses[e.pose as usize].plane.at(du, dv);
+        (q > 0.0).then(|| 1.0 / q)
+    };
+    let mut depths: Vec<f64> = entries.iter().filter_map(z).collect();
+    if depths.len() < DEPTH_BINS * 10 {
+        return entries.to_vec();
+    }
+    depths.sort_by(f64::total_cmp);
+    let edges: Vec<f64> = (1..DEPTH_BINS)
+        .map(|j| depths[j * depths.len() / DEPTH_BINS])
+        .collect();
+    let bin = |z: f64| edges.partition_point(|&edge| edge <= z);
+    // Each cell's share of its readings in each bin.
+    let cells = shape.len();
+    let mut share = vec![[0.0; DEPTH_BINS]; cells];
+    let mut total = vec![0.0; cells];
+    for e in entries {
+        if let Some(z) = z(e) {
+            share[e.cell as usize][bin(z)] += e.n;
+            total[e.cell as usize] += e.n;
+        }
+    }
+    let design = |e: &Entry, z: f64| -> SVector<f64, DEPTH_BINS> {
+        let k = e.cell as usize;
+        let mut row = SVector::<f64, DEPTH_BINS>::zeros();
+        for j in 0..DEPTH_BINS {
+            let own = if bin(z) == j { 1.0 } else { 0.0 };
+            row[j] = shape[k] * (own - share[k][j] / total[k]);
+        }
+        row
+    };
+    let mut normal = SMatrix::<f64, DEPTH_BINS, DEPTH_BINS>::zeros();
+    let mut rhs = SVector::<f64, DEPTH_BINS>::zeros();
+    for e in entries {
+        if let Some(z) = z(e) {
+            if total[e.cell as usize] > 0.0 {
+                let row = design(e, z);
+                normal += row * row.transpose() * e.n;
+                rhs += row * (e.residual * e.n);
+            }
+        }
+    }
+    // The gains are known up to a constant (each cell is centred): the
+    // smallest change that fits, by a ridge a millionth of the scale.
+    let ridge = normal.trace().max(f64::MIN_POSITIVE) * 1e-6;
+    let gains = (normal + SMatrix::identity() * ridge)
+        .try_inverse()
+        .map(|h| h * rhs)
+        .unwrap_or_default();
+    entries
+        .iter()
+        .map(|e| match z(e) {
+            Some(z) if total[e.cell as usize] > 0.0 => Entry {
+                residual: e.residual - design(e, z).dot(&gains),
+                ..*e
+            },
+            _ => *e,
+        })
+        .collect()
+}
+
+/// Whether the residuals left by pattern and planes stay with the ground:
+/// each sum's cell seen on the ground from its pose, binned by
+/// [`GROUND_BIN_M`], and the bins' means over the poses compared with those
+/// the poses make with random signs.
+fn ground_fixed(
+    poses: &[&GroundResiduals],
+    entries: &[Entry],
+    ground_from_sensor: &[crate::geometry::Transform],
+) -> FlipTest {
+    let first = poses[0];
+    let k = first.intrinsics;
+    let sensor_from_optical = crate::geometry::sensor_from_optical();
+    let mut bins: std::collections::HashMap<(i64, i64), u32> = std::collections::HashMap::new();
+    let mut binned = Vec::with_capacity(entries.len());
+    for e in entries {
+        let (du, dv) = cell_centre(e.cell as usize, first.columns, &k);
+        let pose = &ground_from_sensor[e.pose as usize];
+        let ray = pose.rotation * (sensor_from_optical * Vector3::new(du / k.fx, dv / k.fy, 1.0));
+        let origin = pose.translation.vector;
+        if ray.y >= -1e-9 {
+            continue;
+        }
+        let t = -origin.y / ray.y;
+        let (x, z) = (origin.x + t * ray.x, origin.z + t * ray.z);
+        let key = (
+            (x / GROUND_BIN_M).floor() as i64,
+            (z / GROUND_BIN_M).floor() as i64,
+        );
+        let next = bins.len() as u32;
+        let bin = *bins.entry(key).or_insert(next);
+        binned.push(Entry {
+            cell: bin,
+            about_plane: e.residual,
+            ..*e
+        });
+    }
+    let mut weights = vec![0.0; bins.len()];
+    let mut sums = vec![0.0; bins.len()];
+    for e in &binned {
+        weights[e.cell as usize] += e.n;
+        sums[e.cell as usize] += e.n * e.about_plane;
+    }
+    let mean = |sums: &[f64]| -> Vec<f64> {
+        sums.iter()
+            .zip(&weights)
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect()
+    };
+    flip_test(&binned, poses.len(), &weights, &mean(&sums), mean)
+}
+
+/// The sums kept, each as its cell's mean residual about pattern and plane
+/// and about the plane alone.
+fn entries(poses: &[&GroundResiduals], kept: &Kept, fitted: &Fitted) -> Vec<Entry> {
+    let mut entries = Vec::new();
     for (i, pose) in poses.iter().enumerate() {
         let c = fitted.planes[i];
         for (k, cell) in pose.cells.iter().enumerate() {
             if cell.n > 0.0 && kept.takes(i, k) {
-                let model = fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
-                chi2 += (cell.r - model).powi(2) / (cell.n * variance);
-                entries += 1.0;
+                let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
+                let about_plane = (cell.r - plane) / cell.n;
+                entries.push(Entry {
+                    pose: i as u32,
+                    cell: k as u32,
+                    n: cell.n,
+                    residual: about_plane - fitted.shape[k],
+                    about_plane,
+                });
             }
         }
     }
-    (chi2, entries)
+    entries
+}
+
+/// The noise of a cell's mean, from the sums kept about pattern and plane.
+fn estimate_noise(
+    poses: &[&GroundResiduals],
+    kept: &Kept,
+    fitted: &Fitted,
+    within: f64,
+) -> CellNoise {
+    let entries = entries(poses, kept, fitted);
+    let observed = kept.seen.iter().filter(|s| **s).count() as f64;
+    CellNoise::estimate(within, &entries, observed + 3.0 * poses.len() as f64)
+}
+
+/// Each cell's shape variance under `noise`: one over the sum of its sums'
+/// information, pose by pose (0 where not seen).
+fn cell_variances(poses: &[&GroundResiduals], kept: &Kept, noise: &CellNoise) -> Vec<f64> {
+    let cells = kept.seen.len();
+    let mut information = vec![0.0; cells];
+    for (i, pose) in poses.iter().enumerate() {
+        for &k in &kept.taken[i] {
+            let n = pose.cells[k as usize].n;
+            information[k as usize] += 1.0 / noise.of_mean(n);
+        }
+    }
+    information
+        .iter()
+        .map(|&info| if info > 0.0 { 1.0 / info } else { 0.0 })
+        .collect()
 }
 
 /// The plane (1/m on `c0, cu, cv`) by which the pattern `shape` bent the
@@ -714,7 +1085,14 @@ pub fn solve_with_pattern(
         return Ok(base);
     }
     let residuals: Vec<&GroundResiduals> = with_residuals.iter().map(|(_, r)| *r).collect();
-    let Some(shape) = estimate_shape(&residuals) else {
+    // Where each pose's sensor stood over the ground, by the plain solve:
+    // residuals that stay with the ground are the ground's, not the sensor's.
+    let robot_from_sensor = base.robot_from_sensor.to_transform();
+    let ground_from_sensor: Vec<crate::geometry::Transform> = with_residuals
+        .iter()
+        .map(|(k, _)| observations[*k].ground_from_robot * robot_from_sensor)
+        .collect();
+    let Some(shape) = estimate_shape_seen_from(&residuals, Some(&ground_from_sensor)) else {
         let mut base = base;
         base.depth_pattern = Some(DepthPattern::not_estimated(format!(
             "not estimated: {} poses had ground readings, at least {MIN_PATTERN_POSES} are needed",
@@ -1134,7 +1512,7 @@ fn pattern_of(
         let mut variance = 0.0;
         if shape_taken {
             value += shape.shape[k] * k_raw;
-            variance += (shape.reading_sigma * k_raw).powi(2) / shape.readings[k];
+            variance += shape.cell_variance[k] * k_raw * k_raw;
         }
         if let Some(part) = part_taken {
             value += part.value.dot(&basis);
@@ -1160,19 +1538,24 @@ fn pattern_of(
         && (shape.kept_fraction < 1.0 || !shape.consistent());
     let note = match (shape_taken, part_taken) {
         (false, None) if uncorrected && !shape.consistent() => {
-            let how = if shape.kept_fraction < MIN_KEPT_FRACTION {
-                format!(
-                    "in {:.0} % of the cells seen",
-                    100.0 * (1.0 - shape.kept_fraction)
-                )
-            } else {
-                format!(
-                    "{:.1} times the noise",
-                    shape.consistency_chi2 / shape.consistency_dof.max(1.0)
-                )
+            let why = match shape.why_not_fixed() {
+                Some(crate::outcome::WarpCause::ChangesWithDepth { per_m, sigma }) => format!(
+                    "it changes with the distance, {} by {:.0} ± {:.0} % a metre farther: a pattern that changes with depth, which a correction fixed in the image cannot take out",
+                    if per_m > 0.0 { "weaker" } else { "stronger" },
+                    100.0 * per_m.abs(),
+                    100.0 * sigma
+                ),
+                Some(crate::outcome::WarpCause::GroundNotFlat { sigmas }) => format!(
+                    "it stays with the ground as the poses move ({sigmas:.0} of noise's σ): the ground is not flat, not the sensor"
+                ),
+                Some(crate::outcome::WarpCause::CellsChange { left_out }) => format!(
+                    "it changes from pose to pose in {:.0} % of the cells seen: obstacles or bumps in view",
+                    100.0 * left_out
+                ),
+                None => "it is not fixed in the image".to_string(),
             };
             format!(
-                "not corrected: the ground's residuals ({:.3} raw units RMS) change from pose to pose ({how}), so they are not a pattern fixed in the image: uneven ground, clutter, or a pattern that changes with depth",
+                "not corrected: the ground's residuals ({:.3} raw units RMS) are not the sensor's fixed pattern: {why}",
                 shape.all_cells_rms_raw
             )
         }
@@ -1194,6 +1577,18 @@ fn pattern_of(
         shape_rms_raw: words_rms,
         shape_chi2_per_dof: shape.shape_chi2 / shape.shape_dof.max(1.0),
         consistency_chi2_per_dof: shape.consistency_chi2 / shape.consistency_dof.max(1.0),
+        shape_sigmas: shape.flips.sigmas(),
+        changes_with_depth: shape
+            .depth
+            .sigma
+            .is_finite()
+            .then_some([shape.depth.per_m, shape.depth.sigma]),
+        fixed_in_the_ground_sigmas: shape.fixed_in_the_ground.map(|t| t.sigmas()),
+        uncorrected_because: if uncorrected {
+            shape.why_not_fixed()
+        } else {
+            None
+        },
         plane_part: plane_part.map(|p| p.value.into()),
         plane_part_sigma: plane_part
             .map(|p| [0, 1, 2].map(|i| p.covariance[(i, i)].max(0.0).sqrt())),
@@ -1252,6 +1647,11 @@ mod tests {
                     intrinsics,
                     raw_per_inverse_depth: -1.0 / 0.003,
                     fit_band: f64::INFINITY,
+                    plane: PixelPlane {
+                        c0: 0.5,
+                        cu: 0.0,
+                        cv: 0.0,
+                    },
                     beside_another_fit: None,
                 }
             })

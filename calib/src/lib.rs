@@ -34,6 +34,7 @@
 
 pub mod body;
 pub mod calibrate;
+pub mod cell_noise;
 pub mod depth;
 pub mod disparity;
 pub mod distortion;

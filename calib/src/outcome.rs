@@ -259,6 +259,22 @@ pub struct Solution {
     pub depth_pattern: Option<DepthPattern>,
 }
 
+/// Why a warp of the depth was not corrected as the sensor's fixed pattern:
+/// the test of the alternative that said so, with its figures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WarpCause {
+    /// The pattern changes with the distance: it weakens by `per_m` (a
+    /// share) a metre farther, ± `sigma`.
+    ChangesWithDepth { per_m: f64, sigma: f64 },
+    /// The residuals stay with the ground as the poses move: the ground is
+    /// not flat (`sigmas` of noise's σ above what the poses make with
+    /// random signs).
+    GroundNotFlat { sigmas: f64 },
+    /// Most cells' residuals change from pose to pose (obstacles' feet,
+    /// bumps): `left_out` of the readings were left out.
+    CellsChange { left_out: f64 },
+}
+
 /// The Kinect's fixed depth pattern as a calibration found it
 /// ([`crate::distortion`]): per cell of `cell_px` pixels, the raw units every
 /// reading there is off by (more is farther), row-major from the top left.
@@ -278,8 +294,20 @@ pub struct DepthPattern {
     /// The shape against none, χ² per degree of freedom (1: no shape).
     pub shape_chi2_per_dof: f64,
     /// The cells' residuals pose by pose after the pattern, χ² per degree
-    /// of freedom: near 1 when the pattern is fixed in the image.
+    /// of freedom against the noise the poses' own scatter shows: near 1 by
+    /// that noise's construction (a check of the estimate, not a test).
     pub consistency_chi2_per_dof: f64,
+    /// The shape's size in noise's σ above what the poses make with random
+    /// signs (the test that a shape is there).
+    pub shape_sigmas: f64,
+    /// How the pattern changes with depth: the share it weakens a metre
+    /// farther, and its σ.
+    pub changes_with_depth: Option<[f64; 2]>,
+    /// How far the residuals stay with the ground as the poses move, in
+    /// noise's σ (uneven ground); None without the poses' geometry.
+    pub fixed_in_the_ground_sigmas: Option<f64>,
+    /// Why a warp was not corrected, when it was not.
+    pub uncorrected_because: Option<WarpCause>,
     /// The plane part, by the geometry across poses: raw units at the
     /// principal point and per 100 pixels along the columns and the rows;
     /// with its σ. `None` when not estimated.
@@ -320,6 +348,10 @@ impl DepthPattern {
             shape_rms_raw: 0.0,
             shape_chi2_per_dof: 0.0,
             consistency_chi2_per_dof: 0.0,
+            shape_sigmas: 0.0,
+            changes_with_depth: None,
+            fixed_in_the_ground_sigmas: None,
+            uncorrected_because: None,
             plane_part: None,
             plane_part_sigma: None,
             plane_part_taken: false,

@@ -146,10 +146,28 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
                     check.measured
                 ));
             } else if !check.passed {
+                // Said by the test of the alternative that found it, never
+                // guessed: the advice follows the cause.
+                use crate::outcome::WarpCause;
+                let why = match pattern.uncorrected_because {
+                    Some(WarpCause::ChangesWithDepth { per_m, sigma }) => format!(
+                        "it changes with the distance ({} by {:.0} ± {:.0} % a metre farther), so no correction fixed in the image takes it out: the Kinect's depth pattern needs a maintainer (the ground you calibrated on is not the cause)",
+                        if per_m > 0.0 { "weaker" } else { "stronger" },
+                        100.0 * per_m.abs(),
+                        100.0 * sigma
+                    ),
+                    Some(WarpCause::GroundNotFlat { sigmas }) => format!(
+                        "it stays with the ground as the body moves ({sigmas:.0} of the noise's σ), so the ground is not flat: calibrate on flat, firm ground"
+                    ),
+                    Some(WarpCause::CellsChange { left_out }) => format!(
+                        "it changes from pose to pose in {:.0} % of the image (obstacles or bumps in view): clear the floor in front of the robot",
+                        100.0 * left_out
+                    ),
+                    None => "it is not the sensor's fixed pattern".to_string(),
+                };
                 reasons.push(format!(
-                    "the depth image is warped by {:.1} mm RMS at 2 m in a way that changes from pose to pose ({:.1} times the noise), so it cannot be corrected as the sensor's fixed pattern: calibrate on open, flat ground with nothing in view; if it stays, the Kinect's depth pattern changes with the distance and needs a maintainer",
-                    check.measured,
-                    pattern.consistency_chi2_per_dof
+                    "the depth image is warped by {:.1} mm RMS at 2 m and cannot be corrected: {why}",
+                    check.measured
                 ));
             }
             checks.push(check);

@@ -56,6 +56,10 @@ pub struct GroundResiduals {
     /// The fit's own rejection band (1/m): the readings it took for the
     /// ground lay within it of its plane.
     pub(crate) fit_band: f64,
+    /// The fit's plane in inverse depth (1/m, pixels from the principal
+    /// point): the ground's depth at each cell, for a pattern that changes
+    /// with depth.
+    pub(crate) plane: PixelPlane,
     /// Taken from the default fit made beside another one (the paper's,
     /// `--ground-fit paper`): that default fit's plane and its covariance.
     /// The residuals show a warp of the depth, but the observation's plane
@@ -398,6 +402,7 @@ impl GroundResiduals {
             intrinsics,
             raw_per_inverse_depth: camera.raw_per_inverse_depth(),
             fit_band: band,
+            plane,
             beside_another_fit: None,
         })
     }

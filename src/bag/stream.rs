@@ -613,11 +613,21 @@ mod tests {
         // A record longer than the file: named, nothing reserved for it.
         let mut file = MAGIC.to_vec();
         file.push(op::MESSAGE);
+        file.extend_from_slice(&(20u64 << 20).to_le_bytes());
+        let e = messages(&file).unwrap_err();
+        assert!(
+            e.what
+                .contains("ends inside a record (0 of 20971520 bytes)"),
+            "{e}"
+        );
+        // One longer than a real rosbag2's: refused by its length alone.
+        let mut file = MAGIC.to_vec();
+        file.push(op::MESSAGE);
         file.extend_from_slice(&(400u64 << 20).to_le_bytes());
         let e = messages(&file).unwrap_err();
         assert!(
             e.what
-                .contains("ends inside a record (0 of 419430400 bytes)"),
+                .contains("a record of 419430400 bytes (opcode 0x05): more than the 33554432"),
             "{e}"
         );
         // A message on a channel never declared.

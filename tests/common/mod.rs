@@ -405,13 +405,21 @@ pub fn on_schedule(config: &Path, schedule: &str) {
 pub const SIM_DEPTH_MODEL_LINE: &str =
     "depth_model = { kind = \"inverse-linear\", a = 3.3309495161, b = -0.0030711016 }";
 
+/// config/sim.toml's `[sim]` line that gives its Kinect no fixed pattern.
+pub const SIM_NO_PATTERN_LINE: &str = "depth_distortion = { shape = \"none\" }";
+
 /// config/sim.toml, unmeasured ([`sim_config_unmeasured`]), with the
 /// simulated Kinect's depth carrying `pattern` (a `depth_distortion = {…}`
 /// line, or "") and, with `zero_plane`, libfreenect's zero-plane model.
 pub fn sim_config_with_pattern(dir: &Path, pattern: &str, zero_plane: bool) -> PathBuf {
     std::fs::create_dir_all(dir).expect("configuration directory");
-    let world = format!("world = \"flat\"\n{pattern}");
-    let mut replacements = vec![("world = \"flat\"", world.as_str())];
+    // "" keeps config/sim.toml's "none" (a missing line is the default,
+    // the measured pattern).
+    let mut replacements = if pattern.is_empty() {
+        vec![]
+    } else {
+        vec![(SIM_NO_PATTERN_LINE, pattern)]
+    };
     if zero_plane {
         replacements.push((SIM_DEPTH_MODEL_LINE, ""));
     }

@@ -1,0 +1,269 @@
+//! How noisy a cell's mean residual is at one pose, and whether a pattern
+//! over the cells stands out of that noise: both from the poses' own data,
+//! never from a count of pixels.
+//!
+//! A real Kinect's noise is correlated over the image (an 8 × 8 cell's mean
+//! varies 46 times more than independent pixels would make it, docs/method.md)
+//! and much of it holds through a pose's frames. So a cell's mean at one
+//! pose has a variance `within/n + shared`: `within`, a reading's scatter
+//! about its cell's mean (from the sums of squares), averages down with the
+//! `n` readings; `shared`, the noise common to the cell's readings at that
+//! pose, does not. `shared` is estimated from the scatter of the cells'
+//! means about pattern and plane, pose to pose ([`CellNoise::estimate`]);
+//! that scatter's expectation is the noise's, less the share the fitted
+//! parameters take (their count over the entries), so the estimate is
+//! unbiased when the pattern is fixed in the image.
+//!
+//! Whether a shape stands out of the noise is asked of the poses, not of a
+//! distribution that assumes independent cells: a shape fixed in the image
+//! is the same at every pose, noise is not, and a pose's residuals may carry
+//! their sign or the opposite one equally under noise alone. So the shape's
+//! size is compared with the sizes of shapes made from the same poses with
+//! their signs flipped at random, pose by pose ([`flip_test`]): whatever the
+//! noise's correlation within a pose, the flipped shapes show what noise
+//! alone makes.
+
+/// One pose's sum of one cell, as the estimate kept it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Entry {
+    /// The pose's position among the poses.
+    pub pose: u32,
+    /// The cell.
+    pub cell: u32,
+    /// Readings in the sum.
+    pub n: f64,
+    /// The mean residual about the pattern and the pose's plane (1/m).
+    pub residual: f64,
+    /// The mean residual about the pose's plane alone (1/m): the pattern
+    /// plus the noise.
+    pub about_plane: f64,
+}
+
+/// The noise of a cell's mean at one pose (module documentation), (1/m)².
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellNoise {
+    /// A reading's variance about its cell's mean.
+    pub within: f64,
+    /// The variance of a cell's mean that its count of readings does not
+    /// average away.
+    pub shared: f64,
+}
+
+impl CellNoise {
+    /// Only the readings' own scatter, as independent readings would have it.
+    pub fn independent(within: f64) -> Self {
+        Self {
+            within,
+            shared: 0.0,
+        }
+    }
+
+    /// The variance of the mean of `n` readings of a cell at one pose.
+    pub fn of_mean(&self, n: f64) -> f64 {
+        self.within / n.max(1.0) + self.shared
+    }
+
+    /// A reading's variance about pattern and plane.
+    pub fn of_reading(&self) -> f64 {
+        self.within + self.shared
+    }
+
+    /// `shared` from the entries' scatter about pattern and plane, with
+    /// `parameters` fitted to them (the cells' pattern and the poses'
+    /// planes): `Σ e² ≈ (1 − p/N)·Σ (within/n + shared)`.
+    pub fn estimate(within: f64, entries: &[Entry], parameters: f64) -> Self {
+        let count = entries.len() as f64;
+        if count <= parameters + 1.0 {
+            return Self::independent(within);
+        }
+        let squares: f64 = entries.iter().map(|e| e.residual * e.residual).sum();
+        let averaged: f64 = entries.iter().map(|e| within / e.n.max(1.0)).sum();
+        let total = squares * count / (count - parameters);
+        Self {
+            within,
+            shared: ((total - averaged) / count).max(0.0),
+        }
+    }
+
+    /// χ² of the entries about pattern and plane under this noise, and its
+    /// degrees of freedom.
+    pub fn chi2(&self, entries: &[Entry], parameters: f64) -> (f64, f64) {
+        let chi2 = entries
+            .iter()
+            .map(|e| e.residual * e.residual / self.of_mean(e.n))
+            .sum();
+        (chi2, entries.len() as f64 - parameters)
+    }
+}
+
+/// What flipping the poses' signs found: the shape's size against noise's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlipTest {
+    /// The shape's weighted sum of squares, `Σ_cells R·shape²`.
+    pub observed: f64,
+    /// The same for shapes of the poses with random signs: mean and σ.
+    pub null_mean: f64,
+    pub null_sigma: f64,
+}
+
+impl FlipTest {
+    /// How many of noise's σ the shape's size lies above noise's.
+    pub fn sigmas(&self) -> f64 {
+        if self.null_sigma > 0.0 {
+            (self.observed - self.null_mean) / self.null_sigma
+        } else if self.observed > self.null_mean {
+            f64::INFINITY
+        } else {
+            0.0
+        }
+    }
+
+    /// The shape's size over noise's, as a χ² per degree of freedom would
+    /// say it (1 for noise alone).
+    pub fn ratio(&self) -> f64 {
+        if self.null_mean > 0.0 {
+            self.observed / self.null_mean
+        } else {
+            f64::INFINITY
+        }
+    }
+}
+
+/// Flips drawn for the test: enough for the null's mean and σ to a few
+/// percent, a millisecond each for a calibration's poses.
+pub const FLIPS: usize = 40;
+
+/// The shape's size against the sizes of shapes made from the same poses
+/// with their signs flipped (module documentation). `weights` are each
+/// cell's readings over the poses (0 for cells left out); `shape_of` turns
+/// per-cell sums `Σ_p n·m` into a shape as the estimate does (dividing by
+/// the readings, removing the plane part). The draws are fixed by a seed:
+/// the same poses give the same verdict.
+pub fn flip_test(
+    entries: &[Entry],
+    poses: usize,
+    weights: &[f64],
+    observed: &[f64],
+    shape_of: impl Fn(&[f64]) -> Vec<f64>,
+) -> FlipTest {
+    let size = |shape: &[f64]| -> f64 { shape.iter().zip(weights).map(|(s, w)| w * s * s).sum() };
+    let mut state = 0x666c_6970_u64;
+    let mut sizes = Vec::with_capacity(FLIPS);
+    for _ in 0..FLIPS {
+        let signs: Vec<f64> = (0..poses)
+            .map(|_| {
+                if splitmix64(&mut state) >> 63 == 1 {
+                    1.0
+                } else {
+                    -1.0
+                }
+            })
+            .collect();
+        let mut sums = vec![0.0; weights.len()];
+        for e in entries {
+            sums[e.cell as usize] += signs[e.pose as usize] * e.n * e.about_plane;
+        }
+        sizes.push(size(&shape_of(&sums)));
+    }
+    let n = sizes.len() as f64;
+    let mean = sizes.iter().sum::<f64>() / n;
+    let sigma = (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    FlipTest {
+        observed: size(observed),
+        null_mean: mean,
+        null_sigma: sigma,
+    }
+}
+
+/// SplitMix64: the signs' generator (a fixed sequence; no crate needed).
+fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn normal(rng: &mut impl Rng) -> f64 {
+        let u1: f64 = 1.0 - rng.gen::<f64>();
+        let u2: f64 = rng.gen();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    /// With noise shared by a cell's readings, the estimate finds it, and
+    /// the χ² per degree of freedom is then 1; under independent readings'
+    /// noise it is what a count of pixels would claim, many times more.
+    #[test]
+    fn the_shared_noise_is_found_from_the_scatter() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let (within, shared): (f64, f64) = (1.0, 0.2);
+        let entries: Vec<Entry> = (0..20_000)
+            .map(|k| {
+                let n = [16.0, 64.0, 128.0][k % 3];
+                let residual =
+                    normal(&mut rng) * (within / n).sqrt() + normal(&mut rng) * shared.sqrt();
+                Entry {
+                    pose: (k / 100) as u32,
+                    cell: (k % 100) as u32,
+                    n,
+                    residual,
+                    about_plane: residual,
+                }
+            })
+            .collect();
+        let noise = CellNoise::estimate(within, &entries, 0.0);
+        assert!((noise.shared - shared).abs() < 0.01, "{noise:?}");
+        let (chi2, dof) = noise.chi2(&entries, 0.0);
+        assert!((chi2 / dof - 1.0).abs() < 0.03, "{}", chi2 / dof);
+        let (chi2, dof) = CellNoise::independent(within).chi2(&entries, 0.0);
+        assert!(chi2 / dof > 5.0, "{}", chi2 / dof);
+    }
+
+    /// Noise alone, whatever its correlation over the cells of a pose,
+    /// stands at about 0 of noise's σ; a fixed pattern far above.
+    #[test]
+    fn flipping_whole_poses_tells_a_fixed_pattern_from_correlated_noise() {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let (poses, cells) = (40usize, 200usize);
+        let pattern: Vec<f64> = (0..cells).map(|c| 0.2 * (c as f64 / 10.0).sin()).collect();
+        let run = |with_pattern: bool, rng: &mut ChaCha8Rng| {
+            let mut entries = Vec::new();
+            for p in 0..poses {
+                // Noise correlated over all cells of a pose: a common offset
+                // and a slow wave, and each cell's own.
+                let (offset, phase) = (normal(rng), rng.gen::<f64>() * 6.0);
+                for (c, fixed) in pattern.iter().enumerate() {
+                    let noise = offset + (c as f64 / 30.0 + phase).sin() + 0.3 * normal(rng);
+                    let value = noise + if with_pattern { fixed * 5.0 } else { 0.0 };
+                    entries.push(Entry {
+                        pose: p as u32,
+                        cell: c as u32,
+                        n: 10.0,
+                        residual: 0.0,
+                        about_plane: value,
+                    });
+                }
+            }
+            let weights = vec![10.0 * poses as f64; cells];
+            let shape_of = |sums: &[f64]| -> Vec<f64> {
+                sums.iter().zip(&weights).map(|(s, w)| s / w).collect()
+            };
+            let mut sums = vec![0.0; cells];
+            for e in &entries {
+                sums[e.cell as usize] += e.n * e.about_plane;
+            }
+            let observed = shape_of(&sums);
+            flip_test(&entries, poses, &weights, &observed, shape_of)
+        };
+        let noise = run(false, &mut rng);
+        assert!(noise.sigmas().abs() < 3.0, "{noise:?}");
+        let fixed = run(true, &mut rng);
+        assert!(fixed.sigmas() > 8.0, "{fixed:?}");
+    }
+}
