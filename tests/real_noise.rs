@@ -13,6 +13,15 @@
 //! share one simulated device (its fixed pattern) and each draws its own
 //! noise, as the real frames come from a camera that moves.
 //!
+//! The split of the two: the residual averaged per 16-pixel cell over the
+//! floors is the fixed pattern (real 0.83 raw RMS), and what is left of each
+//! floor is its noise, with its own autocorrelation and cell ratios; the
+//! simulator must match the pattern within a factor of 1.25 and the noise
+//! within ±0.15 and a factor of 1.5. (Of the real noise's long-range part,
+//! 10-cm squares of the floor carry 0.16 raw RMS that two random halves of
+//! the frames agree on, correlation 0.73–0.81: the floor's own relief,
+//! about 1.2 mm, which the simulator counts as noise.)
+//!
 //! The statistics: the residual's autocorrelation at 1, 2, 4, 8, 16 and 32
 //! pixels across and down, and the cell-mean variance ratio of 8- and
 //! 16-pixel cells (`var(cell means) / (var(pixels)/n)`: 1 for independent
@@ -194,8 +203,11 @@ struct Stats {
 }
 
 fn stats(floor: &Floor, width: usize) -> Stats {
-    let r = floor.residual(width);
-    let m = &floor.mask;
+    residual_stats(&floor.residual(width), &floor.mask, width)
+}
+
+/// The statistics of a residual `r` over the pixels `m` takes.
+fn residual_stats(r: &[f64], m: &[bool], width: usize) -> Stats {
     let height = r.len() / width;
     let n = m.iter().filter(|&&m| m).count() as f64;
     let mean = r
@@ -256,6 +268,56 @@ fn stats(floor: &Floor, width: usize) -> Stats {
         ratio8: ratio(8),
         ratio16: ratio(16),
     }
+}
+
+/// The side of the cells in which the fixed pattern is taken apart from the noise.
+const PATTERN_CELL: usize = 16;
+
+/// What is fixed in the image and what is not: the residual averaged per
+/// 16-pixel cell over the floors (the pattern map, its RMS over the cells
+/// seen in at least three floors' worth), and every floor's residual less
+/// that map (the noise of a frame, with what of the pattern is finer than a
+/// cell). The real sequence's camera moves, so the floor under a cell
+/// changes and what stays is the sensor's.
+fn pattern_and_noise(floors: &[&Floor], width: usize) -> (f64, Stats) {
+    let height = floors[0].mask.len() / width;
+    let (cells_u, cells_v) = (width / PATTERN_CELL, height / PATTERN_CELL);
+    let cell = |k: usize| {
+        let (u, v) = (k % width / PATTERN_CELL, k / width / PATTERN_CELL);
+        (u < cells_u && v < cells_v).then_some(v * cells_u + u)
+    };
+    let (mut sum, mut count) = (vec![0.0; cells_u * cells_v], vec![0.0; cells_u * cells_v]);
+    let residuals: Vec<Vec<f64>> = floors.iter().map(|f| f.residual(width)).collect();
+    for (floor, r) in floors.iter().zip(&residuals) {
+        for (k, &m) in floor.mask.iter().enumerate() {
+            if let (true, Some(c)) = (m, cell(k)) {
+                sum[c] += r[k];
+                count[c] += 1.0;
+            }
+        }
+    }
+    let enough = 3.0 * (PATTERN_CELL * PATTERN_CELL) as f64;
+    let map: Vec<Option<f64>> = sum
+        .iter()
+        .zip(&count)
+        .map(|(&s, &c)| (c >= enough).then(|| s / c))
+        .collect();
+    let seen: Vec<f64> = map.iter().flatten().copied().collect();
+    let mean = seen.iter().sum::<f64>() / seen.len() as f64;
+    let rms = (seen.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / seen.len() as f64).sqrt();
+    let noise: Vec<Stats> = floors
+        .iter()
+        .zip(&residuals)
+        .map(|(floor, r)| {
+            let at = |k: usize| cell(k).and_then(|c| map[c]);
+            let mask: Vec<bool> = (0..r.len())
+                .map(|k| floor.mask[k] && at(k).is_some())
+                .collect();
+            let less: Vec<f64> = (0..r.len()).map(|k| r[k] - at(k).unwrap_or(0.0)).collect();
+            residual_stats(&less, &mask, width)
+        })
+        .collect();
+    (rms, mean_stats(&noise))
 }
 
 fn mean_stats(all: &[Stats]) -> Stats {
@@ -404,24 +466,30 @@ fn the_simulated_kinects_noise_has_the_real_ones_statistics() {
             config.distortion = Default::default();
         }
         let renderer = DepthRenderer::new(&config).unwrap();
-        let all: Vec<Stats> = real
+        let floors: Vec<Floor> = real
             .iter()
             .enumerate()
             .step_by(4)
             .map(|(k, (floor, up, height))| {
-                stats(
-                    &simulated_floor(&renderer, *up, *height, &floor.mask, k as u64),
-                    640,
-                )
+                simulated_floor(&renderer, *up, *height, &floor.mask, k as u64)
             })
             .collect();
-        mean_stats(&all)
+        let all: Vec<Stats> = floors.iter().map(|f| stats(f, 640)).collect();
+        let refs: Vec<&Floor> = floors.iter().collect();
+        let (pattern, noise) = pattern_and_noise(&refs, 640);
+        (mean_stats(&all), pattern, noise)
     };
-    let simulated = render(SimKinectConfig::default().noise, true);
-    let former = render(DepthNoise::white(), false);
+    let every_fourth: Vec<&Floor> = real.iter().step_by(4).map(|(f, _, _)| f).collect();
+    let (real_pattern, real_noise) = pattern_and_noise(&every_fourth, 640);
+    let (simulated, simulated_pattern, simulated_noise) =
+        render(SimKinectConfig::default().noise, true);
+    let (former, _, _) = render(DepthNoise::white(), false);
     eprintln!("{}", line("real", &real_mean));
     eprintln!("{}", line("simulated", &simulated));
     eprintln!("{}", line("former", &former));
+    eprintln!("the fixed pattern (16-px cells): real {real_pattern:.2} raw RMS, simulated {simulated_pattern:.2}");
+    eprintln!("{}", line("real noise", &real_noise));
+    eprintln!("{}", line("sim noise", &simulated_noise));
 
     let matches = |s: &Stats| {
         (0..6).all(|k| {
@@ -441,6 +509,25 @@ fn the_simulated_kinects_noise_has_the_real_ones_statistics() {
         "the simulator does not match the real frames:\n{}\n{}",
         line("real", &real_mean),
         line("simulated", &simulated)
+    );
+    // What is fixed in the image and what changes from frame to frame, each
+    // as the real sensor's: the simulator's noise must not stand in for the
+    // real pattern, nor its pattern for the real noise.
+    assert!(
+        (simulated_pattern / real_pattern).ln().abs() <= 1.25f64.ln(),
+        "the fixed pattern: real {real_pattern:.2} raw RMS, simulated {simulated_pattern:.2}"
+    );
+    let noise_matches = (0..6).all(|k| {
+        (simulated_noise.across[k] - real_noise.across[k]).abs() <= 0.15
+            && (simulated_noise.down[k] - real_noise.down[k]).abs() <= 0.15
+    }) && (simulated_noise.ratio8 / real_noise.ratio8).ln().abs()
+        <= 1.5f64.ln()
+        && (simulated_noise.ratio16 / real_noise.ratio16).ln().abs() <= 1.5f64.ln();
+    assert!(
+        noise_matches,
+        "the noise less the fixed pattern does not match:\n{}\n{}",
+        line("real", &real_noise),
+        line("simulated", &simulated_noise)
     );
     assert!(
         !matches(&former),
