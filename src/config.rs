@@ -288,28 +288,87 @@ pub struct SimConfig {
     #[serde(default)]
     pub depth_distortion: Option<SimDistortionConfig>,
     /// The simulated Kinect's depth noise: `kinect` (the default: measured
-    /// on real frames, correlated over the image and held through a pose)
-    /// or `white` (independent per pixel and frame, the former model).
+    /// on real frames, correlated over the image and held through a pose),
+    /// `white` (independent per pixel and frame, the former model), or a
+    /// table of the measured model's parts for another sensor or a test:
+    /// `{ white_raw = 0.38, short_raw = 0, medium_raw = 0.25, long_raw = 0,
+    /// gain_per_m = 0, held = "frame" }` (what is left out is as measured).
     #[serde(default, deserialize_with = "sim_noise")]
     pub depth_noise: SimNoise,
 }
 
 /// `[sim] depth_noise`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum SimNoise {
     #[default]
     Kinect,
     White,
+    /// The measured model with parts of its own.
+    Parts(groundcal_hal::sim::noise::KinectNoise),
+}
+
+/// `[sim] depth_noise` as a table: the measured model's parts, each
+/// optional.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SimNoiseParts {
+    white_raw: Option<f64>,
+    short_raw: Option<f64>,
+    medium_raw: Option<f64>,
+    long_raw: Option<f64>,
+    gain_from_m: Option<f64>,
+    gain_per_m: Option<f64>,
+    held: Option<String>,
 }
 
 fn sim_noise<'de, D: serde::Deserializer<'de>>(d: D) -> Result<SimNoise, D::Error> {
-    match String::deserialize(d)?.as_str() {
-        "kinect" => Ok(SimNoise::Kinect),
-        "white" => Ok(SimNoise::White),
-        other => Err(serde::de::Error::custom(format!(
-            "\"{other}\" is not a noise of the simulated Kinect (kinect, white)"
-        ))),
-    }
+    let value = toml::Value::deserialize(d)?;
+    sim_noise_of(value).map_err(|e| serde::de::Error::custom(format!("sim.depth_noise: {e}")))
+}
+
+fn sim_noise_of(value: toml::Value) -> Result<SimNoise, String> {
+    use groundcal_hal::sim::noise::{KinectNoise, NoiseHeld};
+    let parts = match value {
+        toml::Value::String(name) => {
+            return match name.as_str() {
+                "kinect" => Ok(SimNoise::Kinect),
+                "white" => Ok(SimNoise::White),
+                other => Err(format!(
+                    "\"{other}\" is not a noise of the simulated Kinect (kinect, white, or a table of parts)"
+                )),
+            }
+        }
+        table @ toml::Value::Table(_) => {
+            SimNoiseParts::deserialize(table).map_err(|e| e.to_string())?
+        }
+        other => {
+            return Err(format!(
+                "a TOML {} is not a noise of the simulated Kinect (kinect, white, or a table of parts)",
+                other.type_str()
+            ))
+        }
+    };
+    let measured = KinectNoise::default();
+    let held = match parts.held.as_deref() {
+        None | Some("pose") => NoiseHeld::PerPose,
+        Some("frame") => NoiseHeld::PerFrame,
+        Some(other) => {
+            return Err(format!(
+                "held = \"{other}\": the smooth noise is held a \"pose\" or a \"frame\""
+            ))
+        }
+    };
+    let noise = KinectNoise {
+        white_raw: parts.white_raw.unwrap_or(measured.white_raw),
+        short_raw: parts.short_raw.unwrap_or(measured.short_raw),
+        medium_raw: parts.medium_raw.unwrap_or(measured.medium_raw),
+        long_raw: parts.long_raw.unwrap_or(measured.long_raw),
+        gain_from_m: parts.gain_from_m.unwrap_or(measured.gain_from_m),
+        gain_per_m: parts.gain_per_m.unwrap_or(measured.gain_per_m),
+        held,
+    };
+    noise.validate()?;
+    Ok(SimNoise::Parts(noise))
 }
 
 /// `[sim] depth_distortion`: the simulated Kinect's fixed pattern.
@@ -831,6 +890,53 @@ mod tests {
         let err = Config::parse(&path, &text.replace("world = \"flat\"", "world = \"moon\""))
             .unwrap_err();
         assert!(err.to_string().contains("sim.world"), "{err}");
+    }
+
+    /// `[sim] depth_noise` by name or as a table of the measured model's
+    /// parts, and what is wrong in either named.
+    #[test]
+    fn the_simulated_noise_by_name_or_by_parts() {
+        use groundcal_hal::sim::noise::{KinectNoise, NoiseHeld};
+        let text = std::fs::read_to_string(shipped("sim.toml")).unwrap();
+        let path = shipped("sim.toml");
+        let with = |noise: &str| {
+            Config::parse(
+                &path,
+                &text.replace("depth_noise = \"white\"", &format!("depth_noise = {noise}")),
+            )
+        };
+        assert_eq!(
+            with("\"kinect\"").unwrap().sim.unwrap().depth_noise,
+            SimNoise::Kinect
+        );
+        let parts = with("{ white_raw = 0.38, medium_raw = 0.25, long_raw = 0, held = \"frame\" }")
+            .unwrap()
+            .sim
+            .unwrap()
+            .depth_noise;
+        assert_eq!(
+            parts,
+            SimNoise::Parts(KinectNoise {
+                white_raw: 0.38,
+                medium_raw: 0.25,
+                long_raw: 0.0,
+                held: NoiseHeld::PerFrame,
+                ..KinectNoise::default()
+            })
+        );
+        for (noise, words) in [
+            ("\"pink\"", "\"pink\" is not a noise"),
+            ("{ white = 0.3 }", "unknown field `white`"),
+            ("{ held = \"ever\" }", "held = \"ever\""),
+            ("{ long_raw = -1.0 }", "long_raw must lie in [0, 10]"),
+            ("3", "a TOML integer is not a noise"),
+        ] {
+            let err = with(noise).unwrap_err().to_string();
+            assert!(
+                err.contains("sim.depth_noise") && err.contains(words),
+                "{noise}: {err}"
+            );
+        }
     }
 
     /// A robot that tilts less than the check's default 8° still has a valid

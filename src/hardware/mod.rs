@@ -327,8 +327,14 @@ fn sensor_from(
             if let Some(model) = config.sensor.depth_model {
                 kinect.depth_model = model;
             }
-            if parts.sim.depth_noise == crate::config::SimNoise::White {
-                kinect.noise = groundcal_hal::sim::kinect::DepthNoise::white();
+            match parts.sim.depth_noise {
+                crate::config::SimNoise::Kinect => {}
+                crate::config::SimNoise::White => {
+                    kinect.noise = groundcal_hal::sim::kinect::DepthNoise::white();
+                }
+                crate::config::SimNoise::Parts(parts) => {
+                    kinect.noise = groundcal_hal::sim::kinect::DepthNoise::Kinect(parts);
+                }
             }
             if let Some(intrinsics) = config.sensor.intrinsics {
                 kinect.intrinsics = intrinsics;
