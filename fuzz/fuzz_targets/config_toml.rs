@@ -47,6 +47,11 @@ const KEYS: &[&str] = &[
     "verify.tilt_deg",
     "verify",
     "calibration.tilts",
+    "robot.name",
+    "calibration.noise",
+    "serve.preview_interval_ms",
+    "sim.depth_distortion.amplitude_raw",
+    "sim.depth_distortion.plane_part",
 ];
 
 fn plain_relative(path: &Path) -> bool {

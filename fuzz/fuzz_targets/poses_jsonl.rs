@@ -35,11 +35,12 @@ fuzz_target!(|data: &[u8]| {
         );
         previous_line = pose.line;
     }
-    if file.truncated_tail {
-        assert!(
-            !text.ends_with('\n'),
-            "a torn last line in a text ending in a newline"
-        );
+    // A record cut off part-way (newline or not) is the last one.
+    if let Some(c) = file.cut_off {
+        let last_record = text.trim_end().rfind('\n').map_or(0, |i| i + 1);
+        assert_eq!(c.byte, last_record, "a cut-off record that is not the last: {c:?}");
+        assert!(c.line > previous_line && c.line <= lines, "cut-off line {c:?}, {lines} lines");
+        assert!(c.written > 0 && c.byte + c.written <= text.len(), "cut-off bytes {c:?}");
     }
 
     // Written back one line each (as the recorder writes them) they read back
@@ -51,7 +52,7 @@ fuzz_target!(|data: &[u8]| {
     }
     let again = parse_poses(path(), &written)
         .unwrap_or_else(|e| panic!("written poses do not read back: {e}\n{written}"));
-    assert!(!again.truncated_tail);
+    assert!(again.cut_off.is_none(), "written poses read back cut off");
     let (a, b) = (
         serde_json::to_value(&file.poses).unwrap(),
         serde_json::to_value(&again.poses).unwrap(),
