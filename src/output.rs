@@ -457,7 +457,8 @@ pub struct DepthPatternJson {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixed_in_the_ground_sigmas: Option<f64>,
     /// Why a warp was not corrected: `changes_with_depth`,
-    /// `ground_not_flat` or `cells_change`.
+    /// `ground_not_flat`, `cells_change` or `beyond_the_fit` (the pattern
+    /// larger than the ground fit's band, so that neither could be told).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncorrected_because: Option<String>,
     /// Its plane part from the geometry across poses (raw units at the
@@ -521,6 +522,7 @@ impl DepthPatternJson {
                     WarpCause::ChangesWithDepth { .. } => "changes_with_depth",
                     WarpCause::GroundNotFlat { .. } => "ground_not_flat",
                     WarpCause::CellsChange { .. } => "cells_change",
+                    WarpCause::BeyondTheFit { .. } => "beyond_the_fit",
                 }
                 .to_string()
             }),

@@ -116,6 +116,10 @@ pub struct ShapeEstimate {
     pub fixed_in_the_ground: Option<FlipTest>,
     /// Raw units per 1/m.
     pub raw_per_inverse_depth: f64,
+    /// The band within which the poses' ground fits took their readings,
+    /// raw units (the median over the poses): a pattern reaching beyond it
+    /// had its peaks cut out.
+    pub fit_band_raw: f64,
     pub intrinsics: Intrinsics,
     /// Alternations done.
     pub iterations: usize,
@@ -168,6 +172,13 @@ impl ShapeEstimate {
             .depth
             .significant()
             .then(|| (self.depth.per_m / self.depth.sigma).abs());
+        let (largest_raw, band_raw) = (self.largest_raw(), self.fit_band_raw);
+        if (ground.is_some() || depth.is_some()) && largest_raw > band_raw {
+            return Some(WarpCause::BeyondTheFit {
+                largest_raw,
+                band_raw,
+            });
+        }
         match (ground, depth) {
             (Some(g), Some(d)) if d > g => Some(WarpCause::ChangesWithDepth {
                 per_m: self.depth.per_m,
@@ -180,6 +191,16 @@ impl ShapeEstimate {
             }),
             (None, None) => None,
         }
+    }
+
+    /// The shape's largest distance from zero over the cells seen, raw units.
+    pub fn largest_raw(&self) -> f64 {
+        self.shape
+            .iter()
+            .zip(&self.seen)
+            .filter(|(_, &seen)| seen)
+            .map(|(s, _)| (s * self.raw_per_inverse_depth).abs())
+            .fold(0.0, f64::max)
     }
 
     /// Whether the shape stands out of the noise and matters.
@@ -334,9 +355,25 @@ pub fn estimate_shape_seen_from(
         depth,
         fixed_in_the_ground,
         raw_per_inverse_depth: first.raw_per_inverse_depth,
+        fit_band_raw: median_fit_band(poses) * first.raw_per_inverse_depth.abs(),
         intrinsics: first.intrinsics,
         iterations: *iterations,
     })
+}
+
+/// The median of the poses' ground-fit bands, 1/m (infinite when no pose
+/// says: the residuals of a test, not of a fit).
+fn median_fit_band(poses: &[&GroundResiduals]) -> f64 {
+    let mut bands: Vec<f64> = poses
+        .iter()
+        .map(|p| p.fit_band)
+        .filter(|b| b.is_finite() && *b > 0.0)
+        .collect();
+    if bands.is_empty() {
+        return f64::INFINITY;
+    }
+    bands.sort_by(f64::total_cmp);
+    bands[bands.len() / 2]
 }
 
 /// A cell is left out when it lies this far (raw units) from the median of
@@ -1551,6 +1588,9 @@ fn pattern_of(
                 Some(crate::outcome::WarpCause::CellsChange { left_out }) => format!(
                     "it changes from pose to pose in {:.0} % of the cells seen: obstacles or bumps in view",
                     100.0 * left_out
+                ),
+                Some(crate::outcome::WarpCause::BeyondTheFit { largest_raw, band_raw }) => format!(
+                    "it reaches {largest_raw:.1} raw units from the ground's plane, beyond the fit's band of {band_raw:.1}: the fit cut its peaks out, and whether it is the sensor's pattern or uneven ground cannot be told"
                 ),
                 None => "it is not fixed in the image".to_string(),
             };

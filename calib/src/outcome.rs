@@ -273,6 +273,13 @@ pub enum WarpCause {
     /// Most cells' residuals change from pose to pose (obstacles' feet,
     /// bumps): `left_out` of the readings were left out.
     CellsChange { left_out: f64 },
+    /// A test of an alternative fired, but the pattern reaches `largest_raw`
+    /// from the ground's plane, beyond the `band_raw` within which the
+    /// ground fit took its readings (raw units): the fit cut its peaks out,
+    /// differently at every pose, and what that leaves behind looks like
+    /// either alternative. So neither can be told from the sensor's own
+    /// pattern (docs/method.md, "A pattern beyond the fit's band").
+    BeyondTheFit { largest_raw: f64, band_raw: f64 },
 }
 
 /// The Kinect's fixed depth pattern as a calibration found it
