@@ -281,7 +281,6 @@ enum Command {
         #[arg(long)]
         listen: Option<String>,
     },
-    /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
     /// Predict a schedule's σ, correlations and observability before the robot moves; exit 3 when it would be rejected.
     #[command(
         after_help = "Examples:\n  groundcal plan --config /etc/groundcal/groundcal.toml config/schedules/octopus-52.toml --json\n  groundcal plan --design 16 --config config/sim.toml --out config/schedules/designed-16.toml"
@@ -302,6 +301,7 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Validate a configuration (and the schedule it names); non-zero with the reason if invalid.
     #[command(after_help = "Example:\n  groundcal check-config /etc/groundcal/groundcal.toml")]
     CheckConfig {
         /// The configuration file.
@@ -629,6 +629,9 @@ mod tests {
                 .get_after_help()
                 .map(|h| h.to_string())
                 .unwrap_or_default();
+            if command.get_about().is_none() {
+                undocumented.push(format!("{name}: no about"));
+            }
             if !after.contains("Example") {
                 undocumented.push(format!("{name}: no example"));
             }
@@ -643,5 +646,22 @@ mod tests {
             }
         }
         assert!(undocumented.is_empty(), "undocumented: {undocumented:?}");
+    }
+
+    /// `docs/cli.md` is what the commands' definitions say
+    /// (`GROUNDCAL_BLESS=1` writes it).
+    #[test]
+    fn cli_reference_is_the_codes() {
+        let made = groundcal::cli::reference::markdown(&Args::command());
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/cli.md");
+        if std::env::var_os("GROUNDCAL_BLESS").is_some() {
+            std::fs::write(&path, &made).unwrap();
+        }
+        let file = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            file == made,
+            "docs/cli.md differs from the commands' definitions: \
+             GROUNDCAL_BLESS=1 cargo test --bin groundcal cli_reference writes it"
+        );
     }
 }

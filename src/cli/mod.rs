@@ -9,6 +9,7 @@ pub mod check_config;
 pub mod export;
 pub mod plan;
 pub mod plane;
+pub mod reference;
 pub mod replay;
 pub mod serve;
 pub mod sim_robot;
