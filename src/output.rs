@@ -482,6 +482,11 @@ pub struct DepthPatternJson {
     /// uncorrected because the ground fit in use (the paper's) cannot.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub uncorrected_fixed: bool,
+    /// That warp per cell (raw units, as `raw`), when the residuals showed
+    /// a shape that was not corrected: what the sensor or the ground
+    /// looked like, nothing applied.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncorrected_raw: Option<Vec<Option<f64>>>,
     /// Raw units per 1/m of inverse depth (the depth model's 1/b): the depth
     /// error at z metres is −z²·raw/raw_per_inverse_depth.
     pub raw_per_inverse_depth: f64,
@@ -536,6 +541,10 @@ impl DepthPatternJson {
                 crate::calib::outcome::depth_error_m(raw, 2.0, p.raw_per_inverse_depth) * 1e3
             }),
             uncorrected_fixed: p.uncorrected_fixed,
+            uncorrected_raw: p
+                .uncorrected_raw
+                .as_ref()
+                .map(|cells| cells.iter().map(thousandths).collect()),
             raw_per_inverse_depth: p.raw_per_inverse_depth,
         }
     }
@@ -564,7 +573,22 @@ impl DepthPatternJson {
                 self.rows
             ));
         }
-        for (name, values) in [("raw", &self.raw), ("sigma_raw", &self.sigma_raw)] {
+        if let Some(uncorrected) = &self.uncorrected_raw {
+            if without_cells || uncorrected.len() != cells {
+                return Err(format!(
+                    "has {} uncorrected values for {} × {} = {cells} cells",
+                    uncorrected.len(),
+                    self.columns,
+                    self.rows
+                ));
+            }
+        }
+        let uncorrected = self.uncorrected_raw.as_deref().unwrap_or_default();
+        for (name, values) in [
+            ("raw", &self.raw[..]),
+            ("sigma_raw", &self.sigma_raw[..]),
+            ("uncorrected_raw", uncorrected),
+        ] {
             if let Some((k, v)) = values.iter().enumerate().find_map(|(k, v)| {
                 v.filter(|v| !(v.is_finite() && v.abs() <= 50.0))
                     .map(|v| (k, v))
@@ -833,12 +857,13 @@ impl ResultJson {
     }
 
     /// The result without the depth pattern's cells (`raw` and `sigma_raw`
-    /// empty, the rest kept): for the daemon's status, which every page polls;
-    /// the stored document has them.
+    /// empty, `uncorrected_raw` left out, the rest kept): for the daemon's
+    /// status, which every page polls; the stored document has them.
     pub fn without_pattern_cells(mut self) -> Self {
         if let Some(pattern) = &mut self.depth_pattern {
             pattern.raw = Vec::new();
             pattern.sigma_raw = Vec::new();
+            pattern.uncorrected_raw = None;
         }
         self
     }

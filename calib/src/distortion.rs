@@ -1594,8 +1594,16 @@ fn pattern_of(
                 ),
                 None => "it is not fixed in the image".to_string(),
             };
+            let what = if matches!(
+                shape.why_not_fixed(),
+                Some(crate::outcome::WarpCause::BeyondTheFit { .. })
+            ) {
+                "cannot be taken for the sensor's fixed pattern"
+            } else {
+                "are not the sensor's fixed pattern"
+            };
             format!(
-                "not corrected: the ground's residuals ({:.3} raw units RMS) are not the sensor's fixed pattern: {why}",
+                "not corrected: the ground's residuals ({:.3} raw units RMS) {what}: {why}",
                 shape.all_cells_rms_raw
             )
         }
@@ -1634,6 +1642,11 @@ fn pattern_of(
             .map(|p| [0, 1, 2].map(|i| p.covariance[(i, i)].max(0.0).sqrt())),
         plane_part_taken: part_taken.is_some(),
         uncorrected_shape_rms_raw: uncorrected.then_some(shape.all_cells_rms_raw),
+        uncorrected_raw: uncorrected.then(|| {
+            (0..shape.shape.len())
+                .map(|k| shape.seen[k].then(|| shape.shape[k] * k_raw))
+                .collect()
+        }),
         uncorrected_fixed: false,
         raw_per_inverse_depth: k_raw,
         angle_sigma_known_plane_part: None,

@@ -325,6 +325,10 @@ pub struct DepthPattern {
     /// The RMS of a shape that stood out of the noise but was not corrected
     /// (it changed from pose to pose), raw units.
     pub uncorrected_shape_rms_raw: Option<f64>,
+    /// That uncorrected shape per cell (raw units, `None` where no pose saw
+    /// the ground): what the residuals showed, for a maintainer to compare
+    /// with the sensor's; nothing takes it out of a frame.
+    pub uncorrected_raw: Option<Vec<Option<f64>>>,
     /// Whether that uncorrected shape is fixed in the image: the sensor's
     /// own pattern, left uncorrected because the ground fit in use (the
     /// paper's) cannot take it out.
@@ -363,6 +367,7 @@ impl DepthPattern {
             plane_part_sigma: None,
             plane_part_taken: false,
             uncorrected_shape_rms_raw: None,
+            uncorrected_raw: None,
             uncorrected_fixed: false,
             raw_per_inverse_depth: 0.0,
             angle_sigma_known_plane_part: None,

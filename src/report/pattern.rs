@@ -46,11 +46,11 @@ fn colour(error: f64, range: f64) -> [u8; 3] {
     [0, 1, 2].map(|i| (255.0 + (f64::from(end[i]) - 255.0) * a).round() as u8)
 }
 
-/// The picture as PNG bytes, one pixel per cell.
-fn png(pattern: &DepthPatternJson, range: f64) -> Option<Vec<u8>> {
+/// The picture of `cells` as PNG bytes, one pixel per cell.
+fn png(pattern: &DepthPatternJson, cells: &[Option<f64>], range: f64) -> Option<Vec<u8>> {
     let (width, height) = (pattern.columns as u32, pattern.rows as u32);
-    let mut pixels = Vec::with_capacity(pattern.raw.len() * 3);
-    for cell in &pattern.raw {
+    let mut pixels = Vec::with_capacity(cells.len() * 3);
+    for cell in cells {
         pixels.extend(match cell {
             Some(raw) => colour(error_mm(*raw, pattern), range),
             None => UNSEEN,
@@ -102,14 +102,20 @@ pub(super) fn depth_pattern_section(
         return;
     };
     page.push_str("<section id=\"depth-pattern\"><h2>The depth image's own warp</h2>\n");
-    let rgb = |c: [u8; 3]| format!("rgb({},{},{})", c[0], c[1], c[2]);
-    let drawn = pattern.corrected && pattern.columns > 0 && pattern.rows > 0;
+    let has_cells = pattern.columns > 0 && pattern.rows > 0;
+    let drawn = pattern.corrected && has_cells;
     let image = drawn
         .then(|| {
             let range = half_range_mm(pattern.largest_mm_at_2m);
-            png(pattern, range).map(|bytes| (range, base64(&bytes)))
+            png(pattern, &pattern.raw, range).map(|bytes| (range, base64(&bytes)))
         })
         .flatten();
+    // A warp that stood out but was not corrected is drawn too, for a
+    // maintainer to see what the residuals showed.
+    let uncorrected = (!drawn && has_cells)
+        .then_some(pattern.uncorrected_raw.as_deref())
+        .flatten()
+        .filter(|cells| cells.len() == pattern.columns * pattern.rows);
     match image {
         Some((range, data)) => {
             let afterwards = match too_large_for_mm {
@@ -124,20 +130,7 @@ pub(super) fn depth_pattern_section(
                 "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer){afterwards}.</p>",
                 num(pattern.largest_mm_at_2m, 1)
             );
-            let _ = write!(
-                page,
-                "<figure class=\"warp\"><img class=\"warp\" src=\"data:image/png;base64,{data}\" width=\"{}\" height=\"{}\" alt=\"the depth error over the image at 2 m, up to {} mm\">\n<div class=\"warp-scale\" style=\"background: linear-gradient(to right, {}, #fff, {})\"></div>\n<div class=\"warp-ticks\"><span>−{} mm nearer</span><span>0</span><span>+{} mm farther</span></div>\n<figcaption>The depth image as the sensor sees it, {} × {} cells of {} pixels; grey: no ground seen there.</figcaption></figure>\n",
-                pattern.columns,
-                pattern.rows,
-                num(pattern.largest_mm_at_2m, 1),
-                rgb(NEARER),
-                rgb(FARTHER),
-                num(range, 0),
-                num(range, 0),
-                pattern.columns,
-                pattern.rows,
-                pattern.cell_px,
-            );
+            figure(page, pattern, &data, range, pattern.largest_mm_at_2m);
             page.push_str("<dl class=\"facts\">\n");
             let _ = writeln!(
                 page,
@@ -168,6 +161,22 @@ pub(super) fn depth_pattern_section(
         }
         None => {
             let _ = writeln!(page, "<p class=\"none\">{}</p>", escape(&pattern.note));
+            if let Some(cells) = uncorrected {
+                let largest = cells
+                    .iter()
+                    .flatten()
+                    .map(|raw| error_mm(*raw, pattern).abs())
+                    .fold(0.0, f64::max);
+                let range = half_range_mm(largest);
+                if let Some(bytes) = png(pattern, cells, range) {
+                    let _ = writeln!(
+                        page,
+                        "<p class=\"warp-words\">What the ground's residuals showed, up to <strong>{} mm</strong> at 2 m (red: farther, blue: nearer). Nothing was corrected by it.</p>",
+                        num(largest, 1)
+                    );
+                    figure(page, pattern, &base64(&bytes), range, largest);
+                }
+            }
         }
     }
     let _ = write!(
@@ -176,8 +185,27 @@ pub(super) fn depth_pattern_section(
         if drawn {
             escape(&pattern.note)
         } else {
-            "A real Kinect's depth carries a fixed pattern of a few tenths of a raw unit (about 12 mm at 2 m per unit); groundcal looks for it in the ground's residuals at every calibration.".to_string()
+            "A real Kinect v1's depth carries a fixed pattern of most of a raw unit RMS (0.84 in a real sequence of a floor; a raw unit is about 12 mm at 2 m); groundcal looks for it in the ground's residuals at every calibration.".to_string()
         }
+    );
+}
+
+/// The picture (`data`: PNG in base64) with its scale of ± `range` mm.
+fn figure(page: &mut String, pattern: &DepthPatternJson, data: &str, range: f64, largest: f64) {
+    let rgb = |c: [u8; 3]| format!("rgb({},{},{})", c[0], c[1], c[2]);
+    let _ = write!(
+        page,
+        "<figure class=\"warp\"><img class=\"warp\" src=\"data:image/png;base64,{data}\" width=\"{}\" height=\"{}\" alt=\"the depth error over the image at 2 m, up to {} mm\">\n<div class=\"warp-scale\" style=\"background: linear-gradient(to right, {}, #fff, {})\"></div>\n<div class=\"warp-ticks\"><span>−{} mm nearer</span><span>0</span><span>+{} mm farther</span></div>\n<figcaption>The depth image as the sensor sees it, {} × {} cells of {} pixels; grey: no ground seen there.</figcaption></figure>\n",
+        pattern.columns,
+        pattern.rows,
+        num(largest, 1),
+        rgb(NEARER),
+        rgb(FARTHER),
+        num(range, 0),
+        num(range, 0),
+        pattern.columns,
+        pattern.rows,
+        pattern.cell_px,
     );
 }
 
@@ -224,6 +252,7 @@ mod tests {
             angle_sigma_known_plane_part_deg: None,
             uncorrected_mm_at_2m: None,
             uncorrected_fixed: false,
+            uncorrected_raw: None,
             raw_per_inverse_depth: 325.0,
         }
     }
