@@ -98,6 +98,23 @@ fn every_document_linked_from_the_docs_exists() {
 }
 
 #[test]
+fn every_test_suite_is_described_in_docs_tests() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let described = std::fs::read_to_string(root.join("docs/tests.md")).unwrap();
+    let mut missing = Vec::new();
+    for entry in std::fs::read_dir(root.join("tests")).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+        if name.ends_with(".rs") && !described.contains(&format!("`tests/{name}`")) {
+            missing.push(name);
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "docs/tests.md does not describe {missing:?}"
+    );
+}
+
+#[test]
 fn a_missing_path_is_caught() {
     let map = "## Concepts and where they live\n\n| x | `src/no/such/file.rs` |\n\n## Next";
     let paths = quoted_paths(section(map, "## Concepts and where they live").unwrap());
