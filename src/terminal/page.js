@@ -343,7 +343,10 @@ function about(seconds) {
 // A time in the device's own time zone, in the page's language.
 function when(rfc3339) {
   const time = new Date(rfc3339);
-  const locale = language === 'zh' ? 'zh-CN' : [];
+  // In English, the device's English (en-GB, en-US…) if it has one, else
+  // plain English: never a date in another language beside English words.
+  const english = (navigator.languages || []).find((l) => /^en\b/i.test(l)) || 'en';
+  const locale = language === 'zh' ? 'zh-CN' : english;
   return isNaN(time) ? (rfc3339 || '?') : time.toLocaleString(locale, { dateStyle: 'medium', timeStyle: 'medium' });
 }
 function fixed(value, unit) { return value.toFixed(unit === '°' ? 3 : 1); }

@@ -72,7 +72,8 @@ try {
   };
   // Every POST the page sends (Cancel must send none).
   const posts = [];
-  page.on('request', (r) => { if (r.method() === 'POST') posts.push(r.url()); });
+  // (The live stream's one-use ticket is a POST too, and moves nothing.)
+  page.on('request', (r) => { if (r.method() === 'POST' && !r.url().endsWith('/api/stream-ticket')) posts.push(r.url()); });
   // Presses Calibrate and confirms that the robot may move.
   const calibrate = async () => {
     await page.click('#calibrate');
