@@ -1715,10 +1715,13 @@ fn pattern_of(
                     "it changes from pose to pose in {:.0} % of the cells seen: obstacles or bumps in view",
                     100.0 * left_out
                 ),
-                Some(crate::outcome::WarpCause::BeyondTheFit { largest_raw, band_raw }) => format!(
-                    "it reaches {largest_raw:.1} raw units from the ground's plane, {} the fit's band of {band_raw:.1}: the fit cut its peaks out, and whether it is the sensor's pattern or uneven ground cannot be told",
-                    if largest_raw > band_raw { "beyond" } else { "near the edge of" }
-                ),
+                Some(crate::outcome::WarpCause::BeyondTheFit { largest_raw, band_raw }) => {
+                    // Two decimals where one would show them equal.
+                    let decimals = if format!("{largest_raw:.1}") == format!("{band_raw:.1}") { 2 } else { 1 };
+                    format!(
+                        "it reaches {largest_raw:.decimals$} raw units from the ground's plane, beyond the fit's band of {band_raw:.decimals$}: the fit cut its peaks out, and whether it is the sensor's pattern or uneven ground cannot be told"
+                    )
+                }
                 None => "it is not fixed in the image".to_string(),
             };
             let what = if matches!(

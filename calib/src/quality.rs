@@ -163,10 +163,12 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
                         "it changes from pose to pose in {:.0} % of the image (obstacles or bumps in view): clear the floor in front of the robot",
                         100.0 * left_out
                     ),
-                    Some(WarpCause::BeyondTheFit { largest_raw, band_raw }) => format!(
-                        "it reaches {largest_raw:.1} raw units from the ground's plane, {} the {band_raw:.1} within which the ground fit takes its readings, so the fit cut its peaks out and groundcal cannot tell the sensor's pattern from ground that is not flat. On flat ground this is a limit of groundcal's correction (a Kinect v1's pattern is this large), not a fault of the ground or the sensor: keep the last calibration and report it to a maintainer",
-                        if largest_raw > band_raw { "beyond" } else { "near the edge of" }
-                    ),
+                    Some(WarpCause::BeyondTheFit { largest_raw, band_raw }) => {
+                        let (largest_raw, band_raw) = apart(largest_raw, band_raw, 1);
+                        format!(
+                        "it reaches {largest_raw} raw units from the ground's plane, beyond the {band_raw} within which the ground fit takes its readings, so the fit cut its peaks out and groundcal cannot tell the sensor's pattern from ground that is not flat. On flat ground this is a limit of groundcal's correction (a Kinect v1's pattern is this large), not a fault of the ground or the sensor: keep the last calibration and report it to a maintainer"
+                        )
+                    }
                     None => "it is not the sensor's fixed pattern".to_string(),
                 };
                 reasons.push(format!(
