@@ -451,8 +451,24 @@ fn run(args: Args) -> ExitStatus {
                 report: report.as_deref(),
                 mcap: mcap.as_deref(),
                 cut_off,
+                read_from: None,
             };
             if groundcal::bag::is_mcap_file(&dir) {
+                // groundcal's own session carries its recording whole.
+                match groundcal::bag::own::own_recording(&dir) {
+                    Ok(Some(own)) => {
+                        let outputs = cli::replay::Outputs {
+                            read_from: Some(&dir),
+                            ..outputs
+                        };
+                        return cli::replay::run(own.dir(), &outputs, &options);
+                    }
+                    Ok(None) => {}
+                    Err(e) => {
+                        eprintln!("groundcal replay: {e}");
+                        return ExitStatus::BadInput;
+                    }
+                }
                 return match bag.options() {
                     Ok(bag) => cli::replay::run_bag(&dir, &bag, &outputs, &options),
                     Err(e) => usage_error(e),

@@ -31,6 +31,15 @@ use groundcal_ros::msg::{
     self, CameraInfo, Header, Image, Message, PointCloud2, PoseFit, TfMessage, TransformStamped,
 };
 
+/// The recording a session is written from, carried whole as attachments
+/// (`bag::own` reads it back): its text files and small dumps under
+/// [`RECORDING_PREFIX`] by their paths in the recording, and [`FRAMES`],
+/// the names of its depth frames in the order of the raw topic's messages.
+pub mod recording_attachment {
+    pub const RECORDING_PREFIX: &str = "groundcal/recording/";
+    pub const FRAMES: &str = "frames.json";
+}
+
 /// The topics, in one place (docs/export.md describes each).
 pub mod topic {
     /// Depth in millimetres, `16UC1` (REP 118), 0 where there is no reading.
@@ -192,6 +201,10 @@ const TRANSIENT_LOCAL_QOS: &str = "- history: 3\n  depth: 0\n  reliability: 1\n 
 deadline:\n    sec: 2147483647\n    nsec: 4294967295\n  lifespan:\n    sec: 2147483647\n    \
 nsec: 4294967295\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n    \
 nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n";
+
+/// The largest dump other than a depth frame carried (a tilt state is 12
+/// bytes, an RGB frame is not one of groundcal's).
+const SMALL_DUMP_BYTES: u64 = 64 << 10;
 
 /// Chunks of about 4 MiB: a reader seeks to a pose without reading the file.
 const CHUNK_BYTES: u64 = 4 << 20;
@@ -389,6 +402,50 @@ impl<W: Write + Seek> SessionWriter<W> {
                 replay.ground_points.get(k).and_then(Option::as_deref),
             )?;
         }
+        self.attach_recording(recording)
+    }
+
+    /// The recording itself, as attachments ([`recording_attachment`]): its
+    /// text files, its small dumps (tilt states), and the names of its
+    /// depth frames in the order of the raw topic, whose messages hold
+    /// their pixels. `replay` of the file reads it back whole.
+    fn attach_recording(&mut self, recording: &Recording) -> Result<(), WriteError> {
+        use recording_attachment::{FRAMES, RECORDING_PREFIX};
+        let stamp = self.last_stamp;
+        let mut attach = |name: String, media_type: &str, data: Vec<u8>| {
+            self.mcap.attach(&mcap::Attachment {
+                log_time: stamp,
+                create_time: stamp,
+                name: format!("{RECORDING_PREFIX}{name}"),
+                media_type: media_type.into(),
+                data: data.into(),
+            })
+        };
+        for (name, text) in recording.named_text_files() {
+            attach(name.to_string(), "text/plain", text.as_bytes().to_vec())?;
+        }
+        for entry in &recording.index {
+            if entry.kind == crate::recording::dump::EntryKind::Depth {
+                continue;
+            }
+            // A small dump the INDEX names; one that is not there is not
+            // carried (replay reads only the dumps a pose names).
+            let path = recording.kinect_path(&entry.name);
+            if let Ok(bytes) = crate::recording::read_bounded(&path, SMALL_DUMP_BYTES) {
+                attach(
+                    format!("kinect/{}", entry.name),
+                    "application/octet-stream",
+                    bytes,
+                )?;
+            }
+        }
+        let frames: Vec<&str> = recording
+            .poses
+            .iter()
+            .flat_map(|pose| pose.depth_frames.iter().map(String::as_str))
+            .collect();
+        let frames = serde_json::to_vec(&frames).unwrap_or_default();
+        attach(FRAMES.to_string(), "application/json", frames)?;
         Ok(())
     }
 

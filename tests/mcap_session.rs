@@ -71,6 +71,10 @@ fn the_samples_replay_as_mcap_reads_back_in_the_mcap_projects_own_reader() {
     assert_eq!(report["planes_compared"], 12, "{report}");
     assert!(report["mount_error"].as_f64().unwrap() < 1e-6, "{report}");
     assert!(report["chunks"].as_u64().unwrap() > 1, "{report}");
+    // The file is a recording: replayed, it gives the recording's result,
+    // byte for byte (issue 44; before, "the feet never stay still … no home
+    // stance", exit 2), and leaves nothing behind.
+    assert_replays_as_its_recording(&mcap, &stdout);
     // Nothing else was left in the directory: no temporary file.
     let mut names: Vec<String> = std::fs::read_dir(&*work)
         .unwrap()
@@ -78,6 +82,33 @@ fn the_samples_replay_as_mcap_reads_back_in_the_mcap_projects_own_reader() {
         .collect();
     names.sort();
     assert_eq!(names, ["result.json", "sample-12.mcap"]);
+}
+
+/// `replay FILE.mcap` of groundcal's own session prints `expected` (the
+/// JSON of `replay` of the recording it was written from), byte for byte,
+/// and leaves nothing of the recording it read out behind (its temporary
+/// directory is looked for in a TMPDIR of the test's own).
+fn assert_replays_as_its_recording(mcap: &std::path::Path, expected: &str) {
+    let tmp = temp_dir("mcap-replay-tmp");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_groundcal"))
+        .args(["replay", mcap.to_str().unwrap(), "--json"])
+        .env("TMPDIR", &*tmp)
+        .output()
+        .expect("groundcal runs");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(
+        matches!(out.status.code(), Some(0 | 3)),
+        "replay of the MCAP: {stderr}"
+    );
+    assert!(
+        stdout == expected,
+        "replay of the MCAP differs from the recording's:\n{stdout}\n---\n{expected}"
+    );
+    let left: Vec<_> = std::fs::read_dir(&*tmp).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
 }
 
 #[test]
@@ -127,6 +158,10 @@ fn a_live_simulated_calibration_writes_its_session_as_mcap() {
     let result = work.join("result.json");
     std::fs::write(&result, &stdout).unwrap();
     let report = check_with_python(&python, &mcap, &recording, &result);
+    // The live session's file replays as its recording does.
+    let (code, replayed, stderr) = groundcal(&["replay", recording.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_replays_as_its_recording(&mcap, &replayed);
     let poses = serde_json::from_str::<serde_json::Value>(&stdout).unwrap()["poses"]
         .as_array()
         .unwrap()

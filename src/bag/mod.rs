@@ -7,6 +7,7 @@
 //! - [`session`]: the bag's intrinsics, home stance and still poses;
 //! - [`replay_bag`]: their observations, solved as a recording's are.
 
+pub mod own;
 pub mod session;
 pub mod stream;
 

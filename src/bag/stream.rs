@@ -95,6 +95,9 @@ struct Declarations {
 pub struct McapStream {
     limits: Limits,
     declared: Declarations,
+    /// The attachments kept ([`McapStream::keep_attachments`]): name, data.
+    attachments: Vec<(String, Vec<u8>)>,
+    attachments_named: Option<String>,
 }
 
 impl McapStream {
@@ -102,7 +105,20 @@ impl McapStream {
         Self {
             limits,
             declared: Declarations::default(),
+            attachments: Vec::new(),
+            attachments_named: None,
         }
+    }
+
+    /// Keeps, from the passes that follow, the attachments whose names
+    /// start with `prefix` (each within the reader's record limit).
+    pub fn keep_attachments(&mut self, prefix: &str) {
+        self.attachments_named = Some(prefix.to_string());
+    }
+
+    /// The attachments kept so far, in file order.
+    pub fn take_attachments(&mut self) -> Vec<(String, Vec<u8>)> {
+        std::mem::take(&mut self.attachments)
     }
 
     /// Reads every message from `source`, in file order, and hands those
@@ -190,6 +206,15 @@ impl McapStream {
                 chunk: None,
             };
             match record {
+                Parsed::Attachment { name, data } => {
+                    if self
+                        .attachments_named
+                        .as_deref()
+                        .is_some_and(|prefix| name.starts_with(prefix))
+                    {
+                        self.attachments.push((name, data.to_vec()));
+                    }
+                }
                 Parsed::Chunk(header, data) => {
                     decompress(&header, data, limits, &mut chunk)
                         .map_err(|what| stream_error(record_offset, what))?;
@@ -235,6 +260,10 @@ enum Parsed<'a> {
         data: &'a [u8],
     },
     Chunk(ChunkHeader, &'a [u8]),
+    Attachment {
+        name: String,
+        data: &'a [u8],
+    },
     DataEnd,
     Other,
 }
@@ -252,6 +281,7 @@ mod op {
     pub const CHANNEL: u8 = 0x04;
     pub const MESSAGE: u8 = 0x05;
     pub const CHUNK: u8 = 0x06;
+    pub const ATTACHMENT: u8 = 0x09;
     pub const DATA_END: u8 = 0x0F;
 }
 
@@ -340,6 +370,21 @@ fn parse(opcode: u8, body: &[u8]) -> Result<Parsed<'_>, String> {
                 },
                 data,
             )
+        }
+        op::ATTACHMENT => {
+            f.u64("the attachment's log time")?;
+            f.u64("the attachment's create time")?;
+            let name = f.string("the attachment's name")?;
+            f.string("the attachment's media type")?;
+            let length = f.u64("the attachment's data")?;
+            let data = f.take(length, "the attachment's data")?;
+            let crc = f.u32("the attachment's CRC")?;
+            // The CRC covers every field before it.
+            let covered = &body[..body.len() - f.bytes.len() - 4];
+            if crc != 0 && crc32fast::hash(covered) != crc {
+                return Err(format!("the attachment \"{name}\" does not match its CRC"));
+            }
+            Parsed::Attachment { name, data }
         }
         op::DATA_END => Parsed::DataEnd,
         _ => Parsed::Other,
@@ -434,7 +479,7 @@ impl<W: Fn(&str) -> bool, F> Dispatch<'_, W, F> {
                 })
                 .map_err(ReadError::Stopped)?;
             }
-            Parsed::Chunk(..) | Parsed::DataEnd | Parsed::Other => {}
+            Parsed::Chunk(..) | Parsed::Attachment { .. } | Parsed::DataEnd | Parsed::Other => {}
         }
         Ok(())
     }

@@ -18,6 +18,9 @@ pub struct Outputs<'a> {
     pub mcap: Option<&'a Path>,
     /// Takes a recording whose last record is cut off, without that pose.
     pub cut_off: bool,
+    /// The input as it was named, when the recording was read out of it
+    /// (groundcal's own session MCAP): the report's provenance says it.
+    pub read_from: Option<&'a Path>,
 }
 
 /// Runs the command; the result goes to stdout, messages to stderr, and the
@@ -74,7 +77,7 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
         digest = outcome.input_digest.as_deref(),
         "replayed"
     );
-    if let Err(status) = report(report_dir, dir, &outcome) {
+    if let Err(status) = report(report_dir, outputs.read_from.unwrap_or(dir), &outcome) {
         return status;
     }
     if let Some(path) = outputs.mcap {

@@ -262,6 +262,15 @@ impl Recording {
         })
     }
 
+    /// The recording's text files as read, by their paths in it.
+    pub fn named_text_files(&self) -> [(&'static str, &str); 3] {
+        [
+            ("session.json", &self.texts[0]),
+            ("poses.jsonl", &self.texts[1]),
+            ("kinect/INDEX.txt", &self.texts[2]),
+        ]
+    }
+
     /// The path of a file of the dump.
     pub fn kinect_path(&self, name: &str) -> PathBuf {
         self.dir.join("kinect").join(name)
