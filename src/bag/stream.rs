@@ -212,6 +212,16 @@ impl McapStream {
                         .as_deref()
                         .is_some_and(|prefix| name.starts_with(prefix))
                     {
+                        let kept: usize = self.attachments.iter().map(|(_, d)| d.len()).sum();
+                        if (kept + data.len()) as u64 > limits.record_bytes {
+                            return Err(stream_error(
+                                record_offset,
+                                format!(
+                                    "the attachments kept reach more than the {} bytes this reader takes",
+                                    limits.record_bytes
+                                ),
+                            ));
+                        }
                         self.attachments.push((name, data.to_vec()));
                     }
                 }
@@ -611,6 +621,79 @@ mod tests {
             ReadError::Stopped(()) => unreachable!(),
         })?;
         Ok(seen)
+    }
+
+    /// An attachment record: times, name, media type, data, CRC (0: none).
+    fn attachment(name: &str, data: &[u8], crc: Option<u32>) -> Vec<u8> {
+        let mut body = Vec::new();
+        body.extend_from_slice(&1u64.to_le_bytes());
+        body.extend_from_slice(&2u64.to_le_bytes());
+        for text in [name, "text/plain"] {
+            body.extend_from_slice(&(text.len() as u32).to_le_bytes());
+            body.extend_from_slice(text.as_bytes());
+        }
+        body.extend_from_slice(&(data.len() as u64).to_le_bytes());
+        body.extend_from_slice(data);
+        let crc = crc.unwrap_or_else(|| crc32fast::hash(&body));
+        body.extend_from_slice(&crc.to_le_bytes());
+        record(op::ATTACHMENT, &body)
+    }
+
+    /// The attachments a pass keeps: those named with the prefix, checked
+    /// against their CRC (a wrong one is named), within the record limit.
+    #[test]
+    fn attachments_are_kept_by_name_and_checked() {
+        let file = |records: &[Vec<u8>]| {
+            let mut bytes = MAGIC.to_vec();
+            for r in records {
+                bytes.extend_from_slice(r);
+            }
+            bytes.extend_from_slice(&record(op::DATA_END, &[0; 4]));
+            bytes
+        };
+        let read = |bytes: &[u8], limits: Limits| {
+            let mut stream = McapStream::new(limits);
+            stream.keep_attachments("groundcal/");
+            stream
+                .read(bytes, |_| true, |_| false, |_| Ok::<(), ()>(()))
+                .map(|_| stream.take_attachments())
+        };
+        let good = file(&[
+            attachment("result.json", b"{}", None),
+            attachment("groundcal/a.txt", b"first", None),
+            attachment("groundcal/b.txt", b"second", Some(0)),
+        ]);
+        let kept = read(&good, Limits::default()).unwrap();
+        assert_eq!(
+            kept,
+            [
+                ("groundcal/a.txt".to_string(), b"first".to_vec()),
+                ("groundcal/b.txt".to_string(), b"second".to_vec())
+            ]
+        );
+        let bad = file(&[attachment("groundcal/a.txt", b"first", Some(7))]);
+        match read(&bad, Limits::default()) {
+            Err(ReadError::Stream(e)) => assert!(
+                e.to_string()
+                    .contains("\"groundcal/a.txt\" does not match its CRC"),
+                "{e}"
+            ),
+            other => panic!("{other:?}"),
+        }
+        let small = Limits {
+            record_bytes: 130,
+            ..Limits::default()
+        };
+        let many = file(&[
+            attachment("groundcal/a", &[1; 70], None),
+            attachment("groundcal/b", &[2; 70], None),
+        ]);
+        match read(&many, small) {
+            Err(ReadError::Stream(e)) => {
+                assert!(e.to_string().contains("attachments kept"), "{e}")
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
