@@ -11,8 +11,8 @@ use serde::{Deserialize, Deserializer};
 
 use crate::calib::quality::Gates;
 use crate::calib::sensor::{DepthModel, Intrinsics};
+use crate::input::{parse_toml, read_bounded, InputError};
 use crate::recording::session::NominalMount;
-use crate::recording::{parse_toml, read_bounded, InputError};
 use crate::schedule::{Limits, Schedule};
 
 /// The whole configuration.

@@ -24,8 +24,8 @@ use serde::Serialize;
 use serde_json::Value;
 
 use crate::calib::geometry::{self, PoseDegMm, PoseParams, Transform};
+use crate::input::{read_bounded, InputError};
 use crate::output::{ResultJson, ResultStatus};
-use crate::recording::{read_bounded, InputError};
 
 /// The ROS parent frame (REP-103 body frame).
 pub const PARENT_FRAME: &str = "base_link";

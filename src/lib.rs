@@ -43,6 +43,7 @@ pub mod design;
 pub mod export;
 pub mod files;
 pub mod hardware;
+pub mod input;
 pub mod mcap_session;
 pub mod output;
 pub mod recording;

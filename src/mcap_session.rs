@@ -24,8 +24,9 @@ use crate::calib::geometry::{sensor_from_optical, Plane, Transform};
 use crate::calib::sensor::{DepthModel, Intrinsics};
 use crate::export::{base_link_from_camera_optical, base_link_from_robot, quaternion_xyzw};
 use crate::files::{AtomicFile, FileError};
+use crate::input::InputError;
 use crate::output::{PlaneJson, ResultJson};
-use crate::recording::{InputError, Recording};
+use crate::recording::Recording;
 use crate::replay::Replay;
 use groundcal_ros::msg::{
     self, CameraInfo, Header, Image, Message, PointCloud2, PoseFit, TfMessage, TransformStamped,
@@ -431,7 +432,7 @@ impl<W: Write + Seek> SessionWriter<W> {
             // A small dump the INDEX names; one that is not there is not
             // carried (replay reads only the dumps a pose names).
             let path = recording.kinect_path(&entry.name);
-            if let Ok(bytes) = crate::recording::read_bounded(&path, SMALL_DUMP_BYTES) {
+            if let Ok(bytes) = crate::input::read_bounded(&path, SMALL_DUMP_BYTES) {
                 attach(
                     format!("kinect/{}", entry.name),
                     "application/octet-stream",

@@ -17,9 +17,10 @@ use crate::calib::observe::{BodyEstimate, ObserveSettings, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::quality::Gates;
 use crate::calib::solve::Observation;
+use crate::input::InputError;
 use crate::output::{ResultJson, SetupJson};
 use crate::recording::session::NominalMount;
-use crate::recording::{InputError, Recording};
+use crate::recording::Recording;
 use crate::verify::{GravityReading, VisitedPose};
 
 /// How to replay.

@@ -16,8 +16,8 @@ use serde::{Deserialize, Serialize};
 use crate::calib::geometry::{rot_z, PoseDegMm, PoseParams};
 use crate::calib::observe::NominalMount;
 use crate::calib::tilt::{fit, TiltCalibration, TiltModel};
+use crate::input::InputError;
 use crate::output::{MountJson, ResultJson, ResultStatus, TiltModelJson, TiltResultJson};
-use crate::recording::InputError;
 
 /// The model as the result carries it.
 fn model_json(m: &TiltModel) -> TiltModelJson {
@@ -206,7 +206,7 @@ pub fn read_tilts_file(dir: &Path) -> Result<Option<TiltsFile>, InputError> {
     if !path.exists() {
         return Ok(None);
     }
-    let bytes = crate::recording::read_bounded(&path, 1 << 20)?;
+    let bytes = crate::input::read_bounded(&path, 1 << 20)?;
     let text = String::from_utf8(bytes)
         .map_err(|e| InputError::new(&path, None, format!("not UTF-8 text: {e}")))?;
     let file = parse_tilts_file(&path, &text)?;

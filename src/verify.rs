@@ -106,8 +106,7 @@ pub fn load_calibration(
 ) -> Result<Calibration, String> {
     let (document, source) = match file {
         Some(path) => {
-            let bytes =
-                crate::recording::read_bounded(path, 16 << 20).map_err(|e| e.to_string())?;
+            let bytes = crate::input::read_bounded(path, 16 << 20).map_err(|e| e.to_string())?;
             let value: serde_json::Value = serde_json::from_slice(&bytes)
                 .map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
             (value, path.display().to_string())

@@ -152,11 +152,7 @@ impl<R: std::io::Read> std::io::Read for Hashing<R> {
 /// Why a bag could not be used; names the file and what was wrong (with
 /// the control characters of anything the bag said escaped).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error(
-    "{}: {}",
-    crate::recording::printable(path),
-    crate::recording::printable(what)
-)]
+#[error("{}: {}", crate::input::printable(path), crate::input::printable(what))]
 pub struct BagError {
     pub path: String,
     pub what: String,

@@ -75,7 +75,7 @@ fn print(text: &str) -> ExitStatus {
 
 /// The mount at another tilt of the motor, from the result's tilt model.
 fn at_tilt(file: &Path, tilt: f64) -> Result<crate::calib::geometry::PoseDegMm, String> {
-    let bytes = crate::recording::read_bounded(file, 64 << 20).map_err(|e| e.to_string())?;
+    let bytes = crate::input::read_bounded(file, 64 << 20).map_err(|e| e.to_string())?;
     let value: serde_json::Value =
         serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))?;
     let result = crate::output::ResultJson::parse(value)?;

@@ -14,8 +14,8 @@ use crate::calib::plan::{
     predict_schedule_with, predict_with_depth_pattern, sigma_of_covariance, NoiseModel, Prediction,
 };
 use crate::config::Config;
+use crate::input::read_bounded;
 use crate::output::SigmaJson;
-use crate::recording::read_bounded;
 use crate::schedule::{Schedule, ScheduleError};
 
 /// What `plan --json` prints.

@@ -7,7 +7,8 @@ use std::collections::HashMap;
 
 use groundcal_hal::{DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo, TiltState};
 
-use crate::recording::{InputError, Recording};
+use crate::input::InputError;
+use crate::recording::Recording;
 
 /// Why the recording cannot serve a frame.
 #[derive(Debug, thiserror::Error)]
