@@ -1013,11 +1013,19 @@ function lose() {
   render();
 }
 let retry = 1000;
+// Reads of the status overlap (the timer's and each event's); the answers
+// can come back out of order. One asked for before an answer already shown
+// is older than it and is dropped: a stale "running, 0 s so far" must not
+// replace "aborting…" (seen once in CI under load).
+let statusAsked = 0, statusShown = 0;
 async function refresh() {
+  const asked = ++statusAsked;
   try {
     const r = await fetchWithin('/api/status', {}, 2000);
     if (!r.ok) { lose(); return false; }
     const s = await r.json();
+    if (asked < statusShown) return true;
+    statusShown = asked;
     // A poll answered after a newer provisional event must not take the
     // live chart back: within a run it only grows.
     const before = model.status;
