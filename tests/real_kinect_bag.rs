@@ -44,35 +44,17 @@ fn plane_difference(a: &Value, b: &Value) -> (f64, f64) {
 
 /// The values less their least-squares plane `(1, column, row) · c`.
 fn without_plane(cells: &[([f64; 3], f64)]) -> Vec<f64> {
-    let mut normal = [[0.0; 3]; 3];
-    let mut rhs = [0.0; 3];
+    use nalgebra::{Matrix3, Vector3};
+    let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
     for (phi, value) in cells {
-        for i in 0..3 {
-            rhs[i] += phi[i] * value;
-            for j in 0..3 {
-                normal[i][j] += phi[i] * phi[j];
-            }
-        }
+        let phi = Vector3::from(*phi);
+        normal += phi * phi.transpose();
+        rhs += phi * *value;
     }
-    // Cramer's rule on the 3 × 3 normal equations.
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let whole = det(normal);
-    let c: Vec<f64> = (0..3)
-        .map(|k| {
-            let mut m = normal;
-            for i in 0..3 {
-                m[i][k] = rhs[i];
-            }
-            det(m) / whole
-        })
-        .collect();
+    let c = normal.lu().solve(&rhs).expect("the cells span a plane");
     cells
         .iter()
-        .map(|(phi, value)| value - (0..3).map(|i| phi[i] * c[i]).sum::<f64>())
+        .map(|(phi, value)| value - Vector3::from(*phi).dot(&c))
         .collect()
 }
 
