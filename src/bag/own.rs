@@ -53,6 +53,11 @@ pub fn own_recording(path: &Path) -> Result<Option<OwnRecording>, BagError> {
             .map(|f| std::io::BufReader::with_capacity(1 << 20, f))
             .map_err(|e| fail(e.to_string()))
     };
+    // Only a file groundcal wrote can carry a recording: its Header record
+    // says so, and another stack's bag is not read an extra time.
+    if !written_by_groundcal(path) {
+        return Ok(None);
+    }
     let mut stream = McapStream::new(Limits::default());
     stream.keep_attachments(RECORDING_PREFIX);
     stream
@@ -149,6 +154,35 @@ pub fn own_recording(path: &Path) -> Result<Option<OwnRecording>, BagError> {
         )));
     }
     Ok(Some(recording))
+}
+
+/// Whether the file's first record, MCAP's Header (opcode 1: profile, then
+/// library, each a u32 length and its bytes), names groundcal as the
+/// library that wrote it.
+fn written_by_groundcal(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; 8 + 9 + 4096];
+    let Ok(mut file) = crate::files::open_regular(path) else {
+        return false;
+    };
+    let mut read = 0;
+    while read < head.len() {
+        match file.read(&mut head[read..]) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => read += n,
+        }
+    }
+    let body = &head[..read];
+    if body.len() < 17 || body[8] != 0x01 {
+        return false;
+    }
+    let string_at = |at: usize| -> Option<(&[u8], usize)> {
+        let length = u32::from_le_bytes(body.get(at..at + 4)?.try_into().ok()?) as usize;
+        Some((body.get(at + 4..at + 4 + length)?, at + 4 + length))
+    };
+    string_at(17)
+        .and_then(|(_, next)| string_at(next))
+        .is_some_and(|(library, _)| library.starts_with(b"groundcal"))
 }
 
 /// A file name with no directory in it.
