@@ -490,7 +490,15 @@ pub struct DepthPatternJson {
     /// Raw units per 1/m of inverse depth (the depth model's 1/b): the depth
     /// error at z metres is −z²·raw/raw_per_inverse_depth.
     pub raw_per_inverse_depth: f64,
+    /// The shape to take out of the frames before fitting their ground
+    /// again (the fit's band cut its peaks); not part of the document.
+    #[serde(skip)]
+    pub fit_again_about: Option<crate::calib::distortion::DepthCorrection>,
 }
+
+/// Most ground fits of one calibration: the first, and those about the
+/// depth pattern's estimate as it grows (each cuts less of what is left).
+pub const MOST_GROUND_FITS: usize = 4;
 
 /// A figure the document can carry: JSON has no infinity (a test whose
 /// null had no spread says "beyond any" as 10⁹).
@@ -546,6 +554,7 @@ impl DepthPatternJson {
                 .as_ref()
                 .map(|cells| cells.iter().map(thousandths).collect()),
             raw_per_inverse_depth: p.raw_per_inverse_depth,
+            fit_again_about: p.fit_again_about.clone(),
         }
     }
 
@@ -821,25 +830,89 @@ impl ResultJson {
         settings: &crate::calib::calibrate::CalibrationSettings,
         kinect_tilt_deg: f64,
     ) -> Self {
-        use crate::calib::calibrate::calibrate_among;
+        Self::from_poses_taken_out(
+            observations,
+            failed,
+            poses_total,
+            settings,
+            kinect_tilt_deg,
+            None,
+        )
+    }
+
+    /// [`ResultJson::from_poses`] for planes fitted to frames from which
+    /// `taken_out`, a first estimate of the depth pattern, was taken out.
+    pub fn from_poses_taken_out(
+        observations: &[crate::calib::solve::Observation],
+        failed: &[(u32, String)],
+        poses_total: usize,
+        settings: &crate::calib::calibrate::CalibrationSettings,
+        kinect_tilt_deg: f64,
+        taken_out: Option<&crate::calib::distortion::DepthCorrection>,
+    ) -> Self {
+        use crate::calib::calibrate::calibrate_taken_out;
         use crate::calib::solve::SolveError;
-        let mut result = match calibrate_among(observations, poses_total, settings) {
-            Ok(calibration) => Self::from_calibration(&calibration),
-            Err(SolveError::TooFewObservations { usable, outcomes }) => Self::unsolved(
-                SolveError::TooFewObservations {
-                    usable,
-                    outcomes: Vec::new(),
-                }
-                .to_string(),
-                &outcomes,
-            ),
-        }
-        .with_failed_poses(failed);
+        let mut result =
+            match calibrate_taken_out(observations, poses_total, settings, taken_out) {
+                Ok(calibration) => Self::from_calibration(&calibration),
+                Err(SolveError::TooFewObservations { usable, outcomes }) => Self::unsolved(
+                    SolveError::TooFewObservations {
+                        usable,
+                        outcomes: Vec::new(),
+                    }
+                    .to_string(),
+                    &outcomes,
+                ),
+            }
+            .with_failed_poses(failed);
         result.kinect_tilt_deg = Some(kinect_tilt_deg);
         for (index, reason) in failed {
             result.notes.push(format!("pose {index}: {reason}"));
         }
         result
+    }
+
+    /// The shape of a depth pattern whose peaks the ground fit's band cut,
+    /// to take out of the frames before fitting them again; `None` for any
+    /// other result.
+    pub fn pattern_to_fit_about(&self) -> Option<&crate::calib::distortion::DepthCorrection> {
+        self.depth_pattern.as_ref()?.fit_again_about.as_ref()
+    }
+
+    /// When the ground fit's band cut a depth pattern's peaks in this
+    /// result, fits the frames again with its estimate taken out
+    /// (`fit_again`, for a correction taken out of every frame) until what
+    /// is left is a pattern fixed in the image: the result that got there
+    /// (with what `fit_again` kept beside it), or `None` to keep this one
+    /// (what is left is not such a pattern, or the fits ran out).
+    pub fn fit_about_the_pattern<T, E>(
+        &self,
+        mut fit_again: impl FnMut(
+            &crate::calib::distortion::DepthCorrection,
+        ) -> Result<(ResultJson, T), E>,
+    ) -> Result<Option<(ResultJson, T)>, E> {
+        let Some(mut taken_out) = self.pattern_to_fit_about().cloned() else {
+            return Ok(None);
+        };
+        for _ in 1..MOST_GROUND_FITS {
+            let (mut result, kept) = fit_again(&taken_out)?;
+            if let (Some(pattern), Some(first)) = (&mut result.depth_pattern, &self.depth_pattern) {
+                if pattern.corrected {
+                    // The evidence that there is a shape is the first fit's:
+                    // the later ones see what is left of it.
+                    pattern.shape_sigmas = first.shape_sigmas;
+                    pattern.shape_chi2_per_dof = first.shape_chi2_per_dof;
+                    return Ok(Some((result, kept)));
+                }
+            }
+            let Some(more) = result.pattern_to_fit_about() else {
+                break;
+            };
+            for (all, left) in taken_out.raw.iter_mut().zip(&more.raw) {
+                *all += left;
+            }
+        }
+        Ok(None)
     }
 
     /// Adds poses that gave no plane, keeping the list in index order.

@@ -320,14 +320,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         None,
         options.keep,
     )?;
-    let mut observations = Vec::new();
-    let mut failed = Vec::new();
-    for pose in &observed.poses {
-        match &pose.fit {
-            Ok(o) => observations.push(o.clone()),
-            Err(reason) => failed.push((pose.index, reason.clone())),
-        }
-    }
+    let (observations, failed) = VisitedPose::fits(&observed.poses);
     let (settings, gates_from) = options.settings(session.gates, session.noise);
     let mut result = ResultJson::from_poses(
         &observations,
@@ -336,6 +329,37 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         &settings,
         session.kinect.tilt_deg,
     );
+    // A pattern the fit's band cut: the frames fitted again about it.
+    let mut observed = observed;
+    if let Some(again) = result.fit_about_the_pattern(|taken_out| {
+        let again = observe_recording(
+            recording,
+            nominal,
+            options.pose,
+            options.threads,
+            Some(taken_out),
+            options.keep,
+        )?;
+        let (observations, failed) = VisitedPose::fits(&again.poses);
+        let result = ResultJson::from_poses_taken_out(
+            &observations,
+            &failed,
+            recording.poses.len(),
+            &settings,
+            session.kinect.tilt_deg,
+            Some(taken_out),
+        );
+        Ok((result, again))
+    })? {
+        (result, observed) = (
+            again.0,
+            ObservedRecording {
+                input_digest: observed.input_digest,
+                frames: observed.frames,
+                ..again.1
+            },
+        );
+    }
     if let Some(note) = observed.prior_note {
         result.notes.insert(0, note);
     }

@@ -67,6 +67,21 @@ pub struct VisitedPose {
     pub gravity: Option<GravityReading>,
 }
 
+impl VisitedPose {
+    /// The poses' observations, and the poses that gave none with why.
+    pub fn fits(poses: &[VisitedPose]) -> (Vec<Observation>, Vec<(u32, String)>) {
+        let mut observations = Vec::new();
+        let mut failed = Vec::new();
+        for pose in poses {
+            match &pose.fit {
+                Ok(o) => observations.push(o.clone()),
+                Err(reason) => failed.push((pose.index, reason.clone())),
+            }
+        }
+        (observations, failed)
+    }
+}
+
 /// The calibration to check: its mount and σ, and the tilt it holds for.
 pub struct Calibration {
     pub mount: ActiveMount,

@@ -30,6 +30,19 @@ pub fn calibrate_among(
     poses_total: usize,
     settings: &CalibrationSettings,
 ) -> Result<Calibration, SolveError> {
-    let solution = distortion::solve_with_pattern(observations, &settings.solve)?;
+    calibrate_taken_out(observations, poses_total, settings, None)
+}
+
+/// As [`calibrate_among`], for planes fitted to frames from which
+/// `taken_out`, a first estimate of the depth pattern, was taken out
+/// ([`distortion::solve_with_pattern_taken_out`]).
+pub fn calibrate_taken_out(
+    observations: &[Observation],
+    poses_total: usize,
+    settings: &CalibrationSettings,
+    taken_out: Option<&distortion::DepthCorrection>,
+) -> Result<Calibration, SolveError> {
+    let solution =
+        distortion::solve_with_pattern_taken_out(observations, &settings.solve, taken_out)?;
     Ok(quality::assess(solution, poses_total, &settings.gates))
 }

@@ -65,6 +65,13 @@ const RELIEF_TURNS: usize = 4;
 /// keeps at least this share of its RMS (and stands out of the noise).
 const SHAPE_SHARE_BESIDE_RELIEF: f64 = 0.5;
 
+/// A shape stands beside a relief of the ground only when that relief is
+/// local, raw units RMS over the ground seen: obstacles' feet in the
+/// simulator's clutter make 0.014-0.039 and a real lab floor about 0.16
+/// (docs/method.md); bumps all over the ground make 0.53, and a pattern
+/// corrected beside them was accepted 0.77° and 8 mm off.
+const MAX_RELIEF_BESIDE_RAW: f64 = 0.25;
+
 /// Bins of the ground, metres, in which the residuals are looked for
 /// where they stay with the ground: about a cell's footprint at 2 m.
 const GROUND_BIN_M: f64 = 0.05;
@@ -143,6 +150,8 @@ pub struct ReliefTest {
     pub shape_sigmas: f64,
     /// Its RMS against the shape's estimated alone.
     pub shape_share: f64,
+    /// The relief's RMS over the ground seen, weighted by readings, 1/m.
+    pub relief_rms: f64,
 }
 
 impl ShapeEstimate {
@@ -174,6 +183,23 @@ impl ShapeEstimate {
 
     /// Why the residuals are not the sensor's fixed pattern, when they are not.
     pub fn why_not_fixed(&self) -> Option<crate::outcome::WarpCause> {
+        self.why_not_fixed_beside_relief(true)
+    }
+
+    /// [`ShapeEstimate::why_not_fixed`] for the residuals left once a first
+    /// estimate of the pattern was taken out of the frames: any residuals
+    /// that stay with the ground count against it, beside a relief or not.
+    /// (What was taken out holds whatever the first fit saw, uneven ground
+    /// included; what is left of a relief then looks like a shape standing
+    /// beside it, and the simulator's uneven world was accepted 0.13° off.)
+    pub fn why_not_fixed_after_a_first_estimate(&self) -> Option<crate::outcome::WarpCause> {
+        self.why_not_fixed_beside_relief(false)
+    }
+
+    fn why_not_fixed_beside_relief(
+        &self,
+        relief_may_stand_beside: bool,
+    ) -> Option<crate::outcome::WarpCause> {
         use crate::outcome::WarpCause;
         if self.kept_fraction < MIN_KEPT_FRACTION {
             return Some(WarpCause::CellsChange {
@@ -191,7 +217,8 @@ impl ShapeEstimate {
         // Residuals that stay with the ground count against the pattern
         // only when the shape does not stand beside them (obstacles' feet
         // are fixed in the ground too, beside any pattern of the sensor).
-        let ground = stays_with_the_ground.filter(|_| !self.stands_beside_the_relief());
+        let ground = stays_with_the_ground
+            .filter(|_| !(relief_may_stand_beside && self.stands_beside_the_relief()));
         let depth = self
             .depth
             .significant()
@@ -227,7 +254,9 @@ impl ShapeEstimate {
     /// out with it.
     pub fn stands_beside_the_relief(&self) -> bool {
         self.shape_beside_relief.is_some_and(|r| {
-            r.shape_sigmas > SHAPE_SIGNIFICANCE && r.shape_share >= SHAPE_SHARE_BESIDE_RELIEF
+            r.shape_sigmas > SHAPE_SIGNIFICANCE
+                && r.shape_share >= SHAPE_SHARE_BESIDE_RELIEF
+                && r.relief_rms * self.raw_per_inverse_depth.abs() <= MAX_RELIEF_BESIDE_RAW
         })
     }
 
@@ -999,9 +1028,18 @@ fn shape_beside_relief(
         })
         .collect();
     let size = |s: &[f64]| s.iter().zip(weights).map(|(v, w)| w * v * v).sum::<f64>();
+    // The relief's size over the ground seen, weighted by readings.
+    let (mut relief_sum, mut readings) = (0.0, 0.0);
+    for (e, bin) in entries.iter().zip(bin_of) {
+        if let Some(b) = bin {
+            relief_sum += e.n * relief[*b as usize].powi(2);
+            readings += e.n;
+        }
+    }
     ReliefTest {
         shape_sigmas: flip_test(&beside, poses, weights, &shape, &shape_of).sigmas(),
         shape_share: (size(&shape) / size(&alone).max(f64::MIN_POSITIVE)).sqrt(),
+        relief_rms: (relief_sum / readings.max(f64::MIN_POSITIVE)).sqrt(),
     }
 }
 
@@ -1236,6 +1274,22 @@ pub fn solve_with_pattern(
     observations: &[Observation],
     settings: &SolveSettings,
 ) -> Result<Solution, SolveError> {
+    solve_with_pattern_taken_out(observations, settings, None)
+}
+
+/// [`solve_with_pattern`] for planes fitted to frames from which `taken_out`
+/// was taken out first: a first estimate of the pattern, so that the fit's
+/// band lies about the pattern and cuts none of its peaks (docs/method.md,
+/// "A pattern beyond the fit's band"). When the residuals left are a
+/// pattern fixed in the image (no test of an alternative fires), the
+/// pattern found is `taken_out` plus what they still show, and its plane
+/// part is estimated as for a shape taken; otherwise nothing is corrected
+/// and the reason is the residuals'.
+pub fn solve_with_pattern_taken_out(
+    observations: &[Observation],
+    settings: &SolveSettings,
+    taken_out: Option<&DepthCorrection>,
+) -> Result<Solution, SolveError> {
     let base = solve::solve(observations, settings)?;
     let used = |o: &Observation| base.poses.iter().any(|p| p.index == o.index && p.used);
     let with_residuals: Vec<(usize, &GroundResiduals)> = observations
@@ -1301,7 +1355,12 @@ pub fn solve_with_pattern(
     }
 
     // The shape's corrections of each plane, when the shape is real.
-    let shape_taken = shape.significant() && shape.consistent();
+    let consistent = match taken_out {
+        Some(_) => shape.why_not_fixed_after_a_first_estimate().is_none(),
+        None => shape.consistent(),
+    };
+    let shape_taken = shape.significant() && consistent;
+    let taken_out = taken_out.filter(|_| consistent);
     let mut corrected = observations.to_vec();
     if shape_taken {
         let corrections = shape.plane_corrections(&residuals);
@@ -1326,7 +1385,11 @@ pub fn solve_with_pattern(
     };
     let estimate = plane.estimate();
     let (solution, plane_part, angle_sigma_known_part) = match estimate {
-        Some(found) if shape_taken || (shape.consistent() && found.chi2 > PLANE_PART_CHI2) => {
+        Some(found)
+            if shape_taken
+                || taken_out.is_some()
+                || (consistent && found.chi2 > PLANE_PART_CHI2) =>
+        {
             let mut solution = found.solution.clone();
             let known = [0, 1, 2].map(|k| solution.covariance[(k, k)].max(0.0).sqrt());
             // The mount's σ with the plane part's own uncertainty.
@@ -1346,7 +1409,7 @@ pub fn solve_with_pattern(
     let mut solution = solution;
     solution.depth_pattern = Some(DepthPattern {
         angle_sigma_known_plane_part: angle_sigma_known_part,
-        ..pattern_of(&shape, shape_taken, plane_part.as_ref())
+        ..pattern_of(&shape, shape_taken, plane_part.as_ref(), taken_out)
     });
     Ok(solution)
 }
@@ -1632,9 +1695,9 @@ fn pattern_not_corrected_by_another_fit(
 ) -> DepthPattern {
     let shape_fixed = shape.significant() && shape.consistent();
     if !shape_fixed && plane_part.is_none() {
-        return pattern_of(shape, false, None);
+        return pattern_of(shape, false, None, None);
     }
-    let mut pattern = pattern_of(shape, shape_fixed, plane_part);
+    let mut pattern = pattern_of(shape, shape_fixed, plane_part, None);
     // The shape's RMS, as for a warp left uncorrected by the default fit;
     // without one, the offset's and gradients' over the cells seen.
     let rms = if shape_fixed {
@@ -1652,12 +1715,75 @@ fn pattern_not_corrected_by_another_fit(
     pattern
 }
 
+/// The shape to fit the frames about again: when its peaks reach beyond the
+/// fit's band and it was taken, or left out only for that, and no first
+/// estimate was taken out already (the caller adds this one to it).
+fn fit_again_about(
+    shape: &ShapeEstimate,
+    shape_taken: bool,
+    after_a_first_estimate: bool,
+) -> Option<DepthCorrection> {
+    let cut = matches!(
+        shape.why_not_fixed(),
+        Some(crate::outcome::WarpCause::BeyondTheFit { .. })
+    );
+    if after_a_first_estimate || !shape.peaks_cut_by_the_fit() || !(shape_taken || cut) {
+        return None;
+    }
+    let k_raw = shape.raw_per_inverse_depth;
+    let mut cells: Vec<Option<f64>> = (0..shape.shape.len())
+        .map(|k| shape.seen[k].then(|| shape.shape[k] * k_raw))
+        .collect();
+    extend_to_unseen_cells(&mut cells, shape.columns, shape.rows);
+    DepthCorrection::from_cells(shape.columns, shape.rows, CELL_PX, &cells)
+}
+
+/// Gives each cell no pose saw the mean of its neighbours that have a
+/// value, ring by ring outwards: a correction is interpolated between cell
+/// centres, and one that fell to 0 past the cells seen would bend the
+/// readings at their edge, which some poses see and others do not.
+fn extend_to_unseen_cells(cells: &mut [Option<f64>], columns: usize, rows: usize) {
+    while cells.iter().any(Option::is_none) && cells.iter().any(Option::is_some) {
+        let before = cells.to_vec();
+        for k in 0..cells.len() {
+            if before[k].is_some() {
+                continue;
+            }
+            let (c, r) = ((k % columns) as isize, (k / columns) as isize);
+            let (mut sum, mut count) = (0.0, 0);
+            for (dc, dr) in [
+                (-1, 0),
+                (1, 0),
+                (0, -1),
+                (0, 1),
+                (-1, -1),
+                (1, 1),
+                (-1, 1),
+                (1, -1),
+            ] {
+                let (nc, nr) = (c + dc, r + dr);
+                if nc < 0 || nr < 0 || nc >= columns as isize || nr >= rows as isize {
+                    continue;
+                }
+                if let Some(value) = before[nr as usize * columns + nc as usize] {
+                    sum += value;
+                    count += 1;
+                }
+            }
+            if count > 0 {
+                cells[k] = Some(sum / f64::from(count));
+            }
+        }
+    }
+}
+
 /// The pattern as the result carries it: raw units per cell, shape and
 /// plane part, with σ and the words.
 fn pattern_of(
     shape: &ShapeEstimate,
     shape_taken: bool,
     plane_part: Option<&PlanePartEstimate>,
+    taken_out: Option<&DepthCorrection>,
 ) -> DepthPattern {
     let k_raw = shape.raw_per_inverse_depth;
     let part_taken = plane_part.filter(|p| p.taken);
@@ -1675,7 +1801,15 @@ fn pattern_of(
         let mut variance = 0.0;
         if shape_taken {
             value += shape.shape[k] * k_raw;
+        }
+        if shape_taken || taken_out.is_some() {
+            // What was taken out first is of the same readings: its
+            // cells' noise is theirs.
             variance += shape.cell_variance[k] * k_raw * k_raw;
+        }
+        if let Some(first) = taken_out {
+            let (du, dv) = shape.cell_offset(k);
+            value += first.raw_at(du + shape.intrinsics.cx, dv + shape.intrinsics.cy);
         }
         if let Some(part) = part_taken {
             value += part.value.dot(&basis);
@@ -1684,8 +1818,25 @@ fn pattern_of(
         raw.push(Some(value));
         sigma_raw.push(Some(variance.max(0.0).sqrt()));
     }
-    let corrected = shape_taken || part_taken.is_some();
-    let words_rms = shape.rms_raw();
+    let corrected = shape_taken || part_taken.is_some() || taken_out.is_some();
+    let words_rms = match taken_out {
+        // The whole shape: what was taken out and what is left.
+        Some(first) => {
+            let whole: Vec<f64> = (0..shape.shape.len())
+                .map(|k| {
+                    let (du, dv) = shape.cell_offset(k);
+                    let left = if shape_taken {
+                        shape.shape[k] * k_raw
+                    } else {
+                        0.0
+                    };
+                    first.raw_at(du + shape.intrinsics.cx, dv + shape.intrinsics.cy) + left
+                })
+                .collect();
+            weighted_rms(&whole, &shape.readings, &shape.seen)
+        }
+        None => shape.rms_raw(),
+    };
     let seen_cells = shape.seen.iter().filter(|s| **s).count();
     let left_out = (shape.kept_fraction < 0.995).then(|| {
         format!(
@@ -1696,10 +1847,11 @@ fn pattern_of(
     // A warp not corrected: the ground looked warped, but not by a pattern
     // fixed in the image.
     let uncorrected = !shape_taken
+        && taken_out.is_none()
         && part_taken.is_none()
         && shape.all_cells_rms_raw >= MIN_SHAPE_RMS_RAW
         && (shape.kept_fraction < 1.0 || !shape.consistent());
-    let note = match (shape_taken, part_taken) {
+    let note = match (shape_taken || taken_out.is_some(), part_taken) {
         (false, None) if uncorrected && !shape.consistent() => {
             let why = match shape.why_not_fixed() {
                 Some(crate::outcome::WarpCause::ChangesWithDepth { per_m, sigma }) => format!(
@@ -1780,7 +1932,13 @@ fn pattern_of(
         uncorrected_fixed: false,
         raw_per_inverse_depth: k_raw,
         angle_sigma_known_plane_part: None,
-        note: Some(note),
+        fit_again_about: fit_again_about(shape, shape_taken, taken_out.is_some()),
+        note: Some(match taken_out {
+            Some(_) => format!(
+                "its first estimate taken out of the frames and the ground fitted again, since the first fit's band cut its peaks; then {note}"
+            ),
+            None => note,
+        }),
     }
 }
 

@@ -344,6 +344,11 @@ pub struct DepthPattern {
     pub angle_sigma_known_plane_part: Option<[f64; 3]>,
     /// What was found, in words.
     pub note: Option<String>,
+    /// The shape to take out of the frames before fitting their ground
+    /// again, when the fit's band cut its peaks (raw units per cell, no
+    /// plane part): the first estimate is then biased, and a fit about it
+    /// cuts nothing (docs/method.md, "A pattern beyond the fit's band").
+    pub fit_again_about: Option<crate::depth::DepthCorrection>,
 }
 
 impl DepthPattern {
@@ -372,6 +377,7 @@ impl DepthPattern {
             raw_per_inverse_depth: 0.0,
             angle_sigma_known_plane_part: None,
             note: Some(note),
+            fit_again_about: None,
         }
     }
 

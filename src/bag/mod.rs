@@ -59,10 +59,6 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
         .iter()
         .map(|pose| feet.body_pose(&PoseDegMm::from_values([0.0; 6]), &pose.feet_body_mm))
         .collect();
-    // Each pose is fitted on the worker threads as soon as its frames are
-    // read, and its frames freed: at most two poses a thread wait, so a bag
-    // of any length takes the memory of a few poses. The results do not
-    // depend on the number of threads (each pose is fitted alone).
     let threads = options
         .threads
         .unwrap_or_else(rayon::current_num_threads)
@@ -71,6 +67,74 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
         .num_threads(threads)
         .build()
         .map_err(|e| fail(format!("cannot start worker threads: {e}")))?;
+    let (fits, frames_read) = fit_poses(bag, &observer, &bodies, &pool, threads)?;
+    let (observations, failed) = split(bag, fits);
+    // A bag stores no gates and no noise of a live run.
+    let (settings, gates_from) = options.settings(None, None);
+    let mut result =
+        ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
+    // A pattern the fit's band cut: the bag read and fitted again about it.
+    if let Some((again, _)) = result.fit_about_the_pattern(|taken_out| {
+        let observer = observer.clone().with_depth_correction(taken_out);
+        let (fits, _) = fit_poses(bag, &observer, &bodies, &pool, threads)?;
+        let (observations, failed) = split(bag, fits);
+        let result = ResultJson::from_poses_taken_out(
+            &observations,
+            &failed,
+            bag.poses.len(),
+            &settings,
+            0.0,
+            Some(taken_out),
+        );
+        Ok::<_, BagError>((result, ()))
+    })? {
+        result = again;
+    }
+    // The motor's tilt is not in a bag: not claimed.
+    result.kinect_tilt_deg = None;
+    let mut notes = bag.notes.clone();
+    notes.extend(observer.prior_note());
+    result.notes.splice(0..0, notes);
+    let frames_per_pose = bag.poses.iter().map(|p| p.stamps.len() as u32).max();
+    result.setup = Some(SetupJson {
+        robot: None,
+        schedule: None,
+        poses: Some(bag.poses.len()),
+        frames_per_pose,
+        depth_model: None,
+        intrinsics: Some(bag.intrinsics),
+        nominal_mount: nominal,
+        nominal_mount_from: match (options.nominal_mount, bag.nominal_mount) {
+            (Some(_), _) => Some("flag".into()),
+            (None, Some(_)) => Some("bag's TF".into()),
+            (None, None) => None,
+        },
+        gates_from: Some(gates_from.into()),
+    });
+    Ok(Replay {
+        result,
+        input_digest: Some(bag.digest.clone()),
+        frames: frames_read,
+        ground_from_robot: bodies
+            .iter()
+            .map(|b| b.as_ref().ok().map(|b| b.ground_from_robot))
+            .collect(),
+        ground_points: vec![None; bag.poses.len()],
+    })
+}
+
+/// Each pose's ground fitted on the worker threads as soon as its frames are
+/// read, and its frames freed: at most two poses a thread wait, so a bag of
+/// any length takes the memory of a few poses. The results do not depend on
+/// the number of threads (each pose is fitted alone). Per pose its
+/// observation or why there is none, and the frames read.
+fn fit_poses(
+    bag: &BagSession,
+    observer: &PoseObserver,
+    bodies: &[Result<crate::calib::observe::BodyEstimate, String>],
+    pool: &rayon::ThreadPool,
+    threads: usize,
+) -> Result<(Vec<Fit>, usize), BagError> {
     let results: std::sync::Mutex<Vec<Option<Result<crate::calib::solve::Observation, String>>>> =
         std::sync::Mutex::new(vec![None; bag.poses.len()]);
     let in_flight = (std::sync::Mutex::new(0usize), std::sync::Condvar::new());
@@ -105,12 +169,23 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             Ok(())
         })
     })?;
-    let fits: Vec<Result<crate::calib::solve::Observation, String>> = results
+    let fits = results
         .into_inner()
         .unwrap_or_else(|p| p.into_inner())
         .into_iter()
         .map(|fit| fit.unwrap_or_else(|| Err("no frame of this pose was read".into())))
         .collect();
+    Ok((fits, frames_read))
+}
+
+/// A pose's observation, or why there is none.
+type Fit = Result<crate::calib::solve::Observation, String>;
+
+/// The poses' observations, and the poses that gave none with why.
+fn split(
+    bag: &BagSession,
+    fits: Vec<Fit>,
+) -> (Vec<crate::calib::solve::Observation>, Vec<(u32, String)>) {
     let mut observations = Vec::new();
     let mut failed = Vec::new();
     for (pose, fit) in bag.poses.iter().zip(fits) {
@@ -119,39 +194,5 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             Err(reason) => failed.push((pose.index, reason)),
         }
     }
-    // A bag stores no gates and no noise of a live run.
-    let (settings, gates_from) = options.settings(None, None);
-    let mut result =
-        ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
-    // The motor's tilt is not in a bag: not claimed.
-    result.kinect_tilt_deg = None;
-    let mut notes = bag.notes.clone();
-    notes.extend(observer.prior_note());
-    result.notes.splice(0..0, notes);
-    let frames_per_pose = bag.poses.iter().map(|p| p.stamps.len() as u32).max();
-    result.setup = Some(SetupJson {
-        robot: None,
-        schedule: None,
-        poses: Some(bag.poses.len()),
-        frames_per_pose,
-        depth_model: None,
-        intrinsics: Some(bag.intrinsics),
-        nominal_mount: nominal,
-        nominal_mount_from: match (options.nominal_mount, bag.nominal_mount) {
-            (Some(_), _) => Some("flag".into()),
-            (None, Some(_)) => Some("bag's TF".into()),
-            (None, None) => None,
-        },
-        gates_from: Some(gates_from.into()),
-    });
-    Ok(Replay {
-        result,
-        input_digest: Some(bag.digest.clone()),
-        frames: frames_read,
-        ground_from_robot: bodies
-            .iter()
-            .map(|b| b.as_ref().ok().map(|b| b.ground_from_robot))
-            .collect(),
-        ground_points: vec![None; bag.poses.len()],
-    })
+    (observations, failed)
 }

@@ -254,6 +254,7 @@ mod tests {
             uncorrected_fixed: false,
             uncorrected_raw: None,
             raw_per_inverse_depth: 325.0,
+            fit_again_about: None,
         }
     }
 

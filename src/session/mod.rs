@@ -17,6 +17,7 @@
 //!
 //! Everything the operator might want to see is sent as an [`Event`].
 
+mod kept_frames;
 mod plan;
 mod run;
 

@@ -13,6 +13,7 @@ use tokio::sync::mpsc::UnboundedSender;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
+use super::kept_frames::KeptFrames;
 use super::{Event, GravityReading, Plan, PoseFit, ProvisionalPose, RobotLeft, VisitedPose};
 use crate::calib::geometry::Transform;
 use crate::calib::ground_view::GroundView;
@@ -27,6 +28,7 @@ use crate::recording::poses::PoseRecord;
 use crate::recording::session::{Home, KinectInfo, Session};
 use crate::recording::writer::{RecordingWriter, WriteError};
 use crate::schedule::Limits;
+use rayon::prelude::*;
 
 /// How a session ended when it produced a result.
 #[derive(Debug, Clone)]
@@ -271,16 +273,23 @@ struct PendingFit {
     /// The body pose from the feet, when they fixed it.
     ground_from_robot: Option<Transform>,
     gravity: Option<GravityReading>,
-    handle: JoinHandle<Result<Observation, String>>,
+    /// The body pose, for a second fit of the frames.
+    body: Option<BodyEstimate>,
+    handle: JoinHandle<(Result<Observation, String>, Option<KeptFrames>)>,
     /// The fit's outcome once it has been awaited (a handle is awaited once).
     done: Option<Result<Observation, String>>,
+    /// The frames, kept for a second fit when calibrating.
+    frames: Option<KeptFrames>,
 }
 
 impl PendingFit {
     async fn outcome(&mut self) -> &Result<Observation, String> {
         if self.done.is_none() {
             let outcome = match (&mut self.handle).await {
-                Ok(outcome) => outcome,
+                Ok((outcome, frames)) => {
+                    self.frames = frames;
+                    outcome
+                }
                 Err(e) => Err(format!("the fit failed: {e}")),
             };
             self.done = Some(outcome);
@@ -298,7 +307,8 @@ fn fit_pose(
     body: BodyEstimate,
     frames: Vec<DepthFrame>,
     events: UnboundedSender<Event>,
-) -> Result<Observation, String> {
+    keep_frames: bool,
+) -> (Result<Observation, String>, Option<KeptFrames>) {
     let raw: Vec<&[u16]> = frames.iter().map(|f| f.raw.as_slice()).collect();
     let fitted = processor
         .observe_with_fit(u32::from(index), &body, &raw, &mut FitBuffers::default())
@@ -314,7 +324,8 @@ fn fit_pose(
             },
         );
     }
-    fitted.map(|(observation, _)| observation)
+    let kept = (keep_frames && fitted.is_ok()).then(|| KeptFrames::keep(&frames));
+    (fitted.map(|(observation, _)| observation), kept)
 }
 
 /// The fewest fitted poses a provisional solve is tried on: below that the
@@ -578,26 +589,31 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
             writer = Some(record_pose(w, &frames, &tilt_states, record).await?);
         }
         let mut ground_from_robot = None;
+        let mut kept_body = None;
         let fit = match feet.body_pose(commanded, &feet_mm) {
             Ok(body) => {
                 ground_from_robot = Some(body.ground_from_robot);
+                kept_body = plan.calibrating.then(|| body.clone());
                 let processor = Arc::clone(&processor);
                 let events = events.clone();
+                let keep_frames = plan.calibrating;
                 tokio::task::spawn_blocking(move || {
-                    fit_pose(processor, index, body, frames, events)
+                    fit_pose(processor, index, body, frames, events, keep_frames)
                 })
             }
             Err(e) => {
                 let reason = format!("feet: {e}");
-                tokio::task::spawn_blocking(move || Err(reason))
+                tokio::task::spawn_blocking(move || (Err(reason), None))
             }
         };
         pending.push(PendingFit {
             index,
             ground_from_robot,
             gravity: GravityReading::from_states(&tilt_states),
+            body: kept_body,
             handle: fit,
             done: None,
+            frames: None,
         });
         report_finished(pending, &mut reported, of, events, false, plan).await;
     }
@@ -613,8 +629,12 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
     }
     report_finished(pending, &mut reported, of, events, true, plan).await;
     let mut poses = Vec::with_capacity(pending.len());
+    let mut kept = Vec::new();
     for mut fit in pending.drain(..) {
         let outcome = fit.outcome().await.clone();
+        if let (Some(body), Some(frames)) = (fit.body.take(), fit.frames.take()) {
+            kept.push((poses.len(), body, frames));
+        }
         poses.push(VisitedPose {
             index: u32::from(fit.index),
             ground_from_robot: fit.ground_from_robot,
@@ -622,14 +642,24 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
             gravity: fit.gravity,
         });
     }
+    tracing::debug!(
+        poses = kept.len(),
+        bytes = kept
+            .iter()
+            .map(|(_, _, frames)| frames.size())
+            .sum::<usize>(),
+        "frames kept for a second fit"
+    );
     let recording = match writer {
         Some(w) => Some(w.finish()?),
         None => None,
     };
     Ok(Visited {
         poses,
-        of,
+        kept,
         prior_note: processor.prior_note(),
+        processor,
+        of,
         recording,
         firmware: welcome.firmware.clone(),
     })
@@ -640,6 +670,11 @@ struct Visited {
     /// The lower computer's firmware, as its WELCOME said.
     firmware: String,
     poses: Vec<VisitedPose>,
+    /// Per pose that gave a plane when calibrating: its place in `poses`,
+    /// its body pose and its frames, for a second fit.
+    kept: Vec<(usize, BodyEstimate, KeptFrames)>,
+    /// What fitted the poses.
+    processor: Arc<PoseObserver>,
     /// Poses in the schedule.
     of: usize,
     prior_note: Option<String>,
@@ -647,15 +682,12 @@ struct Visited {
 }
 
 /// The calibration's end: the solve, the verdict, the motor's steadiness.
-fn solve_visited(visited: Visited, plan: &Plan, events: &UnboundedSender<Event>) -> SessionOutcome {
-    let mut observations = Vec::new();
-    let mut failed = Vec::new();
-    for pose in &visited.poses {
-        match &pose.fit {
-            Ok(o) => observations.push(o.clone()),
-            Err(reason) => failed.push((pose.index, reason.clone())),
-        }
-    }
+fn solve_visited(
+    mut visited: Visited,
+    plan: &Plan,
+    events: &UnboundedSender<Event>,
+) -> SessionOutcome {
+    let (observations, failed) = VisitedPose::fits(&visited.poses);
     let mut result = ResultJson::from_poses(
         &observations,
         &failed,
@@ -663,6 +695,46 @@ fn solve_visited(visited: Visited, plan: &Plan, events: &UnboundedSender<Event>)
         &plan.calibration,
         plan.tilt_deg,
     );
+    // A pattern the fit's band cut: the kept frames fitted again about it,
+    // as `replay` fits a recording's.
+    let again = result.fit_about_the_pattern(|taken_out| {
+        let observer = (*visited.processor)
+            .clone()
+            .with_depth_correction(taken_out);
+        let mut poses = visited.poses.clone();
+        let refits: Vec<(usize, Result<Observation, String>)> = visited
+            .kept
+            .par_iter()
+            .map(|(at, body, kept)| {
+                let fit = match kept.frames() {
+                    Some(frames) => {
+                        let frames: Vec<&[u16]> = frames.iter().map(Vec::as_slice).collect();
+                        observer
+                            .observe(poses[*at].index, body, &frames, &mut FitBuffers::default())
+                            .map_err(|e| format!("no ground found: {e}"))
+                    }
+                    None => Err("its frames could not be restored for the second fit".into()),
+                };
+                (*at, fit)
+            })
+            .collect();
+        for (at, fit) in refits {
+            poses[at].fit = fit;
+        }
+        let (observations, failed) = VisitedPose::fits(&poses);
+        let result = ResultJson::from_poses_taken_out(
+            &observations,
+            &failed,
+            visited.of,
+            &plan.calibration,
+            plan.tilt_deg,
+            Some(taken_out),
+        );
+        Ok::<_, std::convert::Infallible>((result, poses))
+    });
+    if let Ok(Some((second, poses))) = again {
+        (result, visited.poses) = (second, poses);
+    }
     if let Some(note) = visited.prior_note {
         result.notes.insert(0, note);
     }
@@ -959,7 +1031,15 @@ pub async fn run<S: DepthSensor, C: BodyController>(
     abort: impl Future<Output = String>,
 ) -> Result<SessionOutcome, SessionError> {
     let visited = guarded(sensor, controller, plan, events, abort).await?;
-    Ok(solve_visited(visited, plan, events))
+    // The solve, and a second fit of the frames if it needs one, take a
+    // fraction of a second of every core: off the runtime's threads.
+    let (plan, events) = (plan.clone(), events.clone());
+    tokio::task::spawn_blocking(move || solve_visited(visited, &plan, &events))
+        .await
+        .map_err(|e| SessionError::Sensor {
+            kind: ErrorKind::Other,
+            message: format!("the solve failed: {e}"),
+        })
 }
 
 /// Runs a check of `mount` (`groundcal verify`): the plan's schedule is the
