@@ -1,0 +1,321 @@
+//! The alternatives to a pattern fixed in the image, each tested for what it
+//! is: a pattern that changes with depth (Herrera et al. 2012), residuals that
+//! stay with the ground as the poses move (ground that is not flat), and the
+//! shape estimated beside such a relief (obstacles' feet).
+
+use super::*;
+
+/// The shape estimated beside the ground's relief ([`shape_beside_relief`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReliefTest {
+    /// Its flip test, in noise's σ.
+    pub shape_sigmas: f64,
+    /// Its RMS against the shape's estimated alone.
+    pub shape_share: f64,
+    /// The relief's RMS over the ground seen, weighted by readings, 1/m.
+    pub relief_rms: f64,
+}
+
+/// A pattern that changes with the depth (Herrera et al. 2012: weaker
+/// farther), to first order `D·(1 − per_m·(z − z̄))` about each cell's mean
+/// depth over the poses that saw it: found from the cells' residuals after
+/// the fixed shape, against the shape times their depth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DepthDependence {
+    /// The share by which the pattern weakens a metre farther.
+    pub per_m: f64,
+    /// Its σ, from the poses' own residuals (a sandwich by pose: the cells
+    /// of one pose share its noise).
+    pub sigma: f64,
+    /// What it changes in the cells over the depths the poses saw: the RMS
+    /// of `per_m·shape·(z − z̄)`, raw units.
+    pub effect_raw: f64,
+}
+
+impl DepthDependence {
+    /// Whether it differs from none, and by as much as a shape must to
+    /// matter ([`MIN_SHAPE_RMS_RAW`]).
+    pub fn significant(&self) -> bool {
+        self.sigma > 0.0
+            && (self.per_m / self.sigma).abs() > ALTERNATIVE_SIGMAS
+            && self.effect_raw >= MIN_SHAPE_RMS_RAW
+    }
+}
+
+/// A cell's centre, pixels from the principal point.
+pub(super) fn cell_centre(k: usize, columns: usize, intrinsics: &Intrinsics) -> (f64, f64) {
+    let (column, row) = (k % columns, k / columns);
+    (
+        (column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - intrinsics.cx,
+        (row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - intrinsics.cy,
+    )
+}
+
+/// [`DepthDependence`] of the sums kept under the shape.
+pub(super) fn depth_dependence(
+    poses: &[&GroundResiduals],
+    entries: &[Entry],
+    shape: &[f64],
+    noise: &CellNoise,
+) -> DepthDependence {
+    let none = DepthDependence {
+        per_m: 0.0,
+        sigma: f64::INFINITY,
+        effect_raw: 0.0,
+    };
+    let Some(first) = poses.first() else {
+        return none;
+    };
+    let depth = |e: &Entry| {
+        let (du, dv) = cell_centre(e.cell as usize, first.columns, &first.intrinsics);
+        let q = poses[e.pose as usize].plane.at(du, dv);
+        (q > 0.0).then(|| 1.0 / q)
+    };
+    // Each cell's mean depth over the poses that saw it.
+    let cells = shape.len();
+    let (mut sum, mut weight) = (vec![0.0; cells], vec![0.0; cells]);
+    for e in entries {
+        if let Some(z) = depth(e) {
+            let w = 1.0 / noise.of_mean(e.n);
+            sum[e.cell as usize] += w * z;
+            weight[e.cell as usize] += w;
+        }
+    }
+    // residual ≈ −per_m·x with x = shape·(z − z̄).
+    let mut rows = Vec::with_capacity(entries.len());
+    let (mut xx, mut xe, mut ww) = (0.0, 0.0, 0.0);
+    for e in entries {
+        let k = e.cell as usize;
+        let (Some(z), true) = (depth(e), weight[k] > 0.0) else {
+            continue;
+        };
+        let x = shape[k] * (z - sum[k] / weight[k]);
+        let w = 1.0 / noise.of_mean(e.n);
+        xx += w * x * x;
+        xe += w * x * e.residual;
+        ww += w;
+        rows.push((e.pose, w, x, e.residual));
+    }
+    if xx <= 0.0 {
+        return none;
+    }
+    let per_m = -xe / xx;
+    let mut by_pose = vec![0.0; poses.len()];
+    for (pose, w, x, residual) in rows {
+        by_pose[pose as usize] += w * x * (residual + per_m * x);
+    }
+    let meat: f64 = by_pose.iter().map(|s| s * s).sum();
+    DepthDependence {
+        per_m,
+        sigma: meat.sqrt() / xx,
+        effect_raw: per_m.abs() * (xx / ww).sqrt() * first.raw_per_inverse_depth.abs(),
+    }
+}
+
+/// Bins of depth in which the pattern's gain is found when it changes with
+/// depth (quantiles of the depths the cells were seen at).
+pub(super) const DEPTH_BINS: usize = 8;
+
+/// The entries less what the pattern's change with depth accounts for: the
+/// shape times a gain per bin of depth (any change with depth, not only the
+/// linear one [`DepthDependence`] measures), each cell about its own mean
+/// gain, by least squares.
+pub(super) fn without_depth_dependence(
+    poses: &[&GroundResiduals],
+    entries: &[Entry],
+    shape: &[f64],
+) -> Vec<Entry> {
+    use nalgebra::{SMatrix, SVector};
+    let first = poses[0];
+    let z = |e: &Entry| {
+        let (du, dv) = cell_centre(e.cell as usize, first.columns, &first.intrinsics);
+        let q = poses[e.pose as usize].plane.at(du, dv);
+        (q > 0.0).then(|| 1.0 / q)
+    };
+    let mut depths: Vec<f64> = entries.iter().filter_map(z).collect();
+    if depths.len() < DEPTH_BINS * 10 {
+        return entries.to_vec();
+    }
+    depths.sort_by(f64::total_cmp);
+    let edges: Vec<f64> = (1..DEPTH_BINS)
+        .map(|j| depths[j * depths.len() / DEPTH_BINS])
+        .collect();
+    let bin = |z: f64| edges.partition_point(|&edge| edge <= z);
+    // Each cell's share of its readings in each bin.
+    let cells = shape.len();
+    let mut share = vec![[0.0; DEPTH_BINS]; cells];
+    let mut total = vec![0.0; cells];
+    for e in entries {
+        if let Some(z) = z(e) {
+            share[e.cell as usize][bin(z)] += e.n;
+            total[e.cell as usize] += e.n;
+        }
+    }
+    let design = |e: &Entry, z: f64| -> SVector<f64, DEPTH_BINS> {
+        let k = e.cell as usize;
+        let mut row = SVector::<f64, DEPTH_BINS>::zeros();
+        for j in 0..DEPTH_BINS {
+            let own = if bin(z) == j { 1.0 } else { 0.0 };
+            row[j] = shape[k] * (own - share[k][j] / total[k]);
+        }
+        row
+    };
+    let mut normal = SMatrix::<f64, DEPTH_BINS, DEPTH_BINS>::zeros();
+    let mut rhs = SVector::<f64, DEPTH_BINS>::zeros();
+    for e in entries {
+        if let Some(z) = z(e) {
+            if total[e.cell as usize] > 0.0 {
+                let row = design(e, z);
+                normal += row * row.transpose() * e.n;
+                rhs += row * (e.residual * e.n);
+            }
+        }
+    }
+    // The gains are known up to a constant (each cell is centred): the
+    // smallest change that fits, by a ridge a millionth of the scale.
+    let ridge = normal.trace().max(f64::MIN_POSITIVE) * 1e-6;
+    let gains = (normal + SMatrix::identity() * ridge)
+        .try_inverse()
+        .map(|h| h * rhs)
+        .unwrap_or_default();
+    entries
+        .iter()
+        .map(|e| match z(e) {
+            Some(z) if total[e.cell as usize] > 0.0 => Entry {
+                residual: e.residual - design(e, z).dot(&gains),
+                ..*e
+            },
+            _ => *e,
+        })
+        .collect()
+}
+
+/// Whether the residuals left by pattern and planes stay with the ground:
+/// each sum's cell seen on the ground from its pose, binned by
+/// [`GROUND_BIN_M`], and the bins' means over the poses compared with those
+/// the poses make with random signs.
+pub(super) fn ground_fixed(
+    poses: &[&GroundResiduals],
+    entries: &[Entry],
+    ground_from_sensor: &[crate::geometry::Transform],
+) -> (FlipTest, Vec<Option<u32>>) {
+    let first = poses[0];
+    let k = first.intrinsics;
+    let sensor_from_optical = crate::geometry::sensor_from_optical();
+    let mut bins: std::collections::HashMap<(i64, i64), u32> = std::collections::HashMap::new();
+    let mut binned = Vec::with_capacity(entries.len());
+    let mut bin_of = Vec::with_capacity(entries.len());
+    for e in entries {
+        let (du, dv) = cell_centre(e.cell as usize, first.columns, &k);
+        let pose = &ground_from_sensor[e.pose as usize];
+        let ray = pose.rotation * (sensor_from_optical * Vector3::new(du / k.fx, dv / k.fy, 1.0));
+        let origin = pose.translation.vector;
+        if ray.y >= -1e-9 {
+            bin_of.push(None);
+            continue;
+        }
+        let t = -origin.y / ray.y;
+        let (x, z) = (origin.x + t * ray.x, origin.z + t * ray.z);
+        let key = (
+            (x / GROUND_BIN_M).floor() as i64,
+            (z / GROUND_BIN_M).floor() as i64,
+        );
+        let next = bins.len() as u32;
+        let bin = *bins.entry(key).or_insert(next);
+        bin_of.push(Some(bin));
+        binned.push(Entry {
+            cell: bin,
+            about_plane: e.residual,
+            ..*e
+        });
+    }
+    let mut weights = vec![0.0; bins.len()];
+    let mut sums = vec![0.0; bins.len()];
+    for e in &binned {
+        weights[e.cell as usize] += e.n;
+        sums[e.cell as usize] += e.n * e.about_plane;
+    }
+    let mean = |sums: &[f64]| -> Vec<f64> {
+        sums.iter()
+            .zip(&weights)
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect()
+    };
+    let test = flip_test(&binned, poses.len(), &weights, &mean(&sums), mean);
+    (test, bin_of)
+}
+
+/// The shape estimated beside a relief of the ground: a mean per bin of
+/// the ground ([`ground_fixed`]'s, `bin_of` each entry's), taken out in
+/// turns with the shape. Its flip test's σ, and its RMS against the
+/// shape's alone. What stays with the ground at obstacles' feet is local,
+/// and a sensor's pattern stands beside it; bumps all over the ground take
+/// the shape with them. A bin seen by fewer than three poses has no relief
+/// (it would take in those poses' cells whole).
+pub(super) fn shape_beside_relief(
+    entries: &[Entry],
+    bin_of: &[Option<u32>],
+    poses: usize,
+    weights: &[f64],
+    shape_of: impl Fn(&[f64]) -> Vec<f64>,
+) -> ReliefTest {
+    let bins = bin_of.iter().flatten().max().map_or(0, |b| *b as usize + 1);
+    let mut seen_by = vec![(0u32, u32::MAX); bins];
+    for (e, bin) in entries.iter().zip(bin_of) {
+        if let Some(b) = bin {
+            let (count, last) = &mut seen_by[*b as usize];
+            if *last != e.pose {
+                *count += 1;
+                *last = e.pose;
+            }
+        }
+    }
+    let per_cell = |values: &dyn Fn(&Entry, Option<u32>) -> f64| {
+        let mut sums = vec![0.0; weights.len()];
+        for (e, bin) in entries.iter().zip(bin_of) {
+            sums[e.cell as usize] += e.n * values(e, *bin);
+        }
+        sums
+    };
+    let alone = shape_of(&per_cell(&|e, _| e.about_plane));
+    let mut shape = alone.clone();
+    let mut relief = vec![0.0; bins];
+    for _ in 0..RELIEF_TURNS {
+        let mut sums = vec![(0.0, 0.0); bins];
+        for (e, bin) in entries.iter().zip(bin_of) {
+            if let Some(b) = bin.filter(|b| seen_by[*b as usize].0 >= 3) {
+                let (s, w) = &mut sums[b as usize];
+                *s += e.n * (e.about_plane - shape[e.cell as usize]);
+                *w += e.n;
+            }
+        }
+        relief = sums
+            .iter()
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect();
+        let relief_of = |bin: Option<u32>| bin.map_or(0.0, |b| relief[b as usize]);
+        shape = shape_of(&per_cell(&|e, bin| e.about_plane - relief_of(bin)));
+    }
+    let beside: Vec<Entry> = entries
+        .iter()
+        .zip(bin_of)
+        .map(|(e, bin)| Entry {
+            about_plane: e.about_plane - bin.map_or(0.0, |b| relief[b as usize]),
+            ..*e
+        })
+        .collect();
+    let size = |s: &[f64]| s.iter().zip(weights).map(|(v, w)| w * v * v).sum::<f64>();
+    // The relief's size over the ground seen, weighted by readings.
+    let (mut relief_sum, mut readings) = (0.0, 0.0);
+    for (e, bin) in entries.iter().zip(bin_of) {
+        if let Some(b) = bin {
+            relief_sum += e.n * relief[*b as usize].powi(2);
+            readings += e.n;
+        }
+    }
+    ReliefTest {
+        shape_sigmas: flip_test(&beside, poses, weights, &shape, &shape_of).sigmas(),
+        shape_share: (size(&shape) / size(&alone).max(f64::MIN_POSITIVE)).sqrt(),
+        relief_rms: (relief_sum / readings.max(f64::MIN_POSITIVE)).sqrt(),
+    }
+}

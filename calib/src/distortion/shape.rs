@@ -1,0 +1,752 @@
+//! The pattern's shape from the poses' residual sums: the cells' pattern and
+//! each pose's plane correction by alternating least squares, the cells kept,
+//! the noise of a cell from the poses' own scatter, and the tests of the
+//! shape against none and against its alternatives ([`super::alternatives`]).
+
+use super::*;
+
+/// The pattern's shape over the cells, and what it changes in each pose's
+/// plane, from [`estimate_shape`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShapeEstimate {
+    pub columns: usize,
+    pub rows: usize,
+    /// Per cell, 1/m (0 where not seen): no plane part over the cells seen.
+    pub shape: Vec<f64>,
+    /// Ground readings per cell over all poses.
+    pub readings: Vec<f64>,
+    /// Whether each cell entered the estimate.
+    pub seen: Vec<bool>,
+    /// The noise of a cell's mean at one pose, from the poses' own scatter.
+    pub noise: CellNoise,
+    /// The variance of each cell's shape from that noise, (1/m)² (0 where
+    /// not seen).
+    pub cell_variance: Vec<f64>,
+    /// The shape against none: Σ shape²/σ² over the cells, and its degrees
+    /// of freedom (the cells are correlated: [`ShapeEstimate::flips`] judges).
+    pub shape_chi2: f64,
+    pub shape_dof: f64,
+    /// The shape's size against the sizes the poses make with random signs.
+    pub flips: FlipTest,
+    /// The residuals left by pattern and planes, cell by cell and pose by
+    /// pose, against the readings' noise: about 1 per degree of freedom
+    /// when the pattern is fixed in the image and the ground flat.
+    pub consistency_chi2: f64,
+    pub consistency_dof: f64,
+    /// The shape's RMS over every cell seen, before any was left out, raw
+    /// units: how warped the ground looked, whatever warped it.
+    pub all_cells_rms_raw: f64,
+    /// The share of the cells seen that stayed in the estimate (the others'
+    /// residuals changed from pose to pose).
+    pub kept_fraction: f64,
+    /// Whether the pattern changes with the depth, as the cells' residuals
+    /// against the shape times their depth say.
+    pub depth: DepthDependence,
+    /// Whether the residuals left by pattern and planes stay with the
+    /// ground as the poses move (uneven ground), as flipping the poses'
+    /// signs over bins of the ground says; None without the poses' geometry.
+    pub fixed_in_the_ground: Option<FlipTest>,
+    /// When residuals stay with the ground: the shape estimated beside
+    /// that relief ([`shape_beside_relief`]).
+    pub shape_beside_relief: Option<ReliefTest>,
+    /// Raw units per 1/m.
+    pub raw_per_inverse_depth: f64,
+    /// The band within which the poses' ground fits took their readings,
+    /// raw units (the median over the poses): a pattern reaching beyond it
+    /// had its peaks cut out.
+    pub fit_band_raw: f64,
+    pub intrinsics: Intrinsics,
+    /// Alternations done.
+    pub iterations: usize,
+}
+
+impl ShapeEstimate {
+    /// The shape's RMS over the cells seen, weighted by their readings, raw units.
+    pub fn rms_raw(&self) -> f64 {
+        weighted_rms(&self.shape, &self.readings, &self.seen) * self.raw_per_inverse_depth.abs()
+    }
+
+    /// Per pose of `poses` (those it was estimated from, in order): the
+    /// correction of its plane (1/m, on `c0, cu, cv`) for what the shape bent
+    /// it by. The fit's own plane (its rows, its guard, its band) is kept and
+    /// only the pattern's share is taken out, so that with no pattern nothing
+    /// changes. Every sum the fit took counts, kept or not.
+    pub fn plane_corrections(&self, poses: &[&GroundResiduals]) -> Vec<Vector3<f64>> {
+        let sigma = self.noise.of_reading().sqrt();
+        poses
+            .par_iter()
+            .map(|pose| -bend(pose, &self.shape, &self.seen, sigma))
+            .collect()
+    }
+
+    /// Whether the residuals are a pattern fixed in the image: no test of
+    /// an alternative finds one (a pattern that changes with depth, ground
+    /// that is not flat), and most cells keep their residuals from pose to
+    /// pose (obstacles' feet and bumps do not).
+    pub fn consistent(&self) -> bool {
+        self.why_not_fixed().is_none()
+    }
+
+    /// Why the residuals are not the sensor's fixed pattern, when they are not.
+    pub fn why_not_fixed(&self) -> Option<crate::outcome::WarpCause> {
+        self.why_not_fixed_beside_relief(true)
+    }
+
+    /// [`ShapeEstimate::why_not_fixed`] for the residuals left once a first
+    /// estimate of the pattern was taken out of the frames: any residuals
+    /// that stay with the ground count against it, beside a relief or not.
+    /// (What was taken out holds whatever the first fit saw, uneven ground
+    /// included; what is left of a relief then looks like a shape standing
+    /// beside it, and the simulator's uneven world was accepted 0.13° off.)
+    pub fn why_not_fixed_after_a_first_estimate(&self) -> Option<crate::outcome::WarpCause> {
+        self.why_not_fixed_beside_relief(false)
+    }
+
+    fn why_not_fixed_beside_relief(
+        &self,
+        relief_may_stand_beside: bool,
+    ) -> Option<crate::outcome::WarpCause> {
+        use crate::outcome::WarpCause;
+        if self.kept_fraction < MIN_KEPT_FRACTION {
+            return Some(WarpCause::CellsChange {
+                left_out: 1.0 - self.kept_fraction,
+            });
+        }
+        // Both alternatives leave traces of each other (a pattern weaker
+        // farther leaves residuals that follow the distance over the ground;
+        // bumps seen nearer and farther look like a change with depth): the
+        // one whose test stands farther out says why.
+        let stays_with_the_ground = self
+            .fixed_in_the_ground
+            .map(|t| t.sigmas())
+            .filter(|s| *s > ALTERNATIVE_SIGMAS);
+        // Residuals that stay with the ground count against the pattern
+        // only when the shape does not stand beside them (obstacles' feet
+        // are fixed in the ground too, beside any pattern of the sensor).
+        let ground = stays_with_the_ground
+            .filter(|_| !(relief_may_stand_beside && self.stands_beside_the_relief()));
+        let depth = self
+            .depth
+            .significant()
+            .then(|| (self.depth.per_m / self.depth.sigma).abs());
+        let (largest_raw, band_raw) = (self.largest_raw(), self.fit_band_raw);
+        // A shape whose peaks the fit cut is not corrected when any test
+        // finds residuals it does not explain, even beside the relief: the
+        // correction is then biased (a real Kinect's pattern of 0.8 raw
+        // units RMS, corrected beside the relief, put the mount 0.28-0.98
+        // mm off on four seeds, and one of 0.56 mm was accepted).
+        if (stays_with_the_ground.is_some() || depth.is_some()) && self.peaks_cut_by_the_fit() {
+            return Some(WarpCause::BeyondTheFit {
+                largest_raw,
+                band_raw,
+            });
+        }
+        match (ground, depth) {
+            (Some(g), Some(d)) if d > g => Some(WarpCause::ChangesWithDepth {
+                per_m: self.depth.per_m,
+                sigma: self.depth.sigma,
+            }),
+            (Some(g), _) => Some(WarpCause::GroundNotFlat { sigmas: g }),
+            (None, Some(_)) => Some(WarpCause::ChangesWithDepth {
+                per_m: self.depth.per_m,
+                sigma: self.depth.sigma,
+            }),
+            (None, None) => None,
+        }
+    }
+
+    /// Whether the shape stands beside what stays with the ground: out of
+    /// the noise, and most of it left, once the ground's relief is taken
+    /// out with it.
+    pub fn stands_beside_the_relief(&self) -> bool {
+        self.shape_beside_relief.is_some_and(|r| {
+            r.shape_sigmas > SHAPE_SIGNIFICANCE
+                && r.shape_share >= SHAPE_SHARE_BESIDE_RELIEF
+                && r.relief_rms * self.raw_per_inverse_depth.abs() <= MAX_RELIEF_BESIDE_RAW
+        })
+    }
+
+    /// Whether the shape's peak reaches beyond the fit's band: the fit cut
+    /// the readings there, and what the cut leaves behind differs from
+    /// pose to pose as uneven ground's residuals would. (A lower bound, the
+    /// band less a reading's σ, called the simulator's uneven world a
+    /// pattern beyond the fit; the shape beside the ground's relief,
+    /// [`ShapeEstimate::stands_beside_the_relief`], is what keeps waves of
+    /// ±1.5 raw units in clutter from being called uneven ground.)
+    pub fn peaks_cut_by_the_fit(&self) -> bool {
+        self.largest_raw() > self.fit_band_raw
+    }
+
+    /// The shape's largest distance from zero over the cells seen, raw units.
+    pub fn largest_raw(&self) -> f64 {
+        self.shape
+            .iter()
+            .zip(&self.seen)
+            .filter(|(_, &seen)| seen)
+            .map(|(s, _)| (s * self.raw_per_inverse_depth).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// Whether the shape stands out of the noise and matters.
+    pub fn significant(&self) -> bool {
+        self.shape_dof > 0.0
+            && self.flips.sigmas() > SHAPE_SIGNIFICANCE
+            && self.rms_raw() >= MIN_SHAPE_RMS_RAW
+    }
+
+    /// A cell's centre offset from the principal point, pixels.
+    pub(super) fn cell_offset(&self, k: usize) -> (f64, f64) {
+        let (column, row) = (k % self.columns, k / self.columns);
+        (
+            ((column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0) - self.intrinsics.cx,
+            ((row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0) - self.intrinsics.cy,
+        )
+    }
+}
+
+/// The pattern's shape and each pose's plane correction, by alternating
+/// least squares over the cells (the pattern given the planes, the planes
+/// given the pattern) until the pattern moves by less than 10⁻⁴ raw units.
+/// `None` with fewer than [`MIN_PATTERN_POSES`] poses or cells of mixed sizes.
+pub fn estimate_shape(poses: &[&GroundResiduals]) -> Option<ShapeEstimate> {
+    estimate_shape_seen_from(poses, None)
+}
+
+/// [`estimate_shape`], with each pose's `ground_from_sensor` when known: the
+/// residuals are then also looked for where they stay with the ground.
+pub fn estimate_shape_seen_from(
+    poses: &[&GroundResiduals],
+    ground_from_sensor: Option<&[crate::geometry::Transform]>,
+) -> Option<ShapeEstimate> {
+    let first = poses.first()?;
+    if poses.len() < MIN_PATTERN_POSES
+        || poses
+            .iter()
+            .any(|p| p.cells.len() != first.cells.len() || p.columns != first.columns)
+    {
+        return None;
+    }
+    let cells = first.cells.len();
+    let within = reading_variance(poses);
+    let mut kept = Kept::all(poses);
+    let seen_at_first = kept.seen.clone();
+    let total: f64 = kept.readings.iter().sum();
+
+    // A cell's sum at one pose whose mean lies far from the pattern and the
+    // plane is not the sensor's (an obstacle's foot in that cell at that
+    // pose, a bump of the ground): it leaves the estimate, which is made
+    // again without it, until the sums kept stay the same. "Far" is in the
+    // noise of a cell's mean as the poses' own scatter shows it.
+    let mut fitted = alternate(poses, &kept, None);
+    let all_cells_rms_raw =
+        weighted_rms(&fitted.shape, &kept.readings, &kept.seen) * first.raw_per_inverse_depth.abs();
+    let mut noise = estimate_noise(poses, &kept, &fitted, within);
+    for _ in 0..5 {
+        let next = Kept::within(poses, &fitted, &noise, &seen_at_first);
+        if next.out == kept.out {
+            break;
+        }
+        kept = next;
+        fitted = alternate(poses, &kept, Some(&fitted.shape));
+        noise = estimate_noise(poses, &kept, &fitted, within);
+    }
+    // A cell far from the cells above and below it is not the sensor's
+    // either: a pattern is smooth down the image (a real unit's stripes run
+    // down it), where the foot of a wall or a box lies along a row and sits
+    // at the same place in the image at every pose.
+    for _ in 0..3 {
+        let cell_variance = cell_variances(poses, &kept, &noise);
+        let lone = lone_cells(
+            &fitted.shape,
+            &kept,
+            first.raw_per_inverse_depth,
+            &cell_variance,
+        );
+        if lone.is_empty() {
+            break;
+        }
+        kept.leave_out(&lone);
+        fitted = alternate(poses, &kept, Some(&fitted.shape));
+        noise = estimate_noise(poses, &kept, &fitted, within);
+    }
+    let Fitted {
+        shape, iterations, ..
+    } = &fitted;
+    let seen = kept.seen.clone();
+    let observed = seen.iter().filter(|s| **s).count() as f64;
+    let cell_variance = cell_variances(poses, &kept, &noise);
+    let shape_chi2: f64 = (0..cells)
+        .filter(|&k| seen[k] && cell_variance[k] > 0.0)
+        .map(|k| shape[k].powi(2) / cell_variance[k])
+        .sum();
+    let sums = entries(poses, &kept, &fitted);
+    let parameters = observed + 3.0 * poses.len() as f64;
+    let (consistency_chi2, consistency_dof) = noise.chi2(&sums, parameters);
+    let weights: Vec<f64> = (0..cells)
+        .map(|k| if seen[k] { kept.readings[k] } else { 0.0 })
+        .collect();
+    let shape_of = |per_cell: &[f64]| -> Vec<f64> {
+        let mut shape: Vec<f64> = per_cell
+            .iter()
+            .zip(&weights)
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect();
+        remove_plane_part(&mut shape, &kept.readings, &seen, first);
+        shape
+    };
+    let mut plain = vec![0.0; cells];
+    for e in &sums {
+        plain[e.cell as usize] += e.n * e.about_plane;
+    }
+    let flips = flip_test(&sums, poses.len(), &weights, &shape_of(&plain), shape_of);
+    let depth = depth_dependence(poses, &sums, shape, &noise);
+    // Residuals that stay with the ground are looked for beyond what a
+    // pattern changing with depth would leave: each alternative is asked
+    // what the other does not explain.
+    let ground_tests = ground_from_sensor
+        .filter(|g| g.len() == poses.len())
+        .map(|g| {
+            let beyond_depth = if depth.significant() {
+                without_depth_dependence(poses, &sums, shape)
+            } else {
+                sums.clone()
+            };
+            let (test, bin_of) = ground_fixed(poses, &beyond_depth, g);
+            // Only asked when the ground's test finds something.
+            let beside = (test.sigmas() > ALTERNATIVE_SIGMAS)
+                .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), &weights, shape_of));
+            (test, beside)
+        });
+    let fixed_in_the_ground = ground_tests.as_ref().map(|(test, _)| *test);
+    let shape_beside_relief = ground_tests.and_then(|(_, beside)| beside);
+    let kept_readings: f64 = (0..cells)
+        .filter(|&k| seen[k])
+        .map(|k| kept.readings[k])
+        .sum();
+    Some(ShapeEstimate {
+        columns: first.columns,
+        rows: first.rows,
+        shape: shape.clone(),
+        readings: kept.readings.clone(),
+        seen,
+        noise,
+        cell_variance,
+        shape_chi2,
+        shape_dof: observed - 3.0,
+        flips,
+        consistency_chi2,
+        consistency_dof,
+        all_cells_rms_raw,
+        kept_fraction: if total > 0.0 {
+            kept_readings / total
+        } else {
+            0.0
+        },
+        depth,
+        fixed_in_the_ground,
+        shape_beside_relief,
+        raw_per_inverse_depth: first.raw_per_inverse_depth,
+        fit_band_raw: median_fit_band(poses) * first.raw_per_inverse_depth.abs(),
+        intrinsics: first.intrinsics,
+        iterations: *iterations,
+    })
+}
+
+/// The median of the poses' ground-fit bands, 1/m (infinite when no pose
+/// says: the residuals of a test, not of a fit).
+pub(super) fn median_fit_band(poses: &[&GroundResiduals]) -> f64 {
+    let mut bands: Vec<f64> = poses
+        .iter()
+        .map(|p| p.fit_band)
+        .filter(|b| b.is_finite() && *b > 0.0)
+        .collect();
+    if bands.is_empty() {
+        return f64::INFINITY;
+    }
+    bands.sort_by(f64::total_cmp);
+    bands[bands.len() / 2]
+}
+
+/// A cell is left out when it lies this far (raw units) from the median of
+/// the two cells above and the two below it, and 6 of its σ: a simulated
+/// bowl of ±0.5 raw units changes by 0.03 from a cell to the next down the
+/// image, the foot of a box by several tenths.
+pub(super) const LONE_CELL_RAW: f64 = 0.15;
+
+/// The cells seen that lie far from those above and below them.
+pub(super) fn lone_cells(
+    shape: &[f64],
+    kept: &Kept,
+    raw_per_inverse_depth: f64,
+    cell_variance: &[f64],
+) -> Vec<usize> {
+    let cells = shape.len();
+    let columns = kept.columns;
+    let k_raw = raw_per_inverse_depth.abs();
+    let mut lone = Vec::new();
+    for k in 0..cells {
+        if !kept.seen[k] {
+            continue;
+        }
+        let mut around: Vec<f64> = [-2i64, -1, 1, 2]
+            .iter()
+            .filter_map(|dr| {
+                let j = k as i64 + dr * columns as i64;
+                (j >= 0 && (j as usize) < cells && kept.seen[j as usize]).then(|| shape[j as usize])
+            })
+            .collect();
+        if around.len() < 2 {
+            continue;
+        }
+        around.sort_by(f64::total_cmp);
+        let median = (around[(around.len() - 1) / 2] + around[around.len() / 2]) / 2.0;
+        let off = (shape[k] - median).abs() * k_raw;
+        let sigma = cell_variance[k].max(0.0).sqrt() * k_raw;
+        if off > LONE_CELL_RAW.max(6.0 * sigma) {
+            lone.push(k);
+        }
+    }
+    lone
+}
+
+/// A cell's sum at one pose is left out when its mean lies this many of its
+/// σ from the pattern and the plane.
+pub(super) const ENTRY_SIGMAS: f64 = 4.5;
+
+/// Which cells' sums, pose by pose, enter the estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Kept {
+    /// Cells per row of the image.
+    pub(super) columns: usize,
+    /// `out[i·cells + k]`: pose i's sum of cell k is left out.
+    pub(super) out: Vec<bool>,
+    /// Per cell: readings of the sums kept.
+    pub(super) readings: Vec<f64>,
+    /// Per cell: whether it enters the estimate (enough readings kept,
+    /// from two poses at least).
+    pub(super) seen: Vec<bool>,
+    /// Per pose: the inverse of Σφφᵀ and Σr·φ over its readings less
+    /// those of the sums left out.
+    pub(super) inverse_moments: Vec<Matrix3<f64>>,
+    pub(super) rhs: Vec<Vector3<f64>>,
+    /// Per pose: the cells whose sums are taken (the loops' work list).
+    pub(super) taken: Vec<Vec<u32>>,
+}
+
+impl Kept {
+    /// Every sum.
+    fn all(poses: &[&GroundResiduals]) -> Self {
+        let cells = poses[0].cells.len();
+        Self::from_out(poses, vec![false; poses.len() * cells], None)
+    }
+
+    /// The sums within [`ENTRY_SIGMAS`] of `fitted`, among the cells first seen.
+    fn within(
+        poses: &[&GroundResiduals],
+        fitted: &Fitted,
+        noise: &CellNoise,
+        first_seen: &[bool],
+    ) -> Self {
+        let cells = first_seen.len();
+        let mut out = vec![false; poses.len() * cells];
+        out.par_chunks_mut(cells)
+            .zip(poses)
+            .zip(&fitted.planes)
+            .for_each(|((out, pose), c)| {
+                for (k, cell) in pose.cells.iter().enumerate() {
+                    if first_seen[k] && cell.n > 0.0 {
+                        let model =
+                            fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
+                        let z = (cell.r - model) / cell.n / noise.of_mean(cell.n).sqrt();
+                        out[k] = z.abs() > ENTRY_SIGMAS;
+                    }
+                }
+            });
+        Self::from_out(poses, out, Some(first_seen))
+    }
+
+    fn from_out(poses: &[&GroundResiduals], out: Vec<bool>, among: Option<&[bool]>) -> Self {
+        let cells = poses[0].cells.len();
+        let mut readings = vec![0.0; cells];
+        let mut poses_seen = vec![0usize; cells];
+        // A reading's spread about its cell's centre, per axis (pixels²).
+        let spread = ((CELL_PX * CELL_PX) as f64 - 1.0) / 12.0;
+        // Each pose's moments less those of its sums left out (their
+        // readings' spread about the cell's centre taken as uniform).
+        let (inverse_moments, rhs): (Vec<Matrix3<f64>>, Vec<Vector3<f64>>) = poses
+            .par_iter()
+            .zip(out.par_chunks(cells))
+            .map(|(pose, out)| {
+                let (mut moments, mut sums) = (pose.moments, pose.rhs);
+                for (cell, _) in pose.cells.iter().zip(out).filter(|(c, o)| **o && c.n > 0.0) {
+                    let centre = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
+                    moments -= (centre * centre.transpose()
+                        + Matrix3::from_diagonal(&Vector3::new(0.0, spread, spread)))
+                        * cell.n;
+                    sums -= centre * cell.r;
+                }
+                (moments.try_inverse().unwrap_or_else(Matrix3::zeros), sums)
+            })
+            .unzip();
+        for (pose, out) in poses.iter().zip(out.chunks(cells)) {
+            for (k, (cell, out)) in pose.cells.iter().zip(out).enumerate() {
+                if cell.n > 0.0 && !out {
+                    readings[k] += cell.n;
+                    poses_seen[k] += 1;
+                }
+            }
+        }
+        let seen: Vec<bool> = (0..cells)
+            .map(|k| {
+                among.is_none_or(|a| a[k]) && readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2
+            })
+            .collect();
+        let taken = poses
+            .par_iter()
+            .enumerate()
+            .map(|(i, pose)| {
+                (0..cells)
+                    .filter(|&k| pose.cells[k].n > 0.0 && seen[k] && !out[i * cells + k])
+                    .map(|k| k as u32)
+                    .collect()
+            })
+            .collect();
+        Self {
+            columns: poses[0].columns,
+            out,
+            readings,
+            seen,
+            inverse_moments,
+            rhs,
+            taken,
+        }
+    }
+
+    /// Leaves these cells out of the estimate altogether.
+    fn leave_out(&mut self, cells: &[usize]) {
+        for &k in cells {
+            self.seen[k] = false;
+        }
+        let seen = &self.seen;
+        for taken in &mut self.taken {
+            taken.retain(|&k| seen[k as usize]);
+        }
+    }
+
+    /// Whether pose i's sum of cell k enters the estimate.
+    fn takes(&self, i: usize, k: usize) -> bool {
+        self.seen[k] && !self.out[i * self.seen.len() + k]
+    }
+}
+
+/// The pattern over the cells seen and each pose's plane given it.
+pub(super) struct Fitted {
+    /// Per cell, 1/m, without a plane part over the cells seen.
+    pub(super) shape: Vec<f64>,
+    /// Per pose: the plane (1/m on `c0, cu, cv`) that fits its residuals
+    /// less the pattern.
+    pub(super) planes: Vec<Vector3<f64>>,
+    pub(super) iterations: usize,
+}
+
+/// Cells a worker takes at a time in the pattern's step.
+pub(super) const CELL_BLOCK: usize = 512;
+
+/// Alternating least squares of the pattern and the planes over the sums
+/// kept, until the pattern moves by less than 10⁻⁴ raw units.
+pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&[f64]>) -> Fitted {
+    let cells = kept.seen.len();
+    let grid = poses[0];
+    let tolerance = 1e-4 / grid.raw_per_inverse_depth.abs();
+    // From the last estimate, when there is one: leaving a few cells out
+    // moves it little.
+    let mut shape = match start {
+        Some(start) if start.len() == cells => start
+            .iter()
+            .zip(&kept.seen)
+            .map(|(v, seen)| if *seen { *v } else { 0.0 })
+            .collect(),
+        _ => vec![0.0; cells],
+    };
+    let mut planes = vec![Vector3::zeros(); poses.len()];
+    let mut iterations = 0;
+    for _ in 0..2000 {
+        iterations += 1;
+        // Each pose's plane given the pattern.
+        planes.par_iter_mut().enumerate().for_each(|(i, plane)| {
+            let mut rhs = kept.rhs[i];
+            for &k in &kept.taken[i] {
+                let cell = &poses[i].cells[k as usize];
+                rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k as usize];
+            }
+            *plane = kept.inverse_moments[i] * rhs;
+        });
+        // The pattern given the planes, a block of cells at a time (each
+        // cell summed over the poses in their order).
+        let mut next = vec![0.0; cells];
+        next.par_chunks_mut(CELL_BLOCK)
+            .enumerate()
+            .for_each(|(block, next)| {
+                let (first, end) = (block * CELL_BLOCK, block * CELL_BLOCK + next.len());
+                for (i, pose) in poses.iter().enumerate() {
+                    let c = planes[i];
+                    let taken = &kept.taken[i];
+                    let from = taken.partition_point(|&k| (k as usize) < first);
+                    for &k in &taken[from..] {
+                        let k = k as usize;
+                        if k >= end {
+                            break;
+                        }
+                        let cell = &pose.cells[k];
+                        next[k - first] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
+                    }
+                }
+            });
+        for ((value, seen), readings) in next.iter_mut().zip(&kept.seen).zip(&kept.readings) {
+            if *seen {
+                *value /= readings;
+            }
+        }
+        // No plane part: that is the planes' (and the geometry's) to say.
+        remove_plane_part(&mut next, &kept.readings, &kept.seen, grid);
+        let change = next
+            .iter()
+            .zip(&shape)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        shape = next;
+        if change < tolerance {
+            break;
+        }
+    }
+    Fitted {
+        shape,
+        planes,
+        iterations,
+    }
+}
+
+/// The readings' noise about their cell's mean, pooled over cells and
+/// poses: a variance, (1/m)².
+pub(super) fn reading_variance(poses: &[&GroundResiduals]) -> f64 {
+    let (mut within, mut within_dof) = (0.0, 0.0);
+    for pose in poses {
+        for cell in &pose.cells {
+            if cell.n > 1.0 {
+                within += cell.rr - cell.r * cell.r / cell.n;
+                within_dof += cell.n - 1.0;
+            }
+        }
+    }
+    if within_dof > 0.0 {
+        (within / within_dof).max(f64::MIN_POSITIVE)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The sums kept, each as its cell's mean residual about pattern and plane
+/// and about the plane alone.
+pub(super) fn entries(poses: &[&GroundResiduals], kept: &Kept, fitted: &Fitted) -> Vec<Entry> {
+    let mut entries = Vec::new();
+    for (i, pose) in poses.iter().enumerate() {
+        let c = fitted.planes[i];
+        for (k, cell) in pose.cells.iter().enumerate() {
+            if cell.n > 0.0 && kept.takes(i, k) {
+                let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
+                let about_plane = (cell.r - plane) / cell.n;
+                entries.push(Entry {
+                    pose: i as u32,
+                    cell: k as u32,
+                    n: cell.n,
+                    residual: about_plane - fitted.shape[k],
+                    about_plane,
+                });
+            }
+        }
+    }
+    entries
+}
+
+/// The noise of a cell's mean, from the sums kept about pattern and plane.
+pub(super) fn estimate_noise(
+    poses: &[&GroundResiduals],
+    kept: &Kept,
+    fitted: &Fitted,
+    within: f64,
+) -> CellNoise {
+    let entries = entries(poses, kept, fitted);
+    let observed = kept.seen.iter().filter(|s| **s).count() as f64;
+    CellNoise::estimate(within, &entries, observed + 3.0 * poses.len() as f64)
+}
+
+/// Each cell's shape variance under `noise`: one over the sum of its sums'
+/// information, pose by pose (0 where not seen).
+pub(super) fn cell_variances(
+    poses: &[&GroundResiduals],
+    kept: &Kept,
+    noise: &CellNoise,
+) -> Vec<f64> {
+    let cells = kept.seen.len();
+    let mut information = vec![0.0; cells];
+    for (i, pose) in poses.iter().enumerate() {
+        for &k in &kept.taken[i] {
+            let n = pose.cells[k as usize].n;
+            information[k as usize] += 1.0 / noise.of_mean(n);
+        }
+    }
+    information
+        .iter()
+        .map(|&info| if info > 0.0 { 1.0 / info } else { 0.0 })
+        .collect()
+}
+
+/// RMS of the values of the cells seen, weighted by their readings.
+pub(super) fn weighted_rms(values: &[f64], readings: &[f64], seen: &[bool]) -> f64 {
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for k in 0..values.len() {
+        if seen[k] {
+            sum += readings[k] * values[k].powi(2);
+            weight += readings[k];
+        }
+    }
+    if weight > 0.0 {
+        (sum / weight).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Subtracts the plane `A + B·u' + C·v'` that fits the cells seen, weighted
+/// by their readings.
+pub(super) fn remove_plane_part(
+    shape: &mut [f64],
+    readings: &[f64],
+    seen: &[bool],
+    grid: &GroundResiduals,
+) {
+    let centre = |k: usize| {
+        let (column, row) = (k % grid.columns, k / grid.columns);
+        Vector3::new(
+            1.0,
+            (column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - grid.intrinsics.cx,
+            (row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - grid.intrinsics.cy,
+        )
+    };
+    let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
+    for k in 0..shape.len() {
+        if seen[k] {
+            let phi = centre(k);
+            normal += phi * phi.transpose() * readings[k];
+            rhs += phi * (shape[k] * readings[k]);
+        }
+    }
+    let Some(plane) = normal.try_inverse().map(|h| h * rhs) else {
+        return;
+    };
+    for k in 0..shape.len() {
+        if seen[k] {
+            shape[k] -= plane.dot(&centre(k));
+        }
+    }
+}
