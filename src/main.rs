@@ -12,8 +12,8 @@ use clap::{Parser, Subcommand};
 use groundcal::calib::calibrate::CalibrationSettings;
 use groundcal::calib::plane::GroundFitMethod;
 use groundcal::cli::{self, plane::PlaneOptions, ExitStatus};
-use groundcal::config::{RobotAddress, SensorSource};
-use groundcal::depth_image::DepthUnits;
+use groundcal::formats::depth_image::DepthUnits;
+use groundcal::setup::config::{RobotAddress, SensorSource};
 use nalgebra::Vector3;
 
 /// Which hardware a session runs on, overriding the configuration
@@ -67,7 +67,7 @@ struct BagArgs {
 }
 
 impl BagArgs {
-    fn options(self) -> Result<groundcal::bag::BagOptions, String> {
+    fn options(self) -> Result<groundcal::solving::bag::BagOptions, String> {
         let feet: Vec<String> = self
             .foot_frames
             .split(',')
@@ -82,7 +82,7 @@ impl BagArgs {
         if foot_frames.iter().any(String::is_empty) {
             return Err("--foot-frames: a frame's name is empty".into());
         }
-        Ok(groundcal::bag::BagOptions {
+        Ok(groundcal::solving::bag::BagOptions {
             depth_topic: self.depth_topic,
             camera_info_topic: self.camera_info_topic,
             body_frame: self.body_frame,
@@ -165,8 +165,8 @@ enum Command {
         config: Option<PathBuf>,
         /// The Kinect's depth scale: estimate (the default, or --config's
         /// calibration.depth_scale) or a known value such as 1.0032.
-        #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::config::parse_depth_scale)]
-        depth_scale: Option<groundcal::config::DepthScaleSetting>,
+        #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::setup::config::parse_depth_scale)]
+        depth_scale: Option<groundcal::setup::config::DepthScaleSetting>,
         /// Replay a recording whose poses.jsonl ends part-way through a
         /// record (a power cut while recording) without that pose; the result
         /// says so. Without it such a recording is refused, naming the cut.
@@ -182,7 +182,7 @@ enum Command {
         file: PathBuf,
         /// The format to write on stdout.
         #[arg(long, value_enum)]
-        format: groundcal::export::ExportFormat,
+        format: groundcal::formats::export::ExportFormat,
         /// The mount at this tilt of the Kinect's motor (degrees), from a
         /// calibration made at several tilts (calibrate --tilts), within their range.
         #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
@@ -213,13 +213,13 @@ enum Command {
         ground_fit: Option<GroundFitMethod>,
         /// The Kinect's depth scale, overriding calibration.depth_scale: estimate
         /// (with the mount, when the body's heights observe it) or a known value such as 1.0032.
-        #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::config::parse_depth_scale)]
-        depth_scale: Option<groundcal::config::DepthScaleSetting>,
+        #[arg(long, value_name = "estimate|VALUE", value_parser = groundcal::setup::config::parse_depth_scale)]
+        depth_scale: Option<groundcal::setup::config::DepthScaleSetting>,
         /// Calibrate at each of these tilts of the Kinect's motor (degrees, two or
         /// more, e.g. -20,-10,0) and fit the motor's axis: the result then holds at
         /// any tilt between them (export --tilt). Overrides calibration.tilts.
-        #[arg(long, value_name = "T1,T2,...", allow_hyphen_values = true, value_parser = groundcal::config::parse_tilts)]
-        tilts: Option<groundcal::config::Tilts>,
+        #[arg(long, value_name = "T1,T2,...", allow_hyphen_values = true, value_parser = groundcal::setup::config::parse_tilts)]
+        tilts: Option<groundcal::setup::config::Tilts>,
     },
     /// Whether the sensor still sits where the active (or a given) calibration says: the ground and the accelerometer now, or in a recording; exit 4 on drift.
     #[command(
@@ -408,22 +408,24 @@ fn run(args: Args) -> ExitStatus {
             depth_scale,
             cut_off,
         } => {
-            let (gates, noise, verify, configured_scale) =
-                match config.as_deref().map(groundcal::config::Config::load) {
-                    None => (None, None, Default::default(), Default::default()),
-                    Some(Ok((config, _))) => (
-                        Some(config.calibration.gates),
-                        Some(
-                            config
-                                .calibration
-                                .noise
-                                .unwrap_or_else(groundcal::calib::plan::NoiseModel::solve_floors),
-                        ),
-                        config.verify.settings(&config.calibration),
-                        config.calibration.depth_scale,
+            let (gates, noise, verify, configured_scale) = match config
+                .as_deref()
+                .map(groundcal::setup::config::Config::load)
+            {
+                None => (None, None, Default::default(), Default::default()),
+                Some(Ok((config, _))) => (
+                    Some(config.calibration.gates),
+                    Some(
+                        config
+                            .calibration
+                            .noise
+                            .unwrap_or_else(groundcal::calib::plan::NoiseModel::solve_floors),
                     ),
-                    Some(Err(e)) => return usage_error(e.to_string()),
-                };
+                    config.verify.settings(&config.calibration),
+                    config.calibration.depth_scale,
+                ),
+                Some(Err(e)) => return usage_error(e.to_string()),
+            };
             let nominal_mount =
                 match nominal_mount.map(|m| cli::parse_numbers::<6>("--nominal-mount", &m)) {
                     None => None,
@@ -432,14 +434,14 @@ fn run(args: Args) -> ExitStatus {
                     }
                     Some(Err(e)) => return usage_error(e),
                 };
-            let mut options = groundcal::replay::ReplayOptions {
+            let mut options = groundcal::solving::replay::ReplayOptions {
                 nominal_mount,
                 threads,
                 gates,
                 noise,
                 verify,
                 depth_scale: depth_scale.unwrap_or(configured_scale),
-                keep: groundcal::replay::AlsoKeep {
+                keep: groundcal::solving::replay::AlsoKeep {
                     ground_points: mcap.is_some(),
                     input_digest: report.is_some(),
                 },
@@ -453,9 +455,9 @@ fn run(args: Args) -> ExitStatus {
                 cut_off,
                 read_from: None,
             };
-            if groundcal::bag::is_mcap_file(&dir) {
+            if groundcal::solving::bag::is_mcap_file(&dir) {
                 // groundcal's own session carries its recording whole.
-                match groundcal::bag::own::own_recording(&dir) {
+                match groundcal::solving::bag::own::own_recording(&dir) {
                     Ok(Some(own)) => {
                         let outputs = cli::replay::Outputs {
                             read_from: Some(&dir),
@@ -541,7 +543,7 @@ fn run(args: Args) -> ExitStatus {
         } => {
             // The configuration's sensor and library, the flags overriding them.
             let sensor_config = match &config {
-                Some(path) => match groundcal::config::Config::load(path) {
+                Some(path) => match groundcal::setup::config::Config::load(path) {
                     Ok((config, _)) => Some(config.sensor),
                     Err(e) => return usage_error(e.to_string()),
                 },

@@ -13,7 +13,7 @@ fn sim_config() -> PathBuf {
 }
 
 fn true_mount() -> PoseDegMm {
-    groundcal::config::Config::load(&sim_config())
+    groundcal::setup::config::Config::load(&sim_config())
         .unwrap()
         .0
         .sim
@@ -60,7 +60,7 @@ const FAR_SEEING_MOUNT: &str = "mount = { alpha_deg = 0.8, beta_deg = -24.0, gam
 
 /// Calibrates with `config` and returns the result and the simulator's mount.
 fn calibrate(config: &Path) -> (i32, serde_json::Value, PoseDegMm) {
-    let truth = groundcal::config::Config::load(config)
+    let truth = groundcal::setup::config::Config::load(config)
         .unwrap()
         .0
         .sim
@@ -109,7 +109,7 @@ fn a_foot_that_sinks_is_left_out_and_named_and_the_result_holds() {
             "world = \"flat\"\nsinking_foot = { foot = 3, from_pose = 30, depth_mm = 15.0 }",
         )],
     );
-    let truth = groundcal::config::Config::load(&config)
+    let truth = groundcal::setup::config::Config::load(&config)
         .unwrap()
         .0
         .sim

@@ -17,9 +17,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use groundcal::recording::dump::{parse_index, EntryKind, RawTiltState};
-use groundcal::recording::writer::{entry_name, RecordingWriter};
-use groundcal::recording::Recording;
+use groundcal::formats::recording::dump::{parse_index, EntryKind, RawTiltState};
+use groundcal::formats::recording::writer::{entry_name, RecordingWriter};
+use groundcal::formats::recording::Recording;
 
 /// fakenect-record plays a few frames in well under a second; this bounds a hang.
 const PLAYBACK_TIMEOUT: Duration = Duration::from_secs(60);

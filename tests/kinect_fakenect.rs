@@ -20,8 +20,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use groundcal::recording::dump::{parse_entry_name, EntryKind, RawTiltState};
-use groundcal::recording::Recording;
+use groundcal::formats::recording::dump::{parse_entry_name, EntryKind, RawTiltState};
+use groundcal::formats::recording::Recording;
 use groundcal_hal::error::Error as _;
 use groundcal_hal::kinect::{Kinect, LIBFREENECT_PACKAGE};
 use groundcal_hal::{DepthSensor, ErrorKind, Led};

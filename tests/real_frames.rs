@@ -142,7 +142,7 @@ fn write_png_mm(path: &std::path::Path, width: usize, height: usize, mm: &[u16])
 #[test]
 fn a_real_floor_that_is_a_tenth_of_the_view_is_found() {
     let file = shared().join("data/real/pcl_floor_tilted_frame_20121214T142255.814212_depth.tiff");
-    let (image, _) = groundcal::depth_image::read_depth_image(&file, None).unwrap();
+    let (image, _) = groundcal::formats::depth_image::read_depth_image(&file, None).unwrap();
     let (w, h) = (image.width, image.height);
     let f = 525.0;
     // The floor of the whole frame (the first test), optical frame.

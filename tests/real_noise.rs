@@ -35,7 +35,7 @@ mod common;
 use groundcal::calib::geometry::{sensor_from_optical, Transform};
 use groundcal::calib::sensor::{DepthModel, Intrinsics};
 use groundcal::cli::plane::{fit_file, to_optical, PlaneOptions};
-use groundcal::depth_image::{read_depth_image, DepthUnits};
+use groundcal::formats::depth_image::{read_depth_image, DepthUnits};
 use groundcal_hal::sim::kinect::{DepthNoise, DepthRenderer, SimKinectConfig};
 use groundcal_hal::sim::world::World;
 use nalgebra::{Matrix3, Rotation3, Translation3, Vector3};

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use common::{distance, groundcal, groundcal_json, mount_of, shared};
 use groundcal::calib::geometry::PoseDegMm;
 use groundcal::calib::observe::BodyPoseSource;
-use groundcal::recording::Recording;
-use groundcal::replay::{replay, ReplayOptions};
+use groundcal::formats::recording::Recording;
+use groundcal::solving::replay::{replay, ReplayOptions};
 
 fn sample() -> PathBuf {
     shared().join("data/sample-12")

@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use common::{groundcal_json, mount_of, shared, temp_dir};
-use groundcal::recording::Recording;
+use groundcal::formats::recording::Recording;
 use serde_json::Value;
 
 const FAULTS: &str = "loss=0.2,dup=0.05,reorder=0.05,delay_ms=20,seed=3";

@@ -21,11 +21,11 @@ use serde_json::Value;
 
 use groundcal::calib::calibrate::{calibrate, CalibrationSettings};
 use groundcal::calib::outcome::{position_words, rotation_words};
-use groundcal::output::ResultJson;
-use groundcal::recording::planes::read_planes;
-use groundcal::recording::Recording;
-use groundcal::replay::{replay, AlsoKeep, ReplayOptions};
-use groundcal::report::{write_report, Provenance};
+use groundcal::formats::output::ResultJson;
+use groundcal::formats::recording::planes::read_planes;
+use groundcal::formats::recording::Recording;
+use groundcal::formats::report::{write_report, Provenance};
+use groundcal::solving::replay::{replay, AlsoKeep, ReplayOptions};
 
 /// Writes the report, opens it in Chromium and returns the phone's and the
 /// laptop's views, after the checks every report must pass.

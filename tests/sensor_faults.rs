@@ -8,9 +8,9 @@
 
 use std::time::{Duration, Instant};
 
-use groundcal::config::Config;
 use groundcal::hardware::{self, HardwareError, Selection};
 use groundcal::session::{self, Event, Plan, SessionError, SessionOutcome};
+use groundcal::setup::config::Config;
 use groundcal_hal::{DepthFrame, DepthSensor, ErrorKind, Led, SensorInfo, TiltState};
 
 /// What goes wrong, from pose `at` on.

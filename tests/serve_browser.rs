@@ -299,9 +299,9 @@ fn a_knocked_sensor_is_caught_at_start_and_on_check() {
     let (code, out, err) =
         common::groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
     assert_eq!(code, 0, "{err}");
-    let result = groundcal::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
+    let result = groundcal::formats::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
         .expect("a result document");
-    let store = groundcal::store::Store::new(&dir.join("state.sim"));
+    let store = groundcal::formats::store::Store::new(&dir.join("state.sim"));
     let id = store.add(&result, "2026-12-01T00:00:00Z").unwrap();
     store
         .activate(&id, "2026-12-01T00:00:01Z", "a test")
@@ -767,7 +767,7 @@ fn after_a_crash_nothing_moves_until_a_person_confirms() {
     let ten_seconds = std::time::Duration::from_secs(10);
     let dir = common::temp_dir("serve-crash-restart");
     let (first, _) = common::two_calibrations_in_store(&dir.join("state.sim"));
-    groundcal::store::Store::new(&dir.join("state.sim"))
+    groundcal::formats::store::Store::new(&dir.join("state.sim"))
         .activate(&first, "2026-12-01T02:00:00Z", "a test")
         .unwrap();
     let slow = [("time_scale = 50.0", "time_scale = 5.0")];

@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
-use groundcal::config::Config;
 use groundcal::hardware::Selection;
+use groundcal::setup::config::Config;
 use groundcal::terminal::{serve, AppState};
 use serde_json::Value;
 
@@ -257,16 +257,16 @@ async fn calibrate_accept_and_activate_over_http() {
     );
 
     // Reject marks a history entry without deleting it, and it can no longer be made active.
-    let extra = groundcal::output::ResultJson::parse(serde_json::json!({
+    let extra = groundcal::formats::output::ResultJson::parse(serde_json::json!({
         "status": "accepted",
-        "robot_from_sensor": groundcal::output::MountJson::from_params(
+        "robot_from_sensor": groundcal::formats::output::MountJson::from_params(
             &groundcal::calib::geometry::PoseDegMm::from_values([9.0, -33.0, 0.0, 500.0, 370.0, 0.0])
                 .to_params(),
         ),
         "poses": [],
     }))
     .unwrap();
-    let other = groundcal::store::Store::new(&state_dir)
+    let other = groundcal::formats::store::Store::new(&state_dir)
         .add(&extra, "2000-01-01T00:00:00Z")
         .unwrap();
     let (code, body) = request(
@@ -495,7 +495,7 @@ async fn a_check_holds_the_active_calibration_until_it_ends() {
     })
     .await
     .unwrap();
-    groundcal::store::Store::new(&state_dir)
+    groundcal::formats::store::Store::new(&state_dir)
         .activate(&a, "2026-12-01T02:00:00Z", "a test")
         .unwrap();
     // Real time: the check lasts a few seconds.

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use groundcal::recording::Recording;
+use groundcal::formats::recording::Recording;
 
 fn temp(name: &str) -> PathBuf {
     std::env::temp_dir().join(format!("groundcal-sigterm-{name}-{}", std::process::id()))

@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Barrier};
 use std::time::Duration;
 
-use groundcal::store::Store;
+use groundcal::formats::store::Store;
 use rand::{Rng, SeedableRng};
 use serde_json::{json, Value};
 
@@ -27,10 +27,10 @@ fn temp_dir(tag: &str) -> common::TempDir {
 }
 
 /// An accepted result with this α.
-fn accepted(alpha_deg: f64) -> groundcal::output::ResultJson {
-    groundcal::output::ResultJson::parse(json!({
+fn accepted(alpha_deg: f64) -> groundcal::formats::output::ResultJson {
+    groundcal::formats::output::ResultJson::parse(json!({
         "status": "accepted",
-        "robot_from_sensor": groundcal::output::MountJson::from_params(
+        "robot_from_sensor": groundcal::formats::output::MountJson::from_params(
             &groundcal::calib::geometry::PoseDegMm::from_values([alpha_deg, -33.0, 0.0, 500.0, 370.0, 0.0])
                 .to_params(),
         ),

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::time::{Duration, Instant};
 
-use groundcal::schedule::{Limits, Schedule};
+use groundcal::setup::schedule::{Limits, Schedule};
 use groundcal_hal::sim::lower_computer::{
     FaultInjection, SimOptions, SimServer, FAULTS_ENV, RECEIPTS_ENV,
 };

@@ -12,7 +12,7 @@
 use std::path::{Component, Path, PathBuf};
 use std::sync::OnceLock;
 
-use groundcal::config::{Config, RobotAddress, SensorSource, SimWorld};
+use groundcal::setup::config::{Config, RobotAddress, SensorSource, SimWorld};
 use groundcal_fuzz::{check_input_error, path, text_of};
 use libfuzzer_sys::fuzz_target;
 

@@ -15,7 +15,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 use std::sync::Mutex;
 
-use groundcal::depth_image::{
+use groundcal::formats::depth_image::{
     encode_fakenect_pgm, parse_fakenect_pgm, parse_png16, parse_standard_pgm16, parse_tiff16,
     DepthImage, DepthImageError,
 };

@@ -3,10 +3,10 @@
 //! (`RawTiltState::parse`).
 #![no_main]
 
-use groundcal::recording::dump::{
+use groundcal::formats::recording::dump::{
     parse_entry_name, parse_index, DumpEntry, EntryKind, RawTiltState, RAW_TILT_STATE_BYTES,
 };
-use groundcal::recording::writer::entry_name;
+use groundcal::formats::recording::writer::entry_name;
 use groundcal_fuzz::{check_input_error, path, text_of};
 use libfuzzer_sys::fuzz_target;
 

@@ -4,7 +4,7 @@
 //! is allocated beyond the limits.
 #![no_main]
 
-use groundcal::bag::stream::{for_each_message, Limits, ReadError};
+use groundcal::solving::bag::stream::{for_each_message, Limits, ReadError};
 use groundcal_ros::msg::{CameraInfo, Image, Message, TfMessage};
 use libfuzzer_sys::fuzz_target;
 

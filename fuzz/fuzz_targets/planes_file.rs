@@ -7,7 +7,7 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     let text = text_of(data);
-    match groundcal::recording::planes::parse_planes(path(), &text) {
+    match groundcal::formats::recording::planes::parse_planes(path(), &text) {
         Err(e) => check_input_error(&e, &text),
         Ok(observations) => {
             // A document that parses has as many observations as it lists,

@@ -1,8 +1,8 @@
 //! A recording's `poses.jsonl` (`recording::poses::parse_poses`).
 #![no_main]
 
-use groundcal::recording::poses::parse_poses;
-use groundcal::recording::session::check_feet;
+use groundcal::formats::recording::poses::parse_poses;
+use groundcal::formats::recording::session::check_feet;
 use groundcal_fuzz::{check_input_error, json_close, path, text_of};
 use libfuzzer_sys::fuzz_target;
 

@@ -4,8 +4,8 @@
 //! (`output::ResultJson::parse`, on any input that is JSON).
 #![no_main]
 
-use groundcal::export::{parse_result, ExportError};
-use groundcal::output::{ResultJson, ResultStatus};
+use groundcal::formats::export::{parse_result, ExportError};
+use groundcal::formats::output::{ResultJson, ResultStatus};
 use groundcal_fuzz::{check_input_error, json_close, path, text_of};
 use libfuzzer_sys::fuzz_target;
 

@@ -2,11 +2,11 @@
 //! then `validate` against fixed limits).
 #![no_main]
 
-use groundcal::schedule::{Limits, Schedule, ScheduleError};
+use groundcal::setup::schedule::{Limits, Schedule, ScheduleError};
 use groundcal_fuzz::{check_input_error, path, text_of};
 use libfuzzer_sys::fuzz_target;
 
-/// The simulator's limits (those of `src/schedule.rs`'s tests).
+/// The simulator's limits (those of `src/setup/schedule.rs`'s tests).
 const SIMULATOR: Limits = Limits {
     max_tilt_deg: 25.0,
     min_height_mm: 500.0,

@@ -1,8 +1,8 @@
 //! A recording's `session.json` (`recording::session::Session::parse`).
 #![no_main]
 
-use groundcal::recording::fakenect_frame_len;
-use groundcal::recording::session::{check_feet, Session};
+use groundcal::formats::recording::fakenect_frame_len;
+use groundcal::formats::recording::session::{check_feet, Session};
 use groundcal_fuzz::{check_input_error, json_close, path, text_of};
 use libfuzzer_sys::fuzz_target;
 

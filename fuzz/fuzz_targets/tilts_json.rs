@@ -1,7 +1,7 @@
 //! A recording at several tilts: `tilts.json` (`tilts::parse_tilts_file`).
 #![no_main]
 
-use groundcal::tilts::parse_tilts_file;
+use groundcal::solving::tilts::parse_tilts_file;
 use groundcal_fuzz::{check_input_error, path, text_of};
 use libfuzzer_sys::fuzz_target;
 
@@ -15,7 +15,7 @@ fuzz_target!(|data: &[u8]| {
     assert_eq!(file.format, "groundcal-tilts");
     // Within the bound (`tilts::MAX_TILTS`), each tilt in the motor's range,
     // 1° or more from the others, in a directory of its own.
-    assert!((2..=groundcal::tilts::MAX_TILTS).contains(&file.tilts.len()));
+    assert!((2..=groundcal::solving::tilts::MAX_TILTS).contains(&file.tilts.len()));
     for (k, t) in file.tilts.iter().enumerate() {
         assert!(t.tilt_deg.is_finite() && t.tilt_deg.abs() <= 27.0);
         assert!(!t.dir.is_empty() && !t.dir.contains('/') && t.dir != "..");

@@ -3,7 +3,7 @@
 use std::borrow::Cow;
 use std::path::Path;
 
-use groundcal::recording::InputError;
+use groundcal::formats::recording::InputError;
 
 /// The path every target passes to the parsers (they only use it in messages).
 pub const PATH: &str = "fuzz-input";

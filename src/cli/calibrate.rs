@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use super::{finish, ExitStatus};
 use crate::calib::plane::GroundFitMethod;
-use crate::config::{Config, RobotAddress, SensorSource};
 use crate::hardware::{self, Selection};
-use crate::schedule::Schedule;
 use crate::session::{self, Event, Plan, SessionError};
+use crate::setup::config::{Config, RobotAddress, SensorSource};
+use crate::setup::schedule::Schedule;
 
 /// The command's options.
 #[derive(Debug, Clone, Default)]
@@ -24,7 +24,7 @@ pub struct CalibrateOptions {
     /// Overrides `calibration.ground_fit`.
     pub ground_fit: Option<GroundFitMethod>,
     /// Overrides `calibration.depth_scale`.
-    pub depth_scale: Option<crate::config::DepthScaleSetting>,
+    pub depth_scale: Option<crate::setup::config::DepthScaleSetting>,
     /// Overrides `calibration.tilts`: the motor's tilts to calibrate at.
     pub tilts: Option<Vec<f64>>,
 }
@@ -202,7 +202,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
     // An MCAP file that could not be written at the end is refused before
     // the robot moves.
     if let Some(path) = &options.record_mcap {
-        if let Err(e) = crate::mcap_session::writable_place(path) {
+        if let Err(e) = crate::solving::mcap_session::writable_place(path) {
             eprintln!("groundcal calibrate: --record-mcap: {e}");
             return ExitStatus::RuntimeFailure;
         }
@@ -296,7 +296,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             let record = options
                 .record
                 .as_deref()
-                .map(|dir| crate::tilts::tilt_dir(dir, k + 1));
+                .map(|dir| crate::solving::tilts::tilt_dir(dir, k + 1));
             let mut plan = match Plan::from_config(&config, schedule.clone(), None, record) {
                 Ok(p) => p,
                 Err(e) => {
@@ -307,7 +307,7 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             plan.tilt_deg = *tilt;
             plan.nominal_mount = plan
                 .nominal_mount
-                .map(|n| crate::tilts::nominal_at(&n, config.sensor.tilt_deg, *tilt));
+                .map(|n| crate::solving::tilts::nominal_at(&n, config.sensor.tilt_deg, *tilt));
             eprintln!(
                 "groundcal calibrate: tilt {} of {}: the Kinect at {tilt}°",
                 k + 1,
@@ -319,12 +319,12 @@ pub fn run(options: &CalibrateOptions) -> ExitStatus {
             }
         }
         if let Some(dir) = &options.record {
-            if let Err(e) = crate::tilts::write_tilts_file(dir, &tilts, config.sensor.tilt_deg) {
+            if let Err(e) = crate::solving::tilts::write_tilts_file(dir, &tilts, config.sensor.tilt_deg) {
                 eprintln!("groundcal calibrate: {}: {e}", dir.display());
                 return ExitStatus::RuntimeFailure;
             }
         }
-        let combined = crate::tilts::combine(results, config.sensor.tilt_deg);
+        let combined = crate::solving::tilts::combine(results, config.sensor.tilt_deg);
         finish("calibrate", &combined, options.json)
     })
 }
@@ -368,22 +368,24 @@ impl Drop for RecordingDir {
 fn write_mcap(
     path: &Path,
     recording_dir: &Path,
-    result: &crate::output::ResultJson,
+    result: &crate::formats::output::ResultJson,
     config: &Config,
 ) -> Result<(), String> {
-    let recording = crate::recording::Recording::open(recording_dir).map_err(|e| e.to_string())?;
-    let mut options = crate::replay::ReplayOptions {
+    let recording =
+        crate::formats::recording::Recording::open(recording_dir).map_err(|e| e.to_string())?;
+    let mut options = crate::solving::replay::ReplayOptions {
         depth_scale: config.calibration.depth_scale,
-        keep: crate::replay::AlsoKeep {
+        keep: crate::solving::replay::AlsoKeep {
             ground_points: true,
             input_digest: false,
         },
         ..Default::default()
     };
     options.pose.plane.method = config.calibration.ground_fit;
-    let mut replayed = crate::replay::replay(&recording, &options).map_err(|e| e.to_string())?;
+    let mut replayed =
+        crate::solving::replay::replay(&recording, &options).map_err(|e| e.to_string())?;
     replayed.result = result.clone();
-    let summary = crate::mcap_session::write_replay(path, &recording, &replayed)
+    let summary = crate::solving::mcap_session::write_replay(path, &recording, &replayed)
         .map_err(|e| e.to_string())?;
     eprintln!(
         "groundcal calibrate: MCAP written to {} ({} messages, {:.1} MB)",
@@ -402,7 +404,7 @@ async fn calibrate_once(
     controller: &mut hardware::Controller,
     plan: &Plan,
     announce_recording: bool,
-) -> Result<crate::output::ResultJson, ExitStatus> {
+) -> Result<crate::formats::output::ResultJson, ExitStatus> {
     let (events, receiver) = tokio::sync::mpsc::unbounded_channel();
     let progress = show_progress(receiver, "calibrate");
     let outcome = session::run(sensor, controller, plan, &events, stop_signal()).await;

@@ -33,10 +33,10 @@ use groundcal_hal::kinect::Kinect;
 use groundcal_hal::{DepthSensor, TiltState};
 
 use crate::cli::ExitStatus;
-use crate::depth_image::DepthImage;
-use crate::recording::dump::RawTiltState;
-use crate::recording::session::{Home, KinectInfo, Session};
-use crate::recording::writer::{RecordingWriter, WriteError};
+use crate::formats::depth_image::DepthImage;
+use crate::formats::recording::dump::RawTiltState;
+use crate::formats::recording::session::{Home, KinectInfo, Session};
+use crate::formats::recording::writer::{RecordingWriter, WriteError};
 
 /// What a capture wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -312,7 +312,7 @@ mod tests {
     use groundcal_hal::{DepthFrame, Led, SensorInfo};
 
     use super::*;
-    use crate::recording::Recording;
+    use crate::formats::recording::Recording;
 
     /// The stream has ended.
     #[derive(Debug)]

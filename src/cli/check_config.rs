@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use super::ExitStatus;
-use crate::config::Config;
+use crate::setup::config::Config;
 use crate::terminal::read_token;
 
 /// Runs the command: one line on stdout when valid, the reason on stderr

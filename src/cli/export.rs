@@ -1,11 +1,11 @@
 //! `groundcal export RESULT.json --format urdf|ros-static|json|depth-correction`:
-//! the calibration in other tools' formats (`crate::export`, `docs/export.md`).
+//! the calibration in other tools' formats (`crate::formats::export`, `docs/export.md`).
 
 use std::io::Write;
 use std::path::Path;
 
 use super::ExitStatus;
-use crate::export::{read_result_with_scale, ExportFormat, RosMount};
+use crate::formats::export::{read_result_with_scale, ExportFormat, RosMount};
 
 /// Runs the command: the export on stdout, messages on stderr. A rejected
 /// calibration, a missing file or an inconsistent result is bad input (exit 2).
@@ -45,7 +45,7 @@ pub fn run(file: &Path, format: ExportFormat, tilt: Option<f64>) -> ExitStatus {
 
 /// `--format depth-correction`: the corrected pattern as a JSON document.
 fn depth_correction(file: &Path) -> ExitStatus {
-    match crate::export::read_depth_correction(file) {
+    match crate::formats::export::read_depth_correction(file) {
         Ok(document) => match serde_json::to_string(&document) {
             Ok(text) => print(&(text + "\n")),
             Err(e) => {
@@ -75,11 +75,15 @@ fn print(text: &str) -> ExitStatus {
 
 /// The mount at another tilt of the motor, from the result's tilt model.
 fn at_tilt(file: &Path, tilt: f64) -> Result<crate::calib::geometry::PoseDegMm, String> {
-    let bytes = crate::input::read_bounded(file, 64 << 20).map_err(|e| e.to_string())?;
+    let bytes = crate::platform::input::read_bounded(file, 64 << 20).map_err(|e| e.to_string())?;
     let value: serde_json::Value =
         serde_json::from_slice(&bytes).map_err(|e| format!("not JSON: {e}"))?;
-    let result = crate::output::ResultJson::parse(value)?;
-    let Some(model) = result.tilt_model.as_ref().map(crate::tilts::model_of) else {
+    let result = crate::formats::output::ResultJson::parse(value)?;
+    let Some(model) = result
+        .tilt_model
+        .as_ref()
+        .map(crate::solving::tilts::model_of)
+    else {
         return Err(format!(
             "this calibration holds for one tilt ({}): calibrate with --tilts to export others",
             result

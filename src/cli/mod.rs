@@ -105,7 +105,11 @@ pub fn parse_numbers<const N: usize>(flag: &str, text: &str) -> Result<[f64; N],
 
 /// The end of every command that produces a result: the result on stdout
 /// (JSON or the table), and the exit status its verdict calls for.
-pub fn finish(command: &str, result: &crate::output::ResultJson, json: bool) -> ExitStatus {
+pub fn finish(
+    command: &str,
+    result: &crate::formats::output::ResultJson,
+    json: bool,
+) -> ExitStatus {
     let printed = if json {
         print_json(result)
     } else {
@@ -134,7 +138,7 @@ pub fn for_terminal(text: &str, stderr: bool) -> String {
     };
     match term.size_checked() {
         Some((_, columns)) if term.is_term() => {
-            crate::output::wrap_words(text, usize::from(columns))
+            crate::formats::output::wrap_words(text, usize::from(columns))
         }
         _ => text.to_string(),
     }

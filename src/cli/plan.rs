@@ -13,10 +13,10 @@ use crate::calib::outcome::Observability;
 use crate::calib::plan::{
     predict_schedule_with, predict_with_depth_pattern, sigma_of_covariance, NoiseModel, Prediction,
 };
-use crate::config::Config;
-use crate::input::read_bounded;
-use crate::output::SigmaJson;
-use crate::schedule::{Schedule, ScheduleError};
+use crate::formats::output::SigmaJson;
+use crate::platform::input::read_bounded;
+use crate::setup::config::Config;
+use crate::setup::schedule::{Schedule, ScheduleError};
 
 /// What `plan --json` prints.
 #[derive(Debug, Serialize)]
@@ -409,7 +409,7 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
         }
     };
     let gates = &config.calibration.gates;
-    let configured_sigma = crate::design::predicted_sigma(&configured, &nominal, &noise);
+    let configured_sigma = crate::setup::design::predicted_sigma(&configured, &nominal, &noise);
     // Against the configured schedule when it observes all six, else the gates.
     let reference = configured_sigma.unwrap_or([
         gates.sigma_angle_max_deg.to_radians(),
@@ -419,7 +419,7 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
         gates.sigma_position_max_mm / 1000.0,
         gates.sigma_position_max_mm / 1000.0,
     ]);
-    let design = match crate::design::design_schedule(
+    let design = match crate::setup::design::design_schedule(
         count,
         &config.robot.limits,
         &configured,
@@ -433,7 +433,7 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
             return ExitStatus::BadInput;
         }
     };
-    let designed_sigma = crate::design::predicted_sigma(&design.schedule, &nominal, &noise);
+    let designed_sigma = crate::setup::design::predicted_sigma(&design.schedule, &nominal, &noise);
     let c = &config.calibration;
     let per_pose_s =
         (f64::from(c.motion_ms) + c.settle_ms as f64) / 1000.0 + c.frames_per_pose as f64 / 30.0;
@@ -458,9 +458,10 @@ pub fn run_design(config_path: Option<&Path>, count: usize, out: &Path, json: bo
         n_deg = noise.normal_sigma_deg,
         n_mm = noise.offset_sigma_mm,
     );
-    if let Err(e) =
-        crate::files::write_atomically(out, crate::design::to_toml(&design, &how).as_bytes())
-    {
+    if let Err(e) = crate::platform::files::write_atomically(
+        out,
+        crate::setup::design::to_toml(&design, &how).as_bytes(),
+    ) {
         eprintln!("groundcal plan: {}: {e}", out.display());
         return ExitStatus::RuntimeFailure;
     }

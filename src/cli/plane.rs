@@ -11,8 +11,8 @@ use crate::calib::plane::{
     fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitSettings,
 };
 use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
-use crate::depth_image::{read_depth_image, DepthUnits};
-use crate::output::PlaneJson;
+use crate::formats::depth_image::{read_depth_image, DepthUnits};
+use crate::formats::output::PlaneJson;
 
 /// The command's options, already parsed from flags.
 #[derive(Debug, Clone)]
@@ -122,8 +122,8 @@ pub fn fit_file(file: &Path, options: &PlaneOptions) -> Result<GroundFit, (ExitS
     };
     let mut camera = DepthCamera::new(encoding, intrinsics, DepthRange::default());
     if let Some(path) = &options.depth_correction {
-        let correction =
-            crate::export::read_depth_correction_file(path).map_err(|e| bad(e.to_string()))?;
+        let correction = crate::formats::export::read_depth_correction_file(path)
+            .map_err(|e| bad(e.to_string()))?;
         camera = camera.with_depth_correction(&correction);
     }
     let up_sensor = sensor_from_optical() * options.up_optical.normalize();

@@ -3,9 +3,9 @@
 use std::path::Path;
 
 use super::{finish, ExitStatus};
-use crate::recording::Recording;
-use crate::replay::{replay, ReplayOptions};
-use crate::report::{write_report, Provenance};
+use crate::formats::recording::Recording;
+use crate::formats::report::{write_report, Provenance};
+use crate::solving::replay::{replay, ReplayOptions};
 
 /// What a replay writes besides its result.
 #[derive(Debug, Clone, Copy, Default)]
@@ -27,7 +27,7 @@ pub struct Outputs<'a> {
 /// HTML report and the MCAP file where `outputs` say.
 pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus {
     let (json, report_dir) = (outputs.json, outputs.report);
-    match crate::tilts::read_tilts_file(dir) {
+    match crate::solving::tilts::read_tilts_file(dir) {
         Ok(Some(_)) if outputs.mcap.is_some() => {
             eprintln!("groundcal replay: {}: a recording at several tilts cannot be written as one MCAP file yet; replay each tilt's directory with --mcap", dir.display());
             return ExitStatus::BadInput;
@@ -40,7 +40,7 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
         }
     }
     if let Some(path) = outputs.mcap {
-        if let Err(e) = crate::mcap_session::writable_place(path) {
+        if let Err(e) = crate::solving::mcap_session::writable_place(path) {
             eprintln!("groundcal replay: --mcap: {e}");
             return ExitStatus::RuntimeFailure;
         }
@@ -81,7 +81,7 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
         return status;
     }
     if let Some(path) = outputs.mcap {
-        match crate::mcap_session::write_replay(path, &recording, &outcome) {
+        match crate::solving::mcap_session::write_replay(path, &recording, &outcome) {
             Ok(summary) => eprintln!(
                 "groundcal replay: MCAP written to {} ({} messages, {:.1} MB)",
                 path.display(),
@@ -91,7 +91,7 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
             Err(e) => {
                 eprintln!("groundcal replay: {e}");
                 return match e {
-                    crate::mcap_session::McapError::Input(_) => ExitStatus::BadInput,
+                    crate::solving::mcap_session::McapError::Input(_) => ExitStatus::BadInput,
                     _ => ExitStatus::RuntimeFailure,
                 };
             }
@@ -105,7 +105,7 @@ pub fn run(dir: &Path, outputs: &Outputs, options: &ReplayOptions) -> ExitStatus
 fn report(
     report_dir: Option<&Path>,
     input: &Path,
-    outcome: &crate::replay::Replay,
+    outcome: &crate::solving::replay::Replay,
 ) -> Result<(), ExitStatus> {
     let Some(report_dir) = report_dir else {
         return Ok(());
@@ -133,7 +133,7 @@ fn report(
 /// A ROS 2 bag: its still poses found and calibrated, as a recording's.
 pub fn run_bag(
     path: &Path,
-    bag_options: &crate::bag::BagOptions,
+    bag_options: &crate::solving::bag::BagOptions,
     outputs: &Outputs,
     options: &ReplayOptions,
 ) -> ExitStatus {
@@ -141,14 +141,14 @@ pub fn run_bag(
         eprintln!("groundcal replay: {}: --mcap writes a groundcal recording's session; a bag is MCAP already", path.display());
         return ExitStatus::BadInput;
     }
-    let outcome = match crate::bag::read_bag(path, bag_options).and_then(|bag| {
+    let outcome = match crate::solving::bag::read_bag(path, bag_options).and_then(|bag| {
         eprintln!(
             "groundcal replay: {}: {} depth images, {} still poses with frames",
             path.display(),
             bag.images_seen,
             bag.poses.len()
         );
-        crate::bag::replay_bag(&bag, options)
+        crate::solving::bag::replay_bag(&bag, options)
     }) {
         Ok(o) => o,
         Err(e) => {
@@ -166,7 +166,7 @@ pub fn run_bag(
 /// replayed, then the motor's model, as `calibrate --tilts` made it.
 fn replay_tilts(
     dir: &Path,
-    tilts: &crate::tilts::TiltsFile,
+    tilts: &crate::solving::tilts::TiltsFile,
     json: bool,
     options: &ReplayOptions,
 ) -> ExitStatus {
@@ -183,5 +183,9 @@ fn replay_tilts(
         results.push((entry.tilt_deg, outcome.result));
     }
     let reference = tilts.reference_tilt_deg.unwrap_or(tilts.tilts[0].tilt_deg);
-    finish("replay", &crate::tilts::combine(results, reference), json)
+    finish(
+        "replay",
+        &crate::solving::tilts::combine(results, reference),
+        json,
+    )
 }

@@ -8,8 +8,8 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use super::ExitStatus;
-use crate::config::Config;
 use crate::hardware::{self, Selection};
+use crate::setup::config::Config;
 use crate::terminal::{self, AppState};
 
 /// The command's options.
@@ -64,7 +64,7 @@ pub fn run(options: &ServeOptions) -> ExitStatus {
             return ExitStatus::BadInput;
         }
     };
-    let state_dir = crate::config::resolve_from_config(&options.config, &serve.state_dir);
+    let state_dir = crate::setup::config::resolve_from_config(&options.config, &serve.state_dir);
     let listen = options.listen.clone().unwrap_or(serve.listen);
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()

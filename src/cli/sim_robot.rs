@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use groundcal_hal::sim::lower_computer::{self, FaultInjection, SimOptions, RECEIPTS_ENV};
 use groundcal_hal::sim::recorded_robot::{RecordedScript, RecordedStance};
 
-use crate::recording::Recording;
+use crate::formats::recording::Recording;
 use groundcal_hal::udp::link::resolve_ipv4_first;
 
 use super::ExitStatus;

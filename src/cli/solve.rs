@@ -5,8 +5,8 @@ use std::path::Path;
 use super::{finish, ExitStatus};
 use crate::calib::calibrate::{calibrate, CalibrationSettings};
 use crate::calib::solve::SolveError;
-use crate::output::ResultJson;
-use crate::recording::planes::read_planes;
+use crate::formats::output::ResultJson;
+use crate::formats::recording::planes::read_planes;
 
 /// Runs the command; messages go to stderr, the result to stdout.
 pub fn run(file: &Path, json: bool, settings: &CalibrationSettings) -> ExitStatus {

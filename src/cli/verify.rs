@@ -6,10 +6,10 @@ use std::path::PathBuf;
 
 use super::calibrate::{show_progress, stop_signal};
 use super::{print_json, print_stdout, ExitStatus};
+use crate::formats::recording::Recording;
 use crate::hardware::{self, Selection};
-use crate::recording::Recording;
 use crate::session::{self, Plan, SessionError};
-use crate::verify::{check_schedule, compare, ground_prior, load_calibration, VerifyJson};
+use crate::solving::verify::{check_schedule, compare, ground_prior, load_calibration, VerifyJson};
 
 /// The command's options.
 #[derive(Debug, Clone, Default)]
@@ -95,13 +95,13 @@ pub fn run(options: &VerifyOptions) -> ExitStatus {
         pose_settings.slip_threshold_m = config.calibration.slip_threshold_mm / 1000.0;
         // A check takes the calibration's depth pattern; it estimates none.
         pose_settings.ground_residuals = false;
-        let observed = match crate::replay::observe_recording(
+        let observed = match crate::solving::replay::observe_recording(
             &recording,
             Some(ground_prior(&calibration.mount)),
             pose_settings,
             None,
             calibration.depth_correction.as_deref(),
-            crate::replay::AlsoKeep::default(),
+            crate::solving::replay::AlsoKeep::default(),
         ) {
             Ok(o) => o,
             Err(e) => {

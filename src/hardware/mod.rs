@@ -20,8 +20,8 @@ use groundcal_hal::{
 };
 
 use crate::calib::geometry::PoseDegMm;
-use crate::config::{Config, RobotAddress, SensorSource, SimConfig, SimWorld};
-use crate::recording::Recording;
+use crate::formats::recording::Recording;
+use crate::setup::config::{Config, RobotAddress, SensorSource, SimConfig, SimWorld};
 use playback_sensor::PlaybackSensor;
 
 /// Any hardware error, keeping its kind and its words.
@@ -256,9 +256,9 @@ pub fn open_sensor(config: &Config, selection: &Selection) -> Result<Sensor, Har
 
 /// The simulator's pattern of `[sim] depth_distortion`.
 fn sim_distortion(
-    config: &crate::config::SimDistortionConfig,
+    config: &crate::setup::config::SimDistortionConfig,
 ) -> groundcal_hal::sim::kinect::DepthDistortion {
-    use crate::config::SimDistortionShape as Shape;
+    use crate::setup::config::SimDistortionShape as Shape;
     use groundcal_hal::sim::kinect::{DepthDistortion, DistortionShape};
     let shape = match config.shape {
         Shape::None => DistortionShape::None,
@@ -328,11 +328,11 @@ fn sensor_from(
                 kinect.depth_model = model;
             }
             match parts.sim.depth_noise {
-                crate::config::SimNoise::Kinect => {}
-                crate::config::SimNoise::White => {
+                crate::setup::config::SimNoise::Kinect => {}
+                crate::setup::config::SimNoise::White => {
                     kinect.noise = groundcal_hal::sim::kinect::DepthNoise::white();
                 }
-                crate::config::SimNoise::Parts(parts) => {
+                crate::setup::config::SimNoise::Parts(parts) => {
                     kinect.noise = groundcal_hal::sim::kinect::DepthNoise::Kinect(parts);
                 }
             }

@@ -7,8 +7,8 @@ use std::collections::HashMap;
 
 use groundcal_hal::{DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo, TiltState};
 
-use crate::input::InputError;
-use crate::recording::Recording;
+use crate::formats::recording::Recording;
+use crate::platform::input::InputError;
 
 /// Why the recording cannot serve a frame.
 #[derive(Debug, thiserror::Error)]

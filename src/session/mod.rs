@@ -24,7 +24,7 @@ mod run;
 pub use plan::{Plan, RecordedPose, STALL_LIMIT};
 pub use run::{run, verify, SessionError, SessionOutcome, VerifyOutcome};
 
-pub use crate::verify::{GravityReading, VisitedPose};
+pub use crate::solving::verify::{GravityReading, VisitedPose};
 
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::ground_view::GroundView;

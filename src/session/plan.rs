@@ -8,10 +8,10 @@ use std::time::Duration;
 use crate::calib::calibrate::CalibrationSettings;
 use crate::calib::observe::ObserveSettings;
 use crate::calib::plane::PlaneFitSettings;
-use crate::config::{Config, RobotAddress};
-use crate::recording::session::NominalMount;
-use crate::recording::Recording;
-use crate::schedule::{Limits, Schedule};
+use crate::formats::recording::session::NominalMount;
+use crate::formats::recording::Recording;
+use crate::setup::config::{Config, RobotAddress};
+use crate::setup::schedule::{Limits, Schedule};
 
 /// Everything a session needs to know before it starts.
 #[derive(Debug, Clone)]
@@ -200,12 +200,12 @@ impl Plan {
     pub fn for_check(
         config: &Config,
         schedule: Schedule,
-        calibration: &crate::verify::Calibration,
+        calibration: &crate::solving::verify::Calibration,
         record: Option<PathBuf>,
     ) -> Result<Plan, String> {
         let mut plan = Plan::from_config(config, schedule, None, record)?;
         plan.calibrating = false;
-        plan.nominal_mount = Some(crate::verify::ground_prior(&calibration.mount));
+        plan.nominal_mount = Some(crate::solving::verify::ground_prior(&calibration.mount));
         plan.depth_correction = calibration.depth_correction.clone();
         plan.pose.ground_residuals = false;
         if let Some(tilt) = calibration.tilt_deg {

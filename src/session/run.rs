@@ -21,13 +21,13 @@ use crate::calib::observe::{BodyEstimate, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::solve::Observation;
 use crate::calib::verify::{ActiveMount, VerifyReport};
-use crate::depth_image::DepthImage;
-use crate::output::ResultJson;
-use crate::recording::dump::RawTiltState;
-use crate::recording::poses::PoseRecord;
-use crate::recording::session::{Home, KinectInfo, Session};
-use crate::recording::writer::{RecordingWriter, WriteError};
-use crate::schedule::Limits;
+use crate::formats::depth_image::DepthImage;
+use crate::formats::output::ResultJson;
+use crate::formats::recording::dump::RawTiltState;
+use crate::formats::recording::poses::PoseRecord;
+use crate::formats::recording::session::{Home, KinectInfo, Session};
+use crate::formats::recording::writer::{RecordingWriter, WriteError};
+use crate::setup::schedule::Limits;
 use rayon::prelude::*;
 
 /// How a session ended when it produced a result.
@@ -739,11 +739,11 @@ fn solve_visited(
         result.notes.insert(0, note);
     }
     result.predicted_sigma = predicted_sigma(plan);
-    result.robot = Some(crate::output::RobotJson {
+    result.robot = Some(crate::formats::output::RobotJson {
         name: plan.robot_name.clone(),
         firmware: Some(visited.firmware.clone()),
     });
-    crate::verify::judge_motor(&mut result, &visited.poses, plan.tilt_deg, &plan.verify);
+    crate::solving::verify::judge_motor(&mut result, &visited.poses, plan.tilt_deg, &plan.verify);
     send(
         events,
         Event::Finished {
@@ -763,12 +763,13 @@ fn verify_visited(
     plan: &Plan,
     events: &UnboundedSender<Event>,
 ) -> Result<VerifyOutcome, SessionError> {
-    let report = crate::verify::compare(mount, &visited.poses, &plan.verify).map_err(|e| {
-        SessionError::Sensor {
-            kind: ErrorKind::Other,
-            message: e.to_string(),
-        }
-    })?;
+    let report =
+        crate::solving::verify::compare(mount, &visited.poses, &plan.verify).map_err(|e| {
+            SessionError::Sensor {
+                kind: ErrorKind::Other,
+                message: e.to_string(),
+            }
+        })?;
     send(
         events,
         Event::Verified {
@@ -1129,7 +1130,7 @@ async fn guarded<S: DepthSensor, C: BodyController>(
 /// The σ `groundcal plan` predicts for the plan's schedule, with the depth
 /// scale's when it will be estimated (None without a nominal mount, or for a
 /// schedule the prediction cannot solve).
-fn predicted_sigma(plan: &Plan) -> Option<crate::output::SigmaJson> {
+fn predicted_sigma(plan: &Plan) -> Option<crate::formats::output::SigmaJson> {
     let nominal = plan.nominal_mount?.pose().to_params();
     let poses: Vec<_> = plan.schedule.poses.iter().map(|p| p.to_params()).collect();
     let prediction = crate::calib::plan::predict_schedule_with(
@@ -1142,7 +1143,7 @@ fn predicted_sigma(plan: &Plan) -> Option<crate::output::SigmaJson> {
     if !prediction.observability.problems.is_empty() {
         return None;
     }
-    let mut sigma = crate::output::SigmaJson::from_radians_metres(&prediction.sigma());
+    let mut sigma = crate::formats::output::SigmaJson::from_radians_metres(&prediction.sigma());
     sigma.depth_scale = prediction.depth_scale.sigma;
     Some(sigma)
 }

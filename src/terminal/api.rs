@@ -8,9 +8,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::quality::Gates;
-use crate::schedule::body_pose_in_words;
+use crate::formats::store::{ActiveDocument, HistoryEntry, StoredResult};
 use crate::session::{Event, RobotLeft};
-use crate::store::{ActiveDocument, HistoryEntry, StoredResult};
+use crate::setup::schedule::body_pose_in_words;
 
 /// A serializable mirror of [`Event`] for the API.
 #[derive(Debug, Clone, Serialize)]
@@ -344,7 +344,7 @@ pub struct CheckStatus {
     /// Why it could not check.
     pub error: Option<String>,
     /// The whole report (`groundcal verify --json`).
-    pub report: Option<crate::verify::VerifyJson>,
+    pub report: Option<crate::solving::verify::VerifyJson>,
 }
 
 /// What a session is doing, as the last event that changed it says.

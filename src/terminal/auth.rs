@@ -18,7 +18,7 @@ use axum::response::{IntoResponse, Response};
 
 use super::handlers::ApiError;
 use super::state::AppState;
-use crate::config::resolve_from_config;
+use crate::setup::config::resolve_from_config;
 
 /// The largest token file read: the package writes 64 characters, a person
 /// a passphrase; anything larger is not a token.
@@ -29,10 +29,10 @@ pub const MAX_TOKEN_FILE_BYTES: u64 = 4096;
 /// that a wrong path (`/dev/zero`, a FIFO) is refused at once rather than read
 /// until the memory runs out or waited on for ever.
 pub fn read_token(config_path: &Path, token_file: &Path) -> Result<String, String> {
-    use crate::files::ReadError;
+    use crate::platform::files::ReadError;
     let path = resolve_from_config(config_path, token_file);
     let mut bytes = Vec::new();
-    crate::files::read_bounded_into(&path, MAX_TOKEN_FILE_BYTES, &mut bytes).map_err(
+    crate::platform::files::read_bounded_into(&path, MAX_TOKEN_FILE_BYTES, &mut bytes).map_err(
         |e| match e {
             ReadError::File(f) => format!(
                 "{}: cannot read the token: cannot {}: {}",

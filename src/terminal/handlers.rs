@@ -16,7 +16,7 @@ use tokio_stream::StreamExt;
 use super::api::{CheckStatus, EventJson, History, RunClock, RunState, Status, Task};
 use super::state::{now, AppState};
 use super::worker;
-use crate::store::{ActiveDocument, StoreError, StoredResult};
+use crate::formats::store::{ActiveDocument, StoreError, StoredResult};
 
 /// An error answer: a status and a sentence, as `{"error": "..."}`.
 pub struct ApiError(pub StatusCode, pub String);

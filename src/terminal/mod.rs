@@ -15,7 +15,7 @@
 //! runtime) so that the hardware never has to cross threads; the HTTP side
 //! sees it through the shared status, a broadcast of its events (server-sent
 //! events) and an abort channel. The systemd watchdog is fed from the
-//! session's heartbeat (`crate::systemd`).
+//! session's heartbeat (`crate::platform::systemd`).
 
 pub mod api;
 pub mod auth;
@@ -192,11 +192,11 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
     let limits = ConnectionLimits::default();
-    let notifier = crate::systemd::Notifier::from_env();
+    let notifier = crate::platform::systemd::Notifier::from_env();
     let address = listener.local_addr()?;
     notifier.ready(&format!("listening on {address}"));
     let beating = state.clone();
-    let watchdog = crate::systemd::spawn_watchdog_feed(move || beating.last_beat());
+    let watchdog = crate::platform::systemd::spawn_watchdog_feed(move || beating.last_beat());
     // The live picture, unless the start-up check runs (it starts the
     // picture when it ends).
     state.start_preview();
@@ -208,7 +208,7 @@ pub async fn serve(
     let stopping = state.clone();
     let graceful = async move {
         shutdown.await;
-        crate::systemd::Notifier::from_env().stopping();
+        crate::platform::systemd::Notifier::from_env().stopping();
         stopping.stop_session("the service is stopping").await;
         stopping.mark_stopping();
         let preview = stopping.clone();

@@ -16,8 +16,8 @@ use crate::calib::ground_view::GroundView;
 use crate::calib::observe::ground_prior;
 use crate::calib::plane::{fit_ground, FitBuffers, PlaneFitSettings};
 use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthRange};
-use crate::config::Config;
 use crate::hardware::{self, Selection, Sensor};
+use crate::setup::config::Config;
 use groundcal_hal::DepthSensor;
 
 /// The longest a frame may take before the sensor counts as stalled.

@@ -12,10 +12,10 @@ use super::api::{
     ActiveRef, CheckStatus, EventJson, Interrupted, MotionPlan, MotionPlans, RunState, Status, Task,
 };
 use super::preview::{PreviewThread, ViewSlot};
-use crate::config::Config;
+use crate::formats::store::Store;
 use crate::hardware::Selection;
-use crate::schedule::Schedule;
-use crate::store::Store;
+use crate::setup::config::Config;
+use crate::setup::schedule::Schedule;
 
 /// How many recent events the status keeps.
 const RECENT: usize = 30;
@@ -380,7 +380,9 @@ impl AppState {
 fn motion_plans(config: &Config, schedule: &Schedule) -> MotionPlans {
     let c = &config.calibration;
     let scale = match (&config.robot.address, &config.sim) {
-        (crate::config::RobotAddress::Sim, Some(sim)) if sim.time_scale > 0.0 => sim.time_scale,
+        (crate::setup::config::RobotAddress::Sim, Some(sim)) if sim.time_scale > 0.0 => {
+            sim.time_scale
+        }
         _ => 1.0,
     };
     let per_pose_s =

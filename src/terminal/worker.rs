@@ -7,11 +7,11 @@ use tokio::sync::oneshot;
 
 use super::api::{CheckStatus, EventJson, RunState};
 use super::state::{now, AppState};
+use crate::formats::output::ResultJson;
+use crate::formats::store::StoredResult;
 use crate::hardware;
-use crate::output::ResultJson;
 use crate::session::{self, Event};
-use crate::store::StoredResult;
-use crate::verify::{calibration_in_store, check_schedule, VerifyJson};
+use crate::solving::verify::{calibration_in_store, check_schedule, VerifyJson};
 
 /// The session's own runtime, on this thread.
 fn session_runtime() -> Result<tokio::runtime::Runtime, String> {
@@ -26,7 +26,7 @@ fn session_runtime() -> Result<tokio::runtime::Runtime, String> {
 /// watchdog.
 async fn beating<T>(state: &AppState, work: impl std::future::Future<Output = T>) -> T {
     let beat = async {
-        let mut tick = tokio::time::interval(crate::systemd::heartbeat_period());
+        let mut tick = tokio::time::interval(crate::platform::systemd::heartbeat_period());
         loop {
             tick.tick().await;
             state.beat();

@@ -713,9 +713,9 @@ pub fn active_calibration_in_store(state_dir: &Path) -> String {
     let sim = root().join("config/sim.toml");
     let (code, out, err) = groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
     assert_eq!(code, 0, "{err}");
-    let result = groundcal::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
+    let result = groundcal::formats::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
         .expect("a result document");
-    let store = groundcal::store::Store::new(state_dir);
+    let store = groundcal::formats::store::Store::new(state_dir);
     let id = store.add(&result, "2026-12-01T00:00:00Z").unwrap();
     store
         .activate(&id, "2026-12-01T00:00:01Z", "a test")
@@ -762,22 +762,23 @@ pub fn received_kinds(receipts: &Path) -> Vec<String> {
 /// returns their ids, oldest first.
 pub fn two_calibrations_in_store(state_dir: &Path) -> (String, String) {
     let sim = root().join("config/sim.toml");
-    let store = groundcal::store::Store::new(state_dir);
+    let store = groundcal::formats::store::Store::new(state_dir);
     let mut ids = Vec::new();
     for created in ["2026-12-01T00:00:00Z", "2026-12-01T01:00:00Z"] {
         let (code, out, err) =
             groundcal(&["calibrate", "--config", sim.to_str().unwrap(), "--json"]);
         assert_eq!(code, 0, "{err}");
-        let result = groundcal::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
-            .expect("a result document");
+        let result =
+            groundcal::formats::output::ResultJson::parse(serde_json::from_str(&out).unwrap())
+                .expect("a result document");
         ids.push(store.add(&result, created).unwrap());
     }
     (ids[0].clone(), ids[1].clone())
 }
 
 /// The shipped 52-pose schedule (config/schedules/octopus-52.toml).
-pub fn octopus_52() -> groundcal::schedule::Schedule {
-    groundcal::schedule::Schedule::read(&root().join("config/schedules/octopus-52.toml"))
+pub fn octopus_52() -> groundcal::setup::schedule::Schedule {
+    groundcal::setup::schedule::Schedule::read(&root().join("config/schedules/octopus-52.toml"))
         .expect("the shipped schedule")
 }
 

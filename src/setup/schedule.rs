@@ -12,7 +12,7 @@ use serde::Deserialize;
 
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::solve::{observability, Observation, SolveSettings};
-use crate::input::{parse_toml, read_bounded, InputError};
+use crate::platform::input::{parse_toml, read_bounded, InputError};
 
 /// A schedule as read from its file.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

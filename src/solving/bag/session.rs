@@ -29,7 +29,7 @@ use super::stream::{Limits, McapStream, ReadError, StreamMessage};
 use crate::calib::geometry::{PoseDegMm, Transform};
 use crate::calib::observe::NominalMount;
 use crate::calib::sensor::Intrinsics;
-use crate::export::{base_link_from_robot, robot_from_sensor_from_ros};
+use crate::formats::export::{base_link_from_robot, robot_from_sensor_from_ros};
 use groundcal_ros::msg::{CameraInfo, Cdr, Header, Image, Message, TfMessage};
 use groundcal_ros::CdrReader;
 
@@ -58,7 +58,7 @@ impl Default for BagOptions {
         Self {
             depth_topic: "/camera/depth/image_raw".into(),
             camera_info_topic: "/camera/depth/camera_info".into(),
-            body_frame: crate::export::PARENT_FRAME.into(),
+            body_frame: crate::formats::export::PARENT_FRAME.into(),
             foot_frames: std::array::from_fn(|k| format!("foot_{}", k + 1)),
             still_mm: 0.5,
             still_s: 0.3,
@@ -152,7 +152,11 @@ impl<R: std::io::Read> std::io::Read for Hashing<R> {
 /// Why a bag could not be used; names the file and what was wrong (with
 /// the control characters of anything the bag said escaped).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{}: {}", crate::input::printable(path), crate::input::printable(what))]
+#[error(
+    "{}: {}",
+    crate::platform::input::printable(path),
+    crate::platform::input::printable(what)
+)]
 pub struct BagError {
     pub path: String,
     pub what: String,
@@ -391,7 +395,7 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         what,
     };
     let open = || {
-        crate::files::open_regular(path)
+        crate::platform::files::open_regular(path)
             .map_err(|e| fail(format!("cannot {}: {}", e.action, e.source)))
     };
     let wanted = |topic: &str| {
@@ -678,7 +682,7 @@ impl BagSession {
         let mut stream = plan.stream.clone();
         let mut pending: Vec<Option<Vec<Vec<u16>>>> = vec![Some(Vec::new()); self.poses.len()];
         let mut read = 0;
-        let file = crate::files::open_regular(&self.path)
+        let file = crate::platform::files::open_regular(&self.path)
             .map_err(|e| fail(format!("cannot {}: {}", e.action, e.source)))?;
         stream
             .read(

@@ -397,18 +397,20 @@ fn sniff_format(path: &Path, bytes: &[u8]) -> Result<FileFormat, DepthImageError
 
 /// Reads the whole file, refusing before reading if it is implausibly large for a depth image.
 fn read_bounded(path: &Path) -> Result<Vec<u8>, DepthImageError> {
-    use crate::files::ReadError;
+    use crate::platform::files::ReadError;
     let mut bytes = Vec::new();
-    crate::files::read_bounded_into(path, MAX_FILE_BYTES, &mut bytes).map_err(|e| match e {
-        ReadError::File(f) => DepthImageError::Io {
-            path: path.to_path_buf(),
-            source: f.source,
+    crate::platform::files::read_bounded_into(path, MAX_FILE_BYTES, &mut bytes).map_err(
+        |e| match e {
+            ReadError::File(f) => DepthImageError::Io {
+                path: path.to_path_buf(),
+                source: f.source,
+            },
+            ReadError::TooLarge { .. } => DepthImageError::FileTooLarge {
+                path: path.to_path_buf(),
+                max: MAX_FILE_BYTES,
+            },
         },
-        ReadError::TooLarge { .. } => DepthImageError::FileTooLarge {
-            path: path.to_path_buf(),
-            max: MAX_FILE_BYTES,
-        },
-    })?;
+    )?;
     Ok(bytes)
 }
 

@@ -16,8 +16,8 @@ use serde::{Deserialize, Serialize};
 use crate::calib::geometry::{rot_z, PoseDegMm, PoseParams};
 use crate::calib::observe::NominalMount;
 use crate::calib::tilt::{fit, TiltCalibration, TiltModel};
-use crate::input::InputError;
-use crate::output::{MountJson, ResultJson, ResultStatus, TiltModelJson, TiltResultJson};
+use crate::formats::output::{MountJson, ResultJson, ResultStatus, TiltModelJson, TiltResultJson};
+use crate::platform::input::InputError;
 
 /// The model as the result carries it.
 fn model_json(m: &TiltModel) -> TiltModelJson {
@@ -86,7 +86,7 @@ pub fn combine(results: Vec<(f64, ResultJson)>, reference_tilt_deg: f64) -> Resu
     let calibrations: Vec<TiltCalibration> = results
         .iter()
         .filter_map(|(tilt_deg, r)| {
-            let mount = crate::verify::mount_of(r).ok()?;
+            let mount = crate::solving::verify::mount_of(r).ok()?;
             Some(TiltCalibration {
                 tilt_deg: *tilt_deg,
                 robot_from_sensor: mount.robot_from_sensor,
@@ -189,7 +189,7 @@ pub fn write_tilts_file(dir: &Path, tilts: &[f64], reference_tilt_deg: f64) -> R
             .collect(),
     };
     let text = serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?;
-    crate::files::write_atomically(&dir.join("tilts.json"), text.as_bytes())
+    crate::platform::files::write_atomically(&dir.join("tilts.json"), text.as_bytes())
         .map_err(|e| e.to_string())
 }
 
@@ -206,7 +206,7 @@ pub fn read_tilts_file(dir: &Path) -> Result<Option<TiltsFile>, InputError> {
     if !path.exists() {
         return Ok(None);
     }
-    let bytes = crate::input::read_bounded(&path, 1 << 20)?;
+    let bytes = crate::platform::input::read_bounded(&path, 1 << 20)?;
     let text = String::from_utf8(bytes)
         .map_err(|e| InputError::new(&path, None, format!("not UTF-8 text: {e}")))?;
     let file = parse_tilts_file(&path, &text)?;
@@ -297,7 +297,7 @@ pub fn parse_tilts_file(path: &Path, text: &str) -> Result<TiltsFile, InputError
         }
     }
     let tilts: Vec<f64> = file.tilts.iter().map(|t| t.tilt_deg).collect();
-    crate::config::check_tilts(&tilts).map_err(|e| InputError::new(path, None, e))?;
+    crate::setup::config::check_tilts(&tilts).map_err(|e| InputError::new(path, None, e))?;
     for (k, t) in file.tilts.iter().enumerate() {
         if file.tilts[..k].iter().any(|u| u.dir == t.dir) {
             return Err(InputError::new(

@@ -6,7 +6,7 @@
 use std::fmt::Write as _;
 
 use super::html::{escape, num, signed};
-use crate::output::DepthPatternJson;
+use crate::formats::output::DepthPatternJson;
 
 /// The colours of the scale's ends: reads nearer than the truth, farther.
 const NEARER: [u8; 3] = [33, 102, 172];

@@ -34,8 +34,8 @@ use html::{escape, num, opt, signed};
 
 use crate::calib::outcome::{position_words, rotation_words};
 use crate::calib::sensor::DepthModel;
-use crate::files::{write_atomically, FileError};
-use crate::output::{GateCheckJson, PoseJson, ResultJson};
+use crate::formats::output::{GateCheckJson, PoseJson, ResultJson};
+use crate::platform::files::{write_atomically, FileError};
 
 /// Where a result came from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -61,7 +61,7 @@ impl Provenance {
     }
 }
 
-/// Writes `dir/index.html` atomically ([`crate::files::write_atomically`]),
+/// Writes `dir/index.html` atomically ([`crate::platform::files::write_atomically`]),
 /// so that a reader never sees half a report; creates `dir` if needed.
 pub fn write_report(
     dir: &Path,
@@ -295,7 +295,7 @@ fn parameters_section(page: &mut String, result: &ResultJson) {
         );
         return;
     };
-    let sigma = |f: fn(&crate::output::SigmaJson) -> f64| {
+    let sigma = |f: fn(&crate::formats::output::SigmaJson) -> f64| {
         result
             .sigma
             .as_ref()
@@ -724,7 +724,7 @@ fn accuracy_section(page: &mut String, result: &ResultJson) {
         return;
     }
     let mean_max =
-        |f: fn(&crate::output::SummaryJson) -> (f64, f64)| result.summary.as_ref().map(f);
+        |f: fn(&crate::formats::output::SummaryJson) -> (f64, f64)| result.summary.as_ref().map(f);
     // The gate's line, or under the chart how far below it the poses are.
     let with_gate = |mut marks: Vec<chart::Mark>,
                      gate: Option<f64>,
@@ -1262,7 +1262,7 @@ mod tests {
     use super::*;
     use crate::calib::calibrate::{calibrate, CalibrationSettings};
     use crate::calib::solve::SolveError;
-    use crate::recording::planes::read_planes;
+    use crate::formats::recording::planes::read_planes;
 
     fn table2() -> Vec<crate::calib::solve::Observation> {
         let path =
@@ -1318,7 +1318,7 @@ mod tests {
     #[test]
     fn an_accepted_result_says_so() {
         let mut result = solved();
-        result.status = crate::output::ResultStatus::Accepted;
+        result.status = crate::formats::output::ResultStatus::Accepted;
         result.reasons.clear();
         let html = render_html(&result, &provenance());
         assert!(html.contains("<h1>Passed its checks</h1>"));
@@ -1425,7 +1425,7 @@ mod tests {
         use crate::calib::sensor::{DepthModel, Intrinsics};
         let mut result = solved();
         result.kinect_tilt_deg = Some(-20.0);
-        result.setup = Some(crate::output::SetupJson {
+        result.setup = Some(crate::formats::output::SetupJson {
             robot: Some("octopus".into()),
             schedule: Some("table <2>".into()),
             poses: Some(6),

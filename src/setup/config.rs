@@ -11,9 +11,9 @@ use serde::{Deserialize, Deserializer};
 
 use crate::calib::quality::Gates;
 use crate::calib::sensor::{DepthModel, Intrinsics};
-use crate::input::{parse_toml, read_bounded, InputError};
-use crate::recording::session::NominalMount;
-use crate::schedule::{Limits, Schedule};
+use crate::formats::recording::session::NominalMount;
+use crate::platform::input::{parse_toml, read_bounded, InputError};
+use crate::setup::schedule::{Limits, Schedule};
 
 /// The whole configuration.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -228,7 +228,7 @@ pub fn parse_depth_scale(text: &str) -> Result<DepthScaleSetting, String> {
         Ok(s) if (0.5..=2.0).contains(&s) => Ok(DepthScaleSetting::Fixed(s)),
         Ok(s) => Err(format!(
             "a depth scale of {} is not a Kinect's (it lies near 1, e.g. 1.0032)",
-            crate::output::brief_number(s)
+            crate::formats::output::brief_number(s)
         )),
         Err(_) => Err(format!(
             "\"{text}\" is neither \"estimate\" nor a depth scale such as 1.0032"
@@ -470,8 +470,8 @@ impl Config {
         reason = "files built into the binary, parsed by the unit tests: not input"
     )]
     pub fn embedded_sim() -> (Self, Schedule) {
-        const CONFIG: &str = include_str!("../config/sim.toml");
-        const SCHEDULE: &str = include_str!("../config/schedules/octopus-52.toml");
+        const CONFIG: &str = include_str!("../../config/sim.toml");
+        const SCHEDULE: &str = include_str!("../../config/schedules/octopus-52.toml");
         let config = Self::parse(Path::new("(built-in config/sim.toml)"), CONFIG)
             .expect("the shipped sim.toml parses (tested)");
         let schedule = Schedule::parse(Path::new("(built-in octopus-52.toml)"), SCHEDULE)

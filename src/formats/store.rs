@@ -39,7 +39,9 @@ use std::sync::{Mutex, MutexGuard};
 
 use serde::{Deserialize, Serialize};
 
-use crate::output::{MountJson, ResultJson, ResultStatus, RobotJson, SigmaJson, SummaryJson};
+use crate::formats::output::{
+    MountJson, ResultJson, ResultStatus, RobotJson, SigmaJson, SummaryJson,
+};
 
 /// Why the store could not do something.
 #[derive(Debug, thiserror::Error)]
@@ -51,7 +53,7 @@ pub enum StoreError {
         source: std::io::Error,
     },
     #[error(transparent)]
-    Write(#[from] crate::files::FileError),
+    Write(#[from] crate::platform::files::FileError),
     #[error("{}: {message}", path.display())]
     Invalid { path: PathBuf, message: String },
     #[error("no calibration {0} in the history")]
@@ -163,7 +165,7 @@ pub struct ActiveDocument {
     /// The Kinect's depth pattern it corrected, which checks against it
     /// take out of their frames.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub depth_pattern: Option<crate::output::DepthPatternJson>,
+    pub depth_pattern: Option<crate::formats::output::DepthPatternJson>,
 }
 
 /// `running.json`: who started the run in progress, when, and what it
@@ -188,9 +190,9 @@ const MAX_STORE_FILE_BYTES: u64 = 16 << 20;
 /// A file of the store, read with a bound and only as a regular file; None
 /// when it does not exist.
 fn read_store_file(path: &Path) -> Result<Option<String>, StoreError> {
-    use crate::files::ReadError;
+    use crate::platform::files::ReadError;
     let mut bytes = Vec::new();
-    match crate::files::read_bounded_into(path, MAX_STORE_FILE_BYTES, &mut bytes) {
+    match crate::platform::files::read_bounded_into(path, MAX_STORE_FILE_BYTES, &mut bytes) {
         Ok(()) => {}
         Err(ReadError::File(f)) if f.source.kind() == std::io::ErrorKind::NotFound => {
             return Ok(None)
@@ -289,7 +291,7 @@ impl Store {
             for item in listing {
                 let item = item.map_err(io(&dir, "cannot list"))?;
                 let name = item.file_name().to_string_lossy().into_owned();
-                if crate::files::is_temporary(&name) {
+                if crate::platform::files::is_temporary(&name) {
                     let path = item.path();
                     fs::remove_file(&path).map_err(io(&path, "cannot remove"))?;
                     removed += 1;
@@ -332,7 +334,7 @@ impl Store {
             path: self.running_path(),
             message: e.to_string(),
         })?;
-        crate::files::write_atomically(&self.running_path(), &bytes)?;
+        crate::platform::files::write_atomically(&self.running_path(), &bytes)?;
         Ok(())
     }
 
@@ -376,7 +378,7 @@ impl Store {
             path: self.check_path(),
             message: e.to_string(),
         })?;
-        crate::files::write_atomically(&self.check_path(), &bytes)?;
+        crate::platform::files::write_atomically(&self.check_path(), &bytes)?;
         Ok(())
     }
 
@@ -417,7 +419,7 @@ impl Store {
             path: self.history_dir(),
             message: e.to_string(),
         })?;
-        crate::files::write_atomically(&self.entry_path(&id)?, &bytes)?;
+        crate::platform::files::write_atomically(&self.entry_path(&id)?, &bytes)?;
         Ok(id)
     }
 
@@ -479,7 +481,7 @@ impl Store {
             path: self.active_path(),
             message: e.to_string(),
         })?;
-        crate::files::write_atomically(&self.active_path(), &bytes)?;
+        crate::platform::files::write_atomically(&self.active_path(), &bytes)?;
         if let Some(previous) = previous {
             // Said in the history after the switch: a kill in between leaves
             // the right calibration active and only this remark missing.
@@ -494,7 +496,7 @@ impl Store {
                         path: self.history_dir(),
                         message: e.to_string(),
                     })?;
-                crate::files::write_atomically(&self.entry_path(&previous)?, &bytes)?;
+                crate::platform::files::write_atomically(&self.entry_path(&previous)?, &bytes)?;
             }
         }
         Ok(active)
@@ -520,7 +522,7 @@ impl Store {
             path: path.clone(),
             message: e.to_string(),
         })?;
-        crate::files::write_atomically(&path, &bytes)?;
+        crate::platform::files::write_atomically(&path, &bytes)?;
         Ok(entry)
     }
 

@@ -8,7 +8,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::html::escape;
-use crate::output::PoseJson;
+use crate::formats::output::PoseJson;
 
 /// Logical size of every chart. The page scales charts to the column width
 /// (about 0.8× on a phone), so the fonts below are large enough to survive it.

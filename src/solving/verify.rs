@@ -16,10 +16,10 @@ use crate::calib::verify::{
     verify, ActiveMount, Check, DirectionChange, Unit, VerifyError, VerifyPose, VerifyReport,
     VerifySettings,
 };
-use crate::config::Config;
-use crate::output::{MotorJson, MountJson, ResultJson, ResultStatus, SigmaJson};
-use crate::schedule::Schedule;
-use crate::store::Store;
+use crate::formats::output::{MotorJson, MountJson, ResultJson, ResultStatus, SigmaJson};
+use crate::formats::store::Store;
+use crate::setup::config::Config;
+use crate::setup::schedule::Schedule;
 
 /// The accelerometer at one pose, its readings averaged.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -121,7 +121,8 @@ pub fn load_calibration(
 ) -> Result<Calibration, String> {
     let (document, source) = match file {
         Some(path) => {
-            let bytes = crate::input::read_bounded(path, 16 << 20).map_err(|e| e.to_string())?;
+            let bytes =
+                crate::platform::input::read_bounded(path, 16 << 20).map_err(|e| e.to_string())?;
             let value: serde_json::Value = serde_json::from_slice(&bytes)
                 .map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
             (value, path.display().to_string())
@@ -131,7 +132,7 @@ pub fn load_calibration(
                 "no --calibration FILE, and the configuration has no [serve] state_dir to find the active calibration in",
             )?;
             let dir = match config_path {
-                Some(p) => crate::config::resolve_from_config(p, &serve.state_dir),
+                Some(p) => crate::setup::config::resolve_from_config(p, &serve.state_dir),
                 None => serve.state_dir.clone(),
             };
             return calibration_in_store(&Store::new(&dir))?.ok_or_else(|| {
@@ -751,7 +752,7 @@ mod tests {
             &PoseDegMm::from_values(MOUNT).to_params(),
         ));
         result.poses = (1..=12)
-            .map(|i| crate::output::PoseJson::failed(i, String::new()))
+            .map(|i| crate::formats::output::PoseJson::failed(i, String::new()))
             .collect();
         result
     }

@@ -189,8 +189,9 @@ mod tests {
     /// which skips unknown keys without checking all their escapes.
     #[test]
     fn text_that_is_not_json_is_refused_even_in_an_unknown_key() {
-        let bytes =
-            include_bytes!("../../fuzz/regressions/planes_file/invalid-escape-in-unknown-key.json");
+        let bytes = include_bytes!(
+            "../../../fuzz/regressions/planes_file/invalid-escape-in-unknown-key.json"
+        );
         let text = String::from_utf8_lossy(bytes);
         assert!(serde_json::from_str::<serde_json::Value>(&text).is_err());
         let e = parse(&text).unwrap_err().to_string();

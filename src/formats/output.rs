@@ -1127,7 +1127,7 @@ fn some_6x6_or_nan<'de, D: Deserializer<'de>>(
 mod tests {
     use super::*;
     use crate::calib::calibrate::{calibrate, CalibrationSettings};
-    use crate::recording::planes::read_planes;
+    use crate::formats::recording::planes::read_planes;
 
     /// A pattern's σ of the angles had its plane part been known is read
     /// back only as σ: a NaN (written as null, or made up) is named.

@@ -15,9 +15,9 @@ use std::path::{Path, PathBuf};
 
 use super::stream::{Limits, McapStream, ReadError};
 use super::BagError;
-use crate::depth_image::{encode_fakenect_pgm, DepthImage};
-use crate::mcap_session::recording_attachment::{FRAMES, RECORDING_PREFIX};
-use crate::mcap_session::topic::DEPTH_RAW as RAW_TOPIC;
+use crate::formats::depth_image::{encode_fakenect_pgm, DepthImage};
+use crate::solving::mcap_session::recording_attachment::{FRAMES, RECORDING_PREFIX};
+use crate::solving::mcap_session::topic::DEPTH_RAW as RAW_TOPIC;
 use groundcal_ros::msg::Message;
 
 /// The recording a session MCAP carried, in a directory of its own that is
@@ -49,7 +49,7 @@ pub fn own_recording(path: &Path) -> Result<Option<OwnRecording>, BagError> {
         what,
     };
     let open = || {
-        crate::files::open_regular(path)
+        crate::platform::files::open_regular(path)
             .map(|f| std::io::BufReader::with_capacity(1 << 20, f))
             .map_err(|e| fail(e.to_string()))
     };
@@ -162,7 +162,7 @@ pub fn own_recording(path: &Path) -> Result<Option<OwnRecording>, BagError> {
 fn written_by_groundcal(path: &Path) -> bool {
     use std::io::Read;
     let mut head = [0u8; 8 + 9 + 4096];
-    let Ok(mut file) = crate::files::open_regular(path) else {
+    let Ok(mut file) = crate::platform::files::open_regular(path) else {
         return false;
     };
     let mut read = 0;

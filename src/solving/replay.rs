@@ -17,11 +17,11 @@ use crate::calib::observe::{BodyEstimate, ObserveSettings, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::calib::quality::Gates;
 use crate::calib::solve::Observation;
-use crate::input::InputError;
-use crate::output::{ResultJson, SetupJson};
-use crate::recording::session::NominalMount;
-use crate::recording::Recording;
-use crate::verify::{GravityReading, VisitedPose};
+use crate::formats::output::{ResultJson, SetupJson};
+use crate::formats::recording::session::NominalMount;
+use crate::formats::recording::Recording;
+use crate::platform::input::InputError;
+use crate::solving::verify::{GravityReading, VisitedPose};
 
 /// How to replay.
 #[derive(Debug, Clone, Default)]
@@ -128,7 +128,7 @@ struct PoseOutcome {
 fn process_pose(
     recording: &Recording,
     processor: &PoseObserver,
-    pose: &crate::recording::poses::PoseRecord,
+    pose: &crate::formats::recording::poses::PoseRecord,
     body: &Result<BodyEstimate, String>,
     buffers: &mut WorkerBuffers,
     keep: AlsoKeep,
@@ -363,7 +363,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     if let Some(note) = observed.prior_note {
         result.notes.insert(0, note);
     }
-    crate::verify::judge_motor(
+    crate::solving::verify::judge_motor(
         &mut result,
         &observed.poses,
         session.kinect.tilt_deg,
@@ -378,7 +378,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     }
     result.robot = Some(session.robot.clone())
         .filter(|r| !r.is_empty())
-        .map(|name| crate::output::RobotJson {
+        .map(|name| crate::formats::output::RobotJson {
             name: Some(name),
             firmware: None,
         });

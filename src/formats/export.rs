@@ -24,8 +24,8 @@ use serde::Serialize;
 use serde_json::Value;
 
 use crate::calib::geometry::{self, PoseDegMm, PoseParams, Transform};
-use crate::input::{read_bounded, InputError};
-use crate::output::{ResultJson, ResultStatus};
+use crate::formats::output::{ResultJson, ResultStatus};
+use crate::platform::input::{read_bounded, InputError};
 
 /// The ROS parent frame (REP-103 body frame).
 pub const PARENT_FRAME: &str = "base_link";
@@ -627,7 +627,7 @@ fn key_near(text: &str, line: usize, column: usize) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::output::MountJson;
+    use crate::formats::output::MountJson;
     use approx::assert_abs_diff_eq;
     use nalgebra::Vector3;
     use rand::{Rng, SeedableRng};

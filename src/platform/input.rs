@@ -89,14 +89,14 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> 
 }
 
 /// [`read_bounded`] into a buffer that is reused from file to file
-/// ([`crate::files::read_bounded_into`]), errors as the recording's.
+/// ([`crate::platform::files::read_bounded_into`]), errors as the recording's.
 pub fn read_bounded_into(
     path: &Path,
     max_bytes: u64,
     bytes: &mut Vec<u8>,
 ) -> Result<(), InputError> {
-    use crate::files::ReadError;
-    crate::files::read_bounded_into(path, max_bytes, bytes).map_err(|e| match e {
+    use crate::platform::files::ReadError;
+    crate::platform::files::read_bounded_into(path, max_bytes, bytes).map_err(|e| match e {
         ReadError::File(f) => {
             InputError::new(path, None, format!("cannot {}: {}", f.action, f.source))
         }

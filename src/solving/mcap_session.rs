@@ -22,12 +22,14 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::calib::geometry::{sensor_from_optical, Plane, Transform};
 use crate::calib::sensor::{DepthModel, Intrinsics};
-use crate::export::{base_link_from_camera_optical, base_link_from_robot, quaternion_xyzw};
-use crate::files::{AtomicFile, FileError};
-use crate::input::InputError;
-use crate::output::{PlaneJson, ResultJson};
-use crate::recording::Recording;
-use crate::replay::Replay;
+use crate::formats::export::{
+    base_link_from_camera_optical, base_link_from_robot, quaternion_xyzw,
+};
+use crate::formats::output::{PlaneJson, ResultJson};
+use crate::formats::recording::Recording;
+use crate::platform::files::{AtomicFile, FileError};
+use crate::platform::input::InputError;
+use crate::solving::replay::Replay;
 use groundcal_ros::msg::{
     self, CameraInfo, Header, Image, Message, PointCloud2, PoseFit, TfMessage, TransformStamped,
 };
@@ -68,9 +70,9 @@ pub mod frame {
     /// The ground frame G (conventions.md), z up.
     pub const GROUND: &str = "ground";
     /// The robot body R, z up (`export`'s parent frame).
-    pub const BODY: &str = crate::export::PARENT_FRAME;
+    pub const BODY: &str = crate::formats::export::PARENT_FRAME;
     /// The depth camera, x right, y down, z forward (`export`'s child frame).
-    pub const OPTICAL: &str = crate::export::CHILD_FRAME;
+    pub const OPTICAL: &str = crate::formats::export::CHILD_FRAME;
 
     /// A foot of the robot, 1 to 6.
     pub fn foot(k: usize) -> String {
@@ -426,13 +428,13 @@ impl<W: Write + Seek> SessionWriter<W> {
             attach(name.to_string(), "text/plain", text.as_bytes().to_vec())?;
         }
         for entry in &recording.index {
-            if entry.kind == crate::recording::dump::EntryKind::Depth {
+            if entry.kind == crate::formats::recording::dump::EntryKind::Depth {
                 continue;
             }
             // A small dump the INDEX names; one that is not there is not
             // carried (replay reads only the dumps a pose names).
             let path = recording.kinect_path(&entry.name);
-            if let Ok(bytes) = crate::input::read_bounded(&path, SMALL_DUMP_BYTES) {
+            if let Ok(bytes) = crate::platform::input::read_bounded(&path, SMALL_DUMP_BYTES) {
                 attach(
                     format!("kinect/{}", entry.name),
                     "application/octet-stream",

@@ -60,7 +60,7 @@ impl CutOff {
 
 /// The most poses a recording may hold: the solve's own bound on
 /// observations (a calibration has tens; the paper's schedule 52).
-pub const MAX_POSES: usize = crate::recording::planes::MAX_OBSERVATIONS;
+pub const MAX_POSES: usize = crate::formats::recording::planes::MAX_OBSERVATIONS;
 /// The most depth frames or accelerometer readings one pose may name (a
 /// configuration captures at most 30 frames a pose, and reads 10).
 pub const MAX_FILES_PER_POSE: usize = 100;

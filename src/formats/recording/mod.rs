@@ -11,12 +11,12 @@ pub mod writer;
 
 use std::path::{Path, PathBuf};
 
-use crate::depth_image::{fakenect_pixels_start, parse_fakenect_pgm_into, DepthImage};
+use crate::formats::depth_image::{fakenect_pixels_start, parse_fakenect_pgm_into, DepthImage};
 use dump::{parse_index, DumpEntry, EntryKind};
 use poses::{parse_poses, PoseRecord};
 use session::Session;
 
-pub use crate::input::{read_bounded, read_bounded_into, InputError};
+pub use crate::platform::input::{read_bounded, read_bounded_into, InputError};
 
 /// Largest `session.json` accepted: a few kilobytes in any recording.
 const MAX_SESSION_BYTES: u64 = 1 << 20;
@@ -285,7 +285,7 @@ fn read_dump_pixels(
     digest: Option<&mut blake3::Hasher>,
 ) -> bool {
     use std::io::Read;
-    let Ok(mut file) = crate::files::open_regular(path) else {
+    let Ok(mut file) = crate::platform::files::open_regular(path) else {
         return false;
     };
     // The header is about 18 bytes; 64 hold it with room.
@@ -372,7 +372,7 @@ mod tests {
             &mut pixels,
             Some(&mut digest)
         ));
-        let parsed = crate::depth_image::parse_fakenect_pgm(&path, &bytes).unwrap();
+        let parsed = crate::formats::depth_image::parse_fakenect_pgm(&path, &bytes).unwrap();
         assert_eq!(pixels, parsed.pixels);
         assert_eq!(digest.finalize(), blake3::hash(&bytes));
         // Again into the same buffer, now of the right size.

@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 use super::dump::{EntryKind, RawTiltState};
 use super::poses::PoseRecord;
 use super::session::{check_feet, Session};
-use crate::depth_image::{encode_fakenect_pgm, DepthImage};
+use crate::formats::depth_image::{encode_fakenect_pgm, DepthImage};
 
 /// Largest 11-bit raw value; 2047 means no reading.
 const RAW11_MAX: u16 = 2047;
@@ -47,7 +47,7 @@ pub enum WriteError {
     Refused { path: PathBuf, message: String },
     /// A file could not be replaced whole.
     #[error(transparent)]
-    File(#[from] crate::files::FileError),
+    File(#[from] crate::platform::files::FileError),
     /// The file system failed.
     #[error("{}: cannot {action}: {source}", path.display())]
     Io {
@@ -162,7 +162,7 @@ impl RecordingWriter {
         std::fs::create_dir(&kinect).map_err(WriteError::io(&kinect, "create the directory"))?;
 
         // session.json: complete or absent, never half-written.
-        crate::files::write_atomically(&session_path, text.as_bytes())?;
+        crate::platform::files::write_atomically(&session_path, text.as_bytes())?;
 
         let poses_path = dir.join("poses.jsonl");
         let poses = create_new(&poses_path)?;
@@ -477,8 +477,8 @@ fn sync_dir(dir: &Path) -> Result<(), WriteError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::recording::dump::parse_entry_name;
-    use crate::recording::Recording;
+    use crate::formats::recording::dump::parse_entry_name;
+    use crate::formats::recording::Recording;
 
     fn sample() -> PathBuf {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/sample-12")

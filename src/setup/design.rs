@@ -9,7 +9,7 @@ use std::fmt::Write;
 use crate::calib::geometry::{PoseDegMm, PoseParams};
 use crate::calib::plan::{design, predict_schedule, NoiseModel};
 use crate::calib::solve::predict;
-use crate::schedule::{Limits, Schedule};
+use crate::setup::schedule::{Limits, Schedule};
 
 /// Levels of roll and pitch, as fractions of the tilt limit: a margin of a
 /// tenth keeps the body off the limit itself.

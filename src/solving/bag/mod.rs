@@ -15,8 +15,8 @@ use crate::calib::depth::DepthEncoding;
 use crate::calib::geometry::PoseDegMm;
 use crate::calib::observe::{BodyPoseSource, PoseObserver};
 use crate::calib::plane::FitBuffers;
-use crate::output::{ResultJson, SetupJson};
-use crate::replay::{Replay, ReplayOptions};
+use crate::formats::output::{ResultJson, SetupJson};
+use crate::solving::replay::{Replay, ReplayOptions};
 pub use session::{read_bag, BagError, BagOptions, BagSession};
 
 /// Whether `path` is an MCAP file (its magic), not a recording's directory.
@@ -24,7 +24,7 @@ pub fn is_mcap_file(path: &std::path::Path) -> bool {
     use std::io::Read;
     let mut magic = [0u8; 8];
     path.is_file()
-        && crate::files::open_regular(path)
+        && crate::platform::files::open_regular(path)
             .map_err(std::io::Error::other)
             .and_then(|mut f| f.read_exact(&mut magic))
             .is_ok()
