@@ -258,7 +258,7 @@ pub(super) fn pattern_of(
         fit_again_about: fit_again_about(shape, shape_taken, taken_out.is_some()),
         note: Some(match taken_out {
             Some(_) => format!(
-                "its first estimate taken out of the frames and the ground fitted again, since the first fit's band cut its peaks; then {note}"
+                "the pattern's first estimate taken out of the frames and the ground fitted again, because the first fit's band cut its peaks; then {note}"
             ),
             None => note,
         }),
