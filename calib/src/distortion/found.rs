@@ -18,7 +18,11 @@ pub(super) fn pattern_not_corrected_by_another_fit(
 ) -> DepthPattern {
     let shape_fixed = shape.significant() && shape.consistent();
     if !shape_fixed && plane_part.is_none() {
-        return pattern_of(shape, false, None, None);
+        // Nothing to fit again about: that fit's planes are never corrected.
+        return DepthPattern {
+            fit_again_about: None,
+            ..pattern_of(shape, false, None, None)
+        };
     }
     let mut pattern = pattern_of(shape, shape_fixed, plane_part, None);
     // The shape's RMS, as for a warp left uncorrected by the default fit;
@@ -30,6 +34,8 @@ pub(super) fn pattern_not_corrected_by_another_fit(
         (cells.iter().map(|v| v * v).sum::<f64>() / cells.len().max(1) as f64).sqrt()
     };
     pattern.corrected = false;
+    // Nothing to fit again about: that fit's planes are never corrected.
+    pattern.fit_again_about = None;
     pattern.uncorrected_shape_rms_raw = Some(rms);
     pattern.uncorrected_fixed = true;
     pattern.note = Some(format!(
