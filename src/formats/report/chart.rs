@@ -1,13 +1,11 @@
 //! The report's charts: per-pose series drawn by `plotters` into SVG strings
 //! that the page inlines, and the HTML keys under them.
 
-use std::fmt::Write as _;
-
+use maud::{html, Markup, PreEscaped};
 use plotters::coord::types::{RangedCoordf64, RangedCoordi32};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::html::escape;
 use crate::formats::output::PoseJson;
 
 /// Logical size of every chart. The page scales charts to the column width
@@ -137,49 +135,40 @@ pub(super) fn gate_mark(value: f64, label: String, note: Option<String>) -> Mark
 }
 
 /// One chart with its caption; a chart that cannot be drawn says so instead.
-/// `title` and `caption` are this module's own HTML, never outside text.
-pub(super) fn figure(
-    page: &mut String,
-    title: &str,
-    caption: &str,
-    spec: &ChartSpec,
-    poses: &[PoseJson],
-) {
-    let _ = writeln!(
-        page,
-        "<figure><figcaption><strong>{title}</strong>: {caption}</figcaption>"
-    );
-    match draw_chart(spec, poses) {
-        Ok((svg, notes)) => {
-            page.push_str(&inline_svg(&svg, spec.description));
-            for note in notes {
-                let _ = writeln!(page, "<p class=\"note chart-note\">{}</p>", escape(&note));
+pub(super) fn figure(title: Markup, caption: &str, spec: &ChartSpec, poses: &[PoseJson]) -> Markup {
+    html! {
+        figure {
+            figcaption { strong { (title) } ": " (caption) }
+            @match draw_chart(spec, poses) {
+                Ok((svg, notes)) => {
+                    (inline_svg(&svg, spec.description))
+                    @for note in notes { p.note.chart-note { (note) } }
+                }
+                Err(e) => (cannot_draw(&e)),
             }
         }
-        Err(e) => cannot_draw(page, &e),
     }
-    page.push_str("</figure>\n");
 }
 
-fn cannot_draw(page: &mut String, e: &DrawError) {
-    let _ = writeln!(
-        page,
-        "<p class=\"none\">The chart could not be drawn: {}</p>",
-        escape(&e.to_string())
-    );
+fn cannot_draw(e: &DrawError) -> Markup {
+    html! { p.none { "The chart could not be drawn: " (e.to_string()) } }
 }
 
 /// A standalone SVG document made fit for inlining in HTML: the namespace is
 /// implied there, and the size comes from the page (the viewBox keeps the
-/// aspect ratio).
-fn inline_svg(svg: &str, description: &str) -> String {
+/// aspect ratio). plotters writes the SVG and escapes its texts (all of them
+/// the report's own labels and numbers); the description is escaped here.
+fn inline_svg(svg: &str, description: &str) -> Markup {
     let (w, h) = CHART_SIZE;
-    svg.replacen(" xmlns=\"http://www.w3.org/2000/svg\"", "", 1)
-        .replacen(
-            &format!("<svg width=\"{w}\" height=\"{h}\""),
-            &format!("<svg role=\"img\" aria-label=\"{}\"", escape(description)),
-            1,
-        )
+    let label = html! { (description) }.into_string();
+    PreEscaped(
+        svg.replacen(" xmlns=\"http://www.w3.org/2000/svg\"", "", 1)
+            .replacen(
+                &format!("<svg width=\"{w}\" height=\"{h}\""),
+                &format!("<svg role=\"img\" aria-label=\"{label}\""),
+                1,
+            ),
+    )
 }
 
 /// Where a value falls on a chart whose y range was chosen from the used poses.
@@ -581,69 +570,32 @@ pub(super) enum LegendItem {
 
 /// The key under a row of charts, in HTML so that it stays readable when the
 /// charts are scaled down.
-pub(super) fn legend(items: &[LegendItem]) -> String {
+pub(super) fn legend(items: &[LegendItem]) -> Markup {
     let css = |c: &RGBColor| format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2);
-    let mut out = String::from("<ul class=\"legend\">");
-    for item in items {
-        let (swatch, label) = match item {
-            LegendItem::Dot(c, l) => (
-                format!(
-                    "<span class=\"sw dot\" style=\"background:{}\"></span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Cross(c, l) => (
-                format!(
-                    "<span class=\"sw glyph\" style=\"color:{}\">×</span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Triangle(c, l) => (
-                format!(
-                    "<span class=\"sw glyph\" style=\"color:{}\">▲</span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Solid(c, l) => (
-                format!(
-                    "<span class=\"sw line\" style=\"border-color:{}\"></span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Dashed(c, l) => (
-                format!(
-                    "<span class=\"sw line dashed\" style=\"border-color:{}\"></span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Measured(c, l) => (
-                format!(
-                    "<span class=\"sw series\" style=\"border-color:{0}\"><i class=\"mk dot\" style=\"background:{0}\"></i></span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Predicted(c, l) => (
-                format!(
-                    "<span class=\"sw series dashed\" style=\"border-color:{0}\"><i class=\"mk square\" style=\"border-color:{0}\"></i></span>",
-                    css(c)
-                ),
-                *l,
-            ),
-            LegendItem::Band => (
-                "<span class=\"sw band\"></span>".to_string(),
-                "pose set aside",
-            ),
-        };
-        let _ = write!(out, "<li>{swatch}{}</li>", escape(label));
+    html! {
+        ul.legend {
+            @for item in items {
+                li {
+                    @match item {
+                        LegendItem::Dot(c, l) => { span.sw.dot style={ "background:" (css(c)) } {} (l) },
+                        LegendItem::Cross(c, l) => { span.sw.glyph style={ "color:" (css(c)) } { "×" } (l) },
+                        LegendItem::Triangle(c, l) => { span.sw.glyph style={ "color:" (css(c)) } { "▲" } (l) },
+                        LegendItem::Solid(c, l) => { span.sw.line style={ "border-color:" (css(c)) } {} (l) },
+                        LegendItem::Dashed(c, l) => { span.sw.line.dashed style={ "border-color:" (css(c)) } {} (l) },
+                        LegendItem::Measured(c, l) => {
+                            span.sw.series style={ "border-color:" (css(c)) } { i.mk.dot style={ "background:" (css(c)) } {} }
+                            (l)
+                        },
+                        LegendItem::Predicted(c, l) => {
+                            span.sw.series.dashed style={ "border-color:" (css(c)) } { i.mk.square style={ "border-color:" (css(c)) } {} }
+                            (l)
+                        },
+                        LegendItem::Band => { span.sw.band {} "pose set aside" },
+                    }
+                }
+            }
+        }
     }
-    out.push_str("</ul>\n");
-    out
 }
 
 /// A pose's commanded tilt, for the chart of the schedule's tilts.
@@ -657,16 +609,16 @@ pub(super) struct Tilt {
 
 /// The commanded roll against pitch of every pose: how the schedule tilts
 /// the body (a cloud along one line cannot tell some directions).
-pub(super) fn tilt_figure(page: &mut String, title: &str, caption: &str, tilts: &[Tilt]) {
-    let _ = writeln!(
-        page,
-        "<figure><figcaption><strong>{title}</strong>: {caption}</figcaption>"
-    );
-    match draw_tilts(tilts) {
-        Ok(svg) => page.push_str(&inline_svg(&svg, "commanded roll against pitch per pose")),
-        Err(e) => cannot_draw(page, &e),
+pub(super) fn tilt_figure(title: &str, caption: &str, tilts: &[Tilt]) -> Markup {
+    html! {
+        figure {
+            figcaption { strong { (title) } ": " (caption) }
+            @match draw_tilts(tilts) {
+                Ok(svg) => (inline_svg(&svg, "commanded roll against pitch per pose")),
+                Err(e) => (cannot_draw(&e)),
+            }
+        }
     }
-    page.push_str("</figure>\n");
 }
 
 fn draw_tilts(tilts: &[Tilt]) -> Result<String, DrawError> {

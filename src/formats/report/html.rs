@@ -1,19 +1,27 @@
-//! Text for the report's HTML: escaping, and numbers as the page prints them.
+//! Pieces of the report's HTML: the parameters' names, and numbers as the
+//! page prints them. Escaping is maud's: every `(value)` in `html!` is
+//! escaped, and only the page's own style sheet is inserted as it is.
 
-/// Escapes text for HTML content and attribute values.
-pub(super) fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
+use maud::{html, Markup};
+
+/// The six parameters' names as the page writes them: the positions with
+/// their axis as a subscript (p<sub>x</sub>).
+pub(super) fn param_name(k: usize) -> Markup {
+    const NAMES: [(&str, Option<&str>); 6] = [
+        ("α", None),
+        ("β", None),
+        ("γ", None),
+        ("p", Some("x")),
+        ("p", Some("y")),
+        ("p", Some("z")),
+    ];
+    let (base, axis) = NAMES[k];
+    html! { (base) @if let Some(axis) = axis { sub { (axis) } } }
+}
+
+/// e<sub>d</sub>, the paper's distance error.
+pub(super) fn e_d() -> Markup {
+    html! { "e" sub { "d" } }
 }
 
 /// A number with fixed decimals, or a dash where there is none (NaN, ∞).
@@ -56,9 +64,7 @@ mod tests {
         assert_eq!(signed(0.0, 0), "0");
         assert_eq!(signed(f64::NAN, 2), "—");
         assert_eq!(num(f64::INFINITY, 2), "—");
-        assert_eq!(
-            escape("<a href='x'>&\"</a>"),
-            "&lt;a href=&#39;x&#39;&gt;&amp;&quot;&lt;/a&gt;"
-        );
+        assert_eq!(param_name(4).into_string(), "p<sub>y</sub>");
+        assert_eq!(param_name(1).into_string(), "β");
     }
 }

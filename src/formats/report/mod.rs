@@ -4,9 +4,15 @@
 //! The page is self-contained so that it can be mailed, archived next to the
 //! recording or opened on a robot with no network: inline CSS, no script, no
 //! font or image from anywhere (the one picture, the depth pattern, is a data
-//! URI), and a Content-Security-Policy that forbids loading anything. Charts are drawn by `plotters` into SVG strings and
-//! inlined ([`chart`]); every text that comes from outside (reasons, paths)
-//! is escaped ([`html`]).
+//! URI), and a Content-Security-Policy that forbids loading anything. Charts
+//! are drawn by `plotters` into SVG strings and inlined ([`chart`]).
+//!
+//! The HTML is written with maud's `html!`: the markup is checked when
+//! groundcal is compiled, and every value put into it (reasons, paths,
+//! numbers) is escaped by construction. Each section is a function that
+//! returns its `Markup`, in the module of its group. maud rather than askama:
+//! the sections are Rust functions that compose and share helpers
+//! ([`html::param_name`]) without a template file or a struct per section.
 //!
 //! The sections, in the order an operator reads them: the verdict, the
 //! quality gates (limit, measured, pass or fail), the mount with its σ, the
@@ -26,8 +32,7 @@ mod poses;
 mod verdict;
 mod weakness;
 
-use std::fmt::Write as _;
-
+use maud::{html, Markup, PreEscaped, DOCTYPE};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
@@ -36,7 +41,7 @@ use chart::{
     figure, gate_mark, legend, mean_max_marks, tilt_figure, ChartSpec, LegendItem, Line, Tilt,
     YAxis, COMPONENTS, GATE, INK, MAX, MEAN, SET_ASIDE, USED,
 };
-use html::{escape, num, opt, signed};
+use html::{e_d, num, opt, param_name, signed};
 use mount::*;
 use poses::*;
 use verdict::*;
@@ -91,57 +96,63 @@ pub fn render_html(result: &ResultJson, provenance: &Provenance) -> String {
     } else {
         "Failed its checks"
     };
-    let mut page = String::with_capacity(96 * 1024);
-    let _ = write!(
-        page,
-        r#"<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<meta http-equiv="Content-Security-Policy" content="default-src 'none'; style-src 'unsafe-inline'; img-src data:">
-<title>groundcal calibration: {verdict} ({input})</title>
-<style>{STYLE}</style>
-</head>
-<body>
-<main>
-<header><p class="kicker">groundcal calibration report</p><p class="input">{input}</p></header>
-"#,
-        input = escape(&provenance.input),
-    );
-    verdict_section(&mut page, result, verdict);
-    gates_section(&mut page, result);
-    parameters_section(&mut page, result);
-    setup_section(&mut page, result, &provenance.input);
-    summary_section(&mut page, result);
     let pattern_too_large = result
         .gate_checks
         .iter()
         .find(|c| c.gate == "pattern_max_mm" && !c.passed)
         .map(|c| c.limit);
-    pattern::depth_pattern_section(&mut page, result.depth_pattern.as_ref(), pattern_too_large);
-    observability_section(&mut page, result);
-    correlations_section(&mut page, result);
-    accuracy_section(&mut page, result);
-    residuals_section(&mut page, result);
-    planes_section(&mut page, result);
-    commanded_section(&mut page, result);
-    set_aside_section(&mut page, result);
-    poses_section(&mut page, result);
-    provenance_section(&mut page, provenance);
-    page.push_str("</main>\n</body>\n</html>\n");
+    let page = html! {
+        (DOCTYPE)
+        html lang="en" {
+            head {
+                meta charset="utf-8";
+                meta name="viewport" content="width=device-width, initial-scale=1";
+                meta http-equiv="Content-Security-Policy" content="default-src 'none'; style-src 'unsafe-inline'; img-src data:";
+                title { "groundcal calibration: " (verdict) " (" (provenance.input) ")" }
+                style { (PreEscaped(STYLE)) }
+            }
+            body {
+                main {
+                    header {
+                        p.kicker { "groundcal calibration report" }
+                        p.input { (provenance.input) }
+                    }
+                    (verdict_section(result, verdict))
+                    (gates_section(result))
+                    (parameters_section(result))
+                    (setup_section(result, &provenance.input))
+                    (summary_section(result))
+                    (pattern::depth_pattern_section(result.depth_pattern.as_ref(), pattern_too_large))
+                    (observability_section(result))
+                    (correlations_section(result))
+                    (accuracy_section(result))
+                    (residuals_section(result))
+                    (planes_section(result))
+                    (commanded_section(result))
+                    (set_aside_section(result))
+                    (poses_section(result))
+                    (provenance_section(provenance))
+                }
+            }
+        }
+    };
+    let mut page = page.into_string();
+    page.push('\n');
     page
 }
 
-fn provenance_section(page: &mut String, provenance: &Provenance) {
-    let _ = writeln!(
-        page,
-        "<footer id=\"provenance\"><h2>Provenance</h2>\n<dl class=\"facts\">\n<dt>input</dt><dd>{}</dd>\n<dt>input BLAKE3</dt><dd><code class=\"digest\">{}</code></dd>\n<dt>groundcal</dt><dd>{}</dd>\n<dt>created</dt><dd>{}</dd>\n</dl>\n</footer>",
-        escape(&provenance.input),
-        escape(&provenance.input_digest),
-        escape(&provenance.groundcal_version),
-        escape(&provenance.created)
-    );
+fn provenance_section(provenance: &Provenance) -> Markup {
+    html! {
+        footer #provenance {
+            h2 { "Provenance" }
+            dl.facts {
+                dt { "input" } dd { (provenance.input) }
+                dt { "input BLAKE3" } dd { code.digest { (provenance.input_digest) } }
+                dt { "groundcal" } dd { (provenance.groundcal_version) }
+                dt { "created" } dd { (provenance.created) }
+            }
+        }
+    }
 }
 
 /// Inline, because the page must open with no network; large type and one
@@ -274,6 +285,11 @@ mod tests {
         Provenance::now("recordings/2024-05-01 <table 2>", "ab".repeat(32))
     }
 
+    /// Text as the page escapes it.
+    fn escape(text: &str) -> String {
+        html! { (text) }.into_string()
+    }
+
     fn count(haystack: &str, needle: &str) -> usize {
         haystack.matches(needle).count()
     }
@@ -324,9 +340,7 @@ mod tests {
         let html = render_html(&result, &provenance());
         assert!(!html.contains("<script"));
         assert!(!html.contains("<img"));
-        assert!(
-            html.contains("&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; &quot;more&quot;")
-        );
+        assert!(html.contains("&lt;script&gt;alert('x')&lt;/script&gt; &amp; &quot;more&quot;"));
         assert!(html.contains("&lt;img src=x onerror=alert(1)&gt;"));
         assert!(html.contains("recordings/2024-05-01 &lt;table 2&gt;"));
         assert!(!html.contains("<table 2>"));
@@ -552,10 +566,10 @@ mod tests {
         let result = solved();
         let o = result.observability.as_ref().unwrap();
         let html = render_html(&result, &provenance());
-        assert!(html.contains("<strong>Weakest rotation:</strong> <span class=\"direction\">Rotation about the body&#39;s vertical axis Y (yaw of the sensor, α)</span>"), "{html}");
+        assert!(html.contains("<strong>Weakest rotation:</strong> <span class=\"direction\">Rotation about the body's vertical axis Y (yaw of the sensor, α)</span>"), "{html}");
         let position = position_words(&o.translation_weakest_axis.unwrap());
         assert_eq!(position, "the sensor's sideways (p_z) position");
-        assert!(html.contains("<strong>Weakest position:</strong> <span class=\"direction\">The sensor&#39;s sideways (p_z) position</span>"));
+        assert!(html.contains("<strong>Weakest position:</strong> <span class=\"direction\">The sensor's sideways (p_z) position</span>"));
         // As the spread of the tilts it stands for, against the threshold.
         let spread = num(spread_deg(o.translation_singular_values[2]), 1);
         assert!(html.contains(&format!(

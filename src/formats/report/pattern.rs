@@ -3,9 +3,9 @@
 //! smoothing) coloured by the depth error it causes at 2 m, with its scale.
 //! A PNG inlined as a data URI: the report loads nothing from anywhere.
 
-use std::fmt::Write as _;
+use maud::{html, Markup};
 
-use super::html::{escape, num, signed};
+use super::html::{num, signed};
 use crate::formats::output::DepthPatternJson;
 
 /// The colours of the scale's ends: reads nearer than the truth, farther.
@@ -94,14 +94,12 @@ fn base64(bytes: &[u8]) -> String {
 /// gate `pattern_max_mm` when the pattern failed it: the correction was
 /// made, but the calibration must not lean on it.
 pub(super) fn depth_pattern_section(
-    page: &mut String,
     pattern: Option<&DepthPatternJson>,
     too_large_for_mm: Option<f64>,
-) {
+) -> Markup {
     let Some(pattern) = pattern else {
-        return;
+        return html! {};
     };
-    page.push_str("<section id=\"depth-pattern\"><h2>The depth image's own warp</h2>\n");
     let has_cells = pattern.columns > 0 && pattern.rows > 0;
     let drawn = pattern.corrected && has_cells;
     let image = drawn
@@ -115,98 +113,90 @@ pub(super) fn depth_pattern_section(
     let uncorrected = (!drawn && has_cells)
         .then_some(pattern.uncorrected_raw.as_deref())
         .flatten()
-        .filter(|cells| cells.len() == pattern.columns * pattern.rows);
-    match image {
-        Some((range, data)) => {
-            let afterwards = match too_large_for_mm {
-                Some(limit) => format!(
-                    ": more than the {}&nbsp;mm its correction is checked for, so the calibration cannot rely on it",
-                    num(limit, 0)
-                ),
-                None => ". The calibration was corrected for it".to_string(),
-            };
-            let _ = writeln!(
-                page,
-                "<p class=\"warp-words\">The Kinect reads the depth up to <strong>{} mm</strong> off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer){afterwards}.</p>",
-                num(pattern.largest_mm_at_2m, 1)
-            );
-            figure(page, pattern, &data, range, pattern.largest_mm_at_2m);
-            page.push_str("<dl class=\"facts\">\n");
-            let _ = writeln!(
-                page,
-                "<dt>shape, RMS</dt><dd>{} raw units</dd>",
-                num(pattern.shape_rms_raw, 3)
-            );
-            if let (Some(part), Some(sigma), true) = (
-                pattern.plane_part_raw,
-                pattern.plane_part_sigma_raw,
-                pattern.plane_part_taken,
-            ) {
-                let _ = write!(
-                    page,
-                    "<dt>offset</dt><dd>{} ± {} raw units</dd>\n<dt>gradient along a row</dt><dd>{} ± {} per 100 px</dd>\n<dt>gradient down a column</dt><dd>{} ± {} per 100 px</dd>\n",
-                    signed(part[0], 3),
-                    num(sigma[0], 3),
-                    signed(part[1], 3),
-                    num(sigma[1], 3),
-                    signed(part[2], 3),
-                    num(sigma[2], 3),
-                );
+        .filter(|cells| cells.len() == pattern.columns * pattern.rows)
+        .and_then(|cells| {
+            let largest = cells
+                .iter()
+                .flatten()
+                .map(|raw| error_mm(*raw, pattern).abs())
+                .fold(0.0, f64::max);
+            let range = half_range_mm(largest);
+            png(pattern, cells, range).map(|bytes| (largest, range, base64(&bytes)))
+        });
+    let plane_part = match (
+        pattern.plane_part_raw,
+        pattern.plane_part_sigma_raw,
+        pattern.plane_part_taken,
+    ) {
+        (Some(part), Some(sigma), true) => Some((part, sigma)),
+        _ => None,
+    };
+    html! {
+        section #depth-pattern {
+            h2 { "The depth image's own warp" }
+            @match image {
+                Some((range, data)) => {
+                    p.warp-words {
+                        "The Kinect reads the depth up to " strong { (num(pattern.largest_mm_at_2m, 1)) " mm" }
+                        " off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer)"
+                        @match too_large_for_mm {
+                            Some(limit) => {
+                                ": more than the " (num(limit, 0))
+                                "\u{a0}mm its correction is checked for, so the calibration cannot rely on it."
+                            },
+                            None => ". The calibration was corrected for it.",
+                        }
+                    }
+                    (figure(pattern, &data, range, pattern.largest_mm_at_2m))
+                    dl.facts {
+                        dt { "shape, RMS" } dd { (num(pattern.shape_rms_raw, 3)) " raw units" }
+                        @if let Some((part, sigma)) = plane_part {
+                            dt { "offset" } dd { (signed(part[0], 3)) " ± " (num(sigma[0], 3)) " raw units" }
+                            dt { "gradient along a row" } dd { (signed(part[1], 3)) " ± " (num(sigma[1], 3)) " per 100 px" }
+                            dt { "gradient down a column" } dd { (signed(part[2], 3)) " ± " (num(sigma[2], 3)) " per 100 px" }
+                        }
+                        dt { "left after it, pose by pose" } dd { (num(pattern.consistency_chi2_per_dof, 2)) " × the noise" }
+                    }
+                },
+                None => {
+                    p.none { (pattern.note) }
+                    @if let Some((largest, range, data)) = uncorrected {
+                        p.warp-words {
+                            "What the ground's residuals showed, up to " strong { (num(largest, 1)) " mm" }
+                            " at 2 m (red: farther, blue: nearer). Nothing was corrected by it."
+                        }
+                        (figure(pattern, &data, range, largest))
+                    }
+                },
             }
-            let _ = write!(
-                page,
-                "<dt>left after it, pose by pose</dt><dd>{} × the noise</dd>\n</dl>\n",
-                num(pattern.consistency_chi2_per_dof, 2)
-            );
-        }
-        None => {
-            let _ = writeln!(page, "<p class=\"none\">{}</p>", escape(&pattern.note));
-            if let Some(cells) = uncorrected {
-                let largest = cells
-                    .iter()
-                    .flatten()
-                    .map(|raw| error_mm(*raw, pattern).abs())
-                    .fold(0.0, f64::max);
-                let range = half_range_mm(largest);
-                if let Some(bytes) = png(pattern, cells, range) {
-                    let _ = writeln!(
-                        page,
-                        "<p class=\"warp-words\">What the ground's residuals showed, up to <strong>{} mm</strong> at 2 m (red: farther, blue: nearer). Nothing was corrected by it.</p>",
-                        num(largest, 1)
-                    );
-                    figure(page, pattern, &base64(&bytes), range, largest);
+            p.note {
+                @if drawn {
+                    (pattern.note)
+                } @else {
+                    "A real Kinect v1's depth carries a fixed pattern of most of a raw unit RMS (0.84 in a real sequence of a floor; a raw unit is about 12 mm at 2 m); groundcal looks for it in the ground's residuals at every calibration."
                 }
             }
         }
     }
-    let _ = write!(
-        page,
-        "<p class=\"note\">{}</p>\n</section>\n",
-        if drawn {
-            escape(&pattern.note)
-        } else {
-            "A real Kinect v1's depth carries a fixed pattern of most of a raw unit RMS (0.84 in a real sequence of a floor; a raw unit is about 12 mm at 2 m); groundcal looks for it in the ground's residuals at every calibration.".to_string()
-        }
-    );
 }
 
 /// The picture (`data`: PNG in base64) with its scale of ± `range` mm.
-fn figure(page: &mut String, pattern: &DepthPatternJson, data: &str, range: f64, largest: f64) {
+fn figure(pattern: &DepthPatternJson, data: &str, range: f64, largest: f64) -> Markup {
     let rgb = |c: [u8; 3]| format!("rgb({},{},{})", c[0], c[1], c[2]);
-    let _ = write!(
-        page,
-        "<figure class=\"warp\"><img class=\"warp\" src=\"data:image/png;base64,{data}\" width=\"{}\" height=\"{}\" alt=\"the depth error over the image at 2 m, up to {} mm\">\n<div class=\"warp-scale\" style=\"background: linear-gradient(to right, {}, #fff, {})\"></div>\n<div class=\"warp-ticks\"><span>−{} mm nearer</span><span>0</span><span>+{} mm farther</span></div>\n<figcaption>The depth image as the sensor sees it, {} × {} cells of {} pixels; grey: no ground seen there.</figcaption></figure>\n",
-        pattern.columns,
-        pattern.rows,
-        num(largest, 1),
-        rgb(NEARER),
-        rgb(FARTHER),
-        num(range, 0),
-        num(range, 0),
-        pattern.columns,
-        pattern.rows,
-        pattern.cell_px,
-    );
+    html! {
+        figure.warp {
+            img.warp src={ "data:image/png;base64," (data) } width=(pattern.columns) height=(pattern.rows)
+                alt={ "the depth error over the image at 2 m, up to " (num(largest, 1)) " mm" };
+            div.warp-scale style={ "background: linear-gradient(to right, " (rgb(NEARER)) ", #fff, " (rgb(FARTHER)) ")" } {}
+            div.warp-ticks {
+                span { "−" (num(range, 0)) " mm nearer" } span { "0" } span { "+" (num(range, 0)) " mm farther" }
+            }
+            figcaption {
+                "The depth image as the sensor sees it, " (pattern.columns) " × " (pattern.rows)
+                " cells of " (pattern.cell_px) " pixels; grey: no ground seen there."
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -262,19 +252,17 @@ mod tests {
     /// calibration may rely on the correction (the gate `pattern_max_mm`).
     #[test]
     fn a_pattern_too_large_for_its_correction_is_not_called_corrected_for() {
-        let mut within = String::new();
-        depth_pattern_section(&mut within, Some(&corrected_pattern()), None);
+        let within = depth_pattern_section(Some(&corrected_pattern()), None).into_string();
         assert!(
             within.contains("The calibration was corrected for it."),
             "{within}"
         );
         assert!(within.contains("<img class=\"warp\""), "{within}");
 
-        let mut too_large = String::new();
-        depth_pattern_section(&mut too_large, Some(&corrected_pattern()), Some(15.0));
+        let too_large = depth_pattern_section(Some(&corrected_pattern()), Some(15.0)).into_string();
         assert!(
             too_large.contains("22.6 mm</strong> off at 2 m")
-                && too_large.contains("more than the 15&nbsp;mm its correction is checked for, so the calibration cannot rely on it."),
+                && too_large.contains("more than the 15\u{a0}mm its correction is checked for, so the calibration cannot rely on it."),
             "{too_large}"
         );
         assert!(!too_large.contains("corrected for it"), "{too_large}");

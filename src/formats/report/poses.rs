@@ -47,14 +47,16 @@ pub(super) fn residuals(result: &ResultJson) -> Vec<Residual> {
         .collect()
 }
 
-pub(super) fn residuals_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"residuals\"><h2>Signed residuals per pose</h2>\n");
+pub(super) fn residuals_section(result: &ResultJson) -> Markup {
     let rows = residuals(result);
     if rows.is_empty() {
-        page.push_str("<p class=\"none\">No residuals: without a result there is no predicted ground to compare with.</p>\n</section>\n");
-        return;
+        return html! {
+            section #residuals {
+                h2 { "Signed residuals per pose" }
+                p.none { "No residuals: without a result there is no predicted ground to compare with." }
+            }
+        };
     }
-    page.push_str("<p class=\"note\">Measured minus predicted: a pattern (all of one sign, or growing with the tilt) points at a bias the unsigned θ and e<sub>d</sub> hide.</p>\n");
     let mut marks = Vec::new();
     if let Some(limit) = gate_limit(result, "e_d_max_mm") {
         marks.push(gate_mark(
@@ -66,10 +68,8 @@ pub(super) fn residuals_section(page: &mut String, result: &ResultJson) {
         ));
         marks.push(gate_mark(-limit, format!("gate -{limit:.1} mm"), None));
     }
-    page.push_str("<div class=\"charts\">\n");
-    figure(
-        page,
-        "Δd per pose",
+    let chart = figure(
+        html! { "Δd per pose" },
         "the measured minus the predicted distance of the ground, signed",
         &ChartSpec {
             description: "signed d residual per pose",
@@ -83,36 +83,39 @@ pub(super) fn residuals_section(page: &mut String, result: &ResultJson) {
         },
         &result.poses,
     );
-    page.push_str("<div class=\"scroll\"><table class=\"residuals\">\n<thead><tr><th>pose</th><th>Δd (mm)</th><th>tilt, forward axis (°)</th><th>tilt, sideways axis (°)</th></tr></thead>\n<tbody>\n");
-    for r in &rows {
-        let _ = writeln!(
-            page,
-            "<tr{}><td>{}</td><td class=\"dd\">{}</td><td class=\"tx\">{}</td><td class=\"tz\">{}</td></tr>",
-            if r.used { "" } else { " class=\"unused\"" },
-            r.index,
-            signed(r.d_mm, 2),
-            signed(r.about_forward_deg, 3),
-            signed(r.about_sideways_deg, 3)
-        );
+    html! {
+        section #residuals {
+            h2 { "Signed residuals per pose" }
+            p.note { "Measured minus predicted: a pattern (all of one sign, or growing with the tilt) points at a bias the unsigned θ and " (e_d()) " hide." }
+            div.charts {
+                (chart)
+                div.scroll { table.residuals {
+                    thead { tr { th { "pose" } th { "Δd (mm)" } th { "tilt, forward axis (°)" } th { "tilt, sideways axis (°)" } } }
+                    tbody {
+                        @for r in &rows {
+                            tr class=[(!r.used).then_some("unused")] {
+                                td { (r.index) }
+                                td.dd { (signed(r.d_mm, 2)) }
+                                td.tx { (signed(r.about_forward_deg, 3)) }
+                                td.tz { (signed(r.about_sideways_deg, 3)) }
+                            }
+                        }
+                    }
+                } }
+            }
+            (legend(&[
+                LegendItem::Dot(USED, "used pose"),
+                LegendItem::Cross(SET_ASIDE, "set aside"),
+                LegendItem::Band,
+                LegendItem::Solid(GATE, "e_d's gate, either sign"),
+            ]))
+            p.note { "Δd > 0: the ground was measured farther from the sensor than predicted. The tilts turn the predicted ground into the measured one, about the body's forward and sideways axes laid along the ground (right-handed: a positive tilt about the forward axis lowers the ground on the right); together they make θ. The shaded rows are poses set aside." }
+        }
     }
-    page.push_str("</tbody></table></div>\n</div>\n");
-    page.push_str(&legend(&[
-        LegendItem::Dot(USED, "used pose"),
-        LegendItem::Cross(SET_ASIDE, "set aside"),
-        LegendItem::Band,
-        LegendItem::Solid(GATE, "e_d's gate, either sign"),
-    ]));
-    page.push_str("<p class=\"note\">Δd &gt; 0: the ground was measured farther from the sensor than predicted. The tilts turn the predicted ground into the measured one, about the body's forward and sideways axes laid along the ground (right-handed: a positive tilt about the forward axis lowers the ground on the right); together they make θ. The shaded rows are poses set aside.</p>\n</section>\n");
 }
 
-pub(super) fn planes_section(page: &mut String, result: &ResultJson) {
+pub(super) fn planes_section(result: &ResultJson) -> Markup {
     let solved = result.robot_from_sensor.is_some();
-    if solved {
-        page.push_str("<section id=\"planes\"><h2>Measured and predicted ground</h2>\n<p class=\"note\">The ground plane a·x + b·y + c·z + d = 0 in the sensor frame at each pose, as measured (filled dots, solid lines) and as the result predicts it from the body pose (hollow squares, dashed lines; a dot inside its square is a pose where the two agree) (the paper's Figs. 14 and 15).</p>\n");
-    } else {
-        page.push_str("<section id=\"planes\"><h2>Measured ground</h2>\n<p class=\"note\">The ground plane a·x + b·y + c·z + d = 0 in the sensor frame at each pose, as measured (the paper's Figs. 14 and 15 without the prediction, for want of a result).</p>\n");
-    }
-    page.push_str("<div class=\"charts\">\n");
     let component = |color, predicted, value| Line {
         color,
         aside_color: color,
@@ -148,9 +151,8 @@ pub(super) fn planes_section(page: &mut String, result: &ResultJson) {
     } else {
         "measured"
     };
-    figure(
-        page,
-        "Normal a, b, c",
+    let normal = figure(
+        html! { "Normal a, b, c" },
         &format!("{what} (the paper's Fig. 14)"),
         &ChartSpec {
             description: "plane normal a, b, c per pose",
@@ -162,9 +164,8 @@ pub(super) fn planes_section(page: &mut String, result: &ResultJson) {
         },
         &result.poses,
     );
-    figure(
-        page,
-        "Distance d",
+    let distance = figure(
+        html! { "Distance d" },
         &format!("{what}: the sensor's height above the ground (the paper's Fig. 15)"),
         &ChartSpec {
             description: "plane distance d per pose",
@@ -176,7 +177,6 @@ pub(super) fn planes_section(page: &mut String, result: &ResultJson) {
         },
         &result.poses,
     );
-    page.push_str("</div>\n");
     let mut items = vec![
         LegendItem::Dot(COMPONENTS[0], "a"),
         LegendItem::Dot(COMPONENTS[1], "b"),
@@ -191,22 +191,35 @@ pub(super) fn planes_section(page: &mut String, result: &ResultJson) {
         LegendItem::Cross(INK, "measured, pose set aside"),
         LegendItem::Band,
     ]);
-    page.push_str(&legend(&items));
-    page.push_str("</section>\n");
+    html! {
+        section #planes {
+            @if solved {
+                h2 { "Measured and predicted ground" }
+                p.note { "The ground plane a·x + b·y + c·z + d = 0 in the sensor frame at each pose, as measured (filled dots, solid lines) and as the result predicts it from the body pose (hollow squares, dashed lines; a dot inside its square is a pose where the two agree) (the paper's Figs. 14 and 15)." }
+            } @else {
+                h2 { "Measured ground" }
+                p.note { "The ground plane a·x + b·y + c·z + d = 0 in the sensor frame at each pose, as measured (the paper's Figs. 14 and 15 without the prediction, for want of a result)." }
+            }
+            div.charts { (normal) (distance) }
+            (legend(&items))
+        }
+    }
 }
 
-pub(super) fn commanded_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"commanded\"><h2>Commanded body poses</h2>\n");
+pub(super) fn commanded_section(result: &ResultJson) -> Markup {
     let poses: Vec<(&PoseJson, crate::calib::geometry::PoseDegMm)> = result
         .poses
         .iter()
         .filter_map(|p| Some((p, p.commanded?)))
         .collect();
     if poses.is_empty() {
-        page.push_str("<p class=\"none\">This input has no commanded poses (ground planes only): the body's attitudes are not known here.</p>\n</section>\n");
-        return;
+        return html! {
+            section #commanded {
+                h2 { "Commanded body poses" }
+                p.none { "This input has no commanded poses (ground planes only): the body's attitudes are not known here." }
+            }
+        };
     }
-    page.push_str("<p class=\"note\">What the body was asked for at each pose (the solve uses the real pose from the feet, not these): roll γ′ about its forward axis, pitch β′ about its sideways axis, yaw α′ about the vertical, and its height.</p>\n<div class=\"charts\">\n");
     let tilts: Vec<Tilt> = poses
         .iter()
         .map(|(p, c)| Tilt {
@@ -215,111 +228,112 @@ pub(super) fn commanded_section(page: &mut String, result: &ResultJson) {
             used: p.used,
         })
         .collect();
-    tilt_figure(
-        page,
-        "Tilts of the schedule",
-        "the commanded roll against pitch of every pose; a cloud along one line cannot tell every direction",
-        &tilts,
-    );
     // Shifts of the body only when some pose has one.
     let shifted = poses
         .iter()
         .any(|(_, c)| c.px_mm.abs() > 1e-9 || c.pz_mm.abs() > 1e-9);
-    page.push_str("<div class=\"scroll\"><table class=\"commanded\">\n<thead><tr><th>pose</th><th>roll γ′ (°)</th><th>pitch β′ (°)</th><th>yaw α′ (°)</th><th>height (mm)</th>");
-    if shifted {
-        page.push_str("<th>x′ (mm)</th><th>z′ (mm)</th>");
-    }
-    page.push_str("</tr></thead>\n<tbody>\n");
-    for (p, c) in &poses {
-        let _ = write!(
-            page,
-            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
-            if p.used { "" } else { " class=\"unused\"" },
-            p.index,
-            num(c.gamma_deg, 1),
-            num(c.beta_deg, 1),
-            num(c.alpha_deg, 1),
-            num(c.py_mm, 0)
-        );
-        if shifted {
-            let _ = write!(
-                page,
-                "<td>{}</td><td>{}</td>",
-                num(c.px_mm, 0),
-                num(c.pz_mm, 0)
-            );
+    html! {
+        section #commanded {
+            h2 { "Commanded body poses" }
+            p.note { "What the body was asked for at each pose (the solve uses the real pose from the feet, not these): roll γ′ about its forward axis, pitch β′ about its sideways axis, yaw α′ about the vertical, and its height." }
+            div.charts {
+                (tilt_figure(
+                    "Tilts of the schedule",
+                    "the commanded roll against pitch of every pose; a cloud along one line cannot tell every direction",
+                    &tilts,
+                ))
+                div.scroll { table.commanded {
+                    thead { tr {
+                        th { "pose" } th { "roll γ′ (°)" } th { "pitch β′ (°)" } th { "yaw α′ (°)" } th { "height (mm)" }
+                        @if shifted { th { "x′ (mm)" } th { "z′ (mm)" } }
+                    } }
+                    tbody {
+                        @for (p, c) in &poses {
+                            tr class=[(!p.used).then_some("unused")] {
+                                td { (p.index) }
+                                td { (num(c.gamma_deg, 1)) }
+                                td { (num(c.beta_deg, 1)) }
+                                td { (num(c.alpha_deg, 1)) }
+                                td { (num(c.py_mm, 0)) }
+                                @if shifted { td { (num(c.px_mm, 0)) } td { (num(c.pz_mm, 0)) } }
+                            }
+                        }
+                    }
+                } }
+            }
+            (legend(&[
+                LegendItem::Dot(USED, "used pose"),
+                LegendItem::Cross(SET_ASIDE, "set aside (shaded rows)"),
+            ]))
         }
-        page.push_str("</tr>\n");
     }
-    page.push_str("</tbody></table></div>\n</div>\n");
-    page.push_str(&legend(&[
-        LegendItem::Dot(USED, "used pose"),
-        LegendItem::Cross(SET_ASIDE, "set aside (shaded rows)"),
-    ]));
-    page.push_str("</section>\n");
 }
 
-pub(super) fn set_aside_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"set-aside\"><h2>Poses set aside</h2>\n");
+pub(super) fn set_aside_section(result: &ResultJson) -> Markup {
     let aside: Vec<&PoseJson> = result.poses.iter().filter(|p| !p.used).collect();
-    if aside.is_empty() {
-        page.push_str("<p>None: every pose was used.</p>\n");
-    } else {
-        page.push_str("<div class=\"scroll\"><table class=\"aside\">\n<thead><tr><th>pose</th><th class=\"text\">why</th><th>θ (°)</th><th>e<sub>d</sub> (mm)</th></tr></thead>\n<tbody>\n");
-        for p in aside {
-            let _ = writeln!(
-                page,
-                "<tr><td>{}</td><td class=\"text reason\">{}</td><td>{}</td><td>{}</td></tr>",
-                p.index,
-                escape(p.reason.as_deref().unwrap_or("no reason given")),
-                opt(p.theta_deg, 3),
-                opt(p.e_d_mm, 2)
-            );
-        }
-        page.push_str("</tbody></table></div>\n");
-    }
     // Poses kept with a remark: a slipped foot left out of the body pose.
     let noted: Vec<&PoseJson> = result.poses.iter().filter(|p| p.note.is_some()).collect();
-    if !noted.is_empty() {
-        page.push_str("<h3 id=\"noted\">Poses kept with a note</h3>\n<div class=\"scroll\"><table class=\"aside\">\n<thead><tr><th>pose</th><th class=\"text\">note</th></tr></thead>\n<tbody>\n");
-        for p in noted {
-            let _ = writeln!(
-                page,
-                "<tr><td>{}</td><td class=\"text reason\">{}</td></tr>",
-                p.index,
-                escape(p.note.as_deref().unwrap_or_default())
-            );
-        }
-        page.push_str("</tbody></table></div>\n");
-    }
-    page.push_str("</section>\n");
-}
-
-pub(super) fn poses_section(page: &mut String, result: &ResultJson) {
-    let _ = writeln!(
-        page,
-        "<section id=\"poses\"><details><summary>All {} poses</summary>",
-        result.poses.len()
-    );
-    page.push_str("<div class=\"scroll\"><table class=\"poses\">\n<thead><tr><th>pose</th><th>used</th><th>θ (°)</th><th>e<sub>d</sub> (mm)</th><th>inliers</th><th>a</th><th>b</th><th>c</th><th>d (m)</th><th>predicted a</th><th>b</th><th>c</th><th>d (m)</th></tr></thead>\n<tbody>\n");
-    for p in &result.poses {
-        let _ = write!(
-            page,
-            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
-            if p.used { "" } else { " class=\"unused\"" },
-            p.index,
-            if p.used { "yes" } else { "no" },
-            opt(p.theta_deg, 3),
-            opt(p.e_d_mm, 2),
-            p.inliers.map_or_else(|| "—".to_string(), |n| n.to_string()),
-        );
-        for plane in [p.plane, p.predicted_plane] {
-            let values = plane.map(|q| [q.a, q.b, q.c, q.d_m]);
-            for k in 0..4 {
-                let _ = write!(page, "<td>{}</td>", opt(values.map(|v| v[k]), 4));
+    html! {
+        section #set-aside {
+            h2 { "Poses set aside" }
+            @if aside.is_empty() {
+                p { "None: every pose was used." }
+            } @else {
+                div.scroll { table.aside {
+                    thead { tr { th { "pose" } th.text { "why" } th { "θ (°)" } th { (e_d()) " (mm)" } } }
+                    tbody {
+                        @for p in aside {
+                            tr {
+                                td { (p.index) }
+                                td.text.reason { (p.reason.as_deref().unwrap_or("no reason given")) }
+                                td { (opt(p.theta_deg, 3)) }
+                                td { (opt(p.e_d_mm, 2)) }
+                            }
+                        }
+                    }
+                } }
+            }
+            @if !noted.is_empty() {
+                h3 #noted { "Poses kept with a note" }
+                div.scroll { table.aside {
+                    thead { tr { th { "pose" } th.text { "note" } } }
+                    tbody {
+                        @for p in noted {
+                            tr { td { (p.index) } td.text.reason { (p.note.as_deref().unwrap_or_default()) } }
+                        }
+                    }
+                } }
             }
         }
-        page.push_str("</tr>\n");
     }
-    page.push_str("</tbody></table></div>\n</details></section>\n");
+}
+
+pub(super) fn poses_section(result: &ResultJson) -> Markup {
+    html! {
+        section #poses { details {
+            summary { "All " (result.poses.len()) " poses" }
+            div.scroll { table.poses {
+                thead { tr {
+                    th { "pose" } th { "used" } th { "θ (°)" } th { (e_d()) " (mm)" } th { "inliers" }
+                    th { "a" } th { "b" } th { "c" } th { "d (m)" }
+                    th { "predicted a" } th { "b" } th { "c" } th { "d (m)" }
+                } }
+                tbody {
+                    @for p in &result.poses {
+                        tr class=[(!p.used).then_some("unused")] {
+                            td { (p.index) }
+                            td { (if p.used { "yes" } else { "no" }) }
+                            td { (opt(p.theta_deg, 3)) }
+                            td { (opt(p.e_d_mm, 2)) }
+                            td { (p.inliers.map_or_else(|| "—".to_string(), |n| n.to_string())) }
+                            @for plane in [p.plane, p.predicted_plane] {
+                                @let values = plane.map(|q| [q.a, q.b, q.c, q.d_m]);
+                                @for k in 0..4 { td { (opt(values.map(|v| v[k]), 4)) } }
+                            }
+                        }
+                    }
+                }
+            } }
+        } }
+    }
 }

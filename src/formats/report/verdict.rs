@@ -3,13 +3,9 @@
 
 use super::*;
 
-pub(super) fn verdict_section(page: &mut String, result: &ResultJson, verdict: &str) {
+pub(super) fn verdict_section(result: &ResultJson, verdict: &str) -> Markup {
     // Coloured by the status (green or red), whatever the words.
     let class = result.status.as_str();
-    let _ = writeln!(
-        page,
-        "<section class=\"verdict {class}\" id=\"verdict\"><h1>{verdict}</h1>"
-    );
     let lead = match (result.accepted(), result.reasons.is_empty()) {
         (true, true) => "The calibration passed every quality gate.",
         (true, false) => "The calibration passed its quality gates, with these notes:",
@@ -17,22 +13,19 @@ pub(super) fn verdict_section(page: &mut String, result: &ResultJson, verdict: &
         (false, true) => "The calibration did not pass its quality gates.",
         (false, false) => "The calibration did not pass its quality gates:",
     };
-    let _ = writeln!(page, "<p>{lead}</p>");
-    if !result.reasons.is_empty() {
-        page.push_str("<ul class=\"reasons\">\n");
-        for reason in &result.reasons {
-            let _ = writeln!(page, "<li>{}</li>", escape(reason));
+    html! {
+        section.verdict.(class) #verdict {
+            h1 { (verdict) }
+            p { (lead) }
+            @if !result.reasons.is_empty() {
+                ul.reasons { @for reason in &result.reasons { li { (reason) } } }
+            }
+            @if !result.notes.is_empty() {
+                p.notes-lead { "Also note:" }
+                ul.reasons { @for note in &result.notes { li { (note) } } }
+            }
         }
-        page.push_str("</ul>\n");
     }
-    if !result.notes.is_empty() {
-        page.push_str("<p class=\"notes-lead\">Also note:</p>\n<ul class=\"reasons\">\n");
-        for note in &result.notes {
-            let _ = writeln!(page, "<li>{}</li>", escape(note));
-        }
-        page.push_str("</ul>\n");
-    }
-    page.push_str("</section>\n");
 }
 
 /// The spread of the body's tilts (degrees, RMS) that a singular value of
@@ -41,67 +34,70 @@ pub(super) fn spread_deg(singular_value: f64) -> f64 {
     singular_value.clamp(0.0, 1.0).asin().to_degrees()
 }
 
-/// A gate's row: what it is (HTML), its limit, the value measured, and the
-/// words before where the value comes from.
-pub(super) fn gate_row(check: &GateCheckJson) -> (String, String, String, Option<&'static str>) {
+/// A gate's row: what it is, its limit, the value measured, and the words
+/// before where the value comes from (none: the place is not shown).
+pub(super) fn gate_row(check: &GateCheckJson) -> (Markup, String, String, Option<&'static str>) {
     let (l, m) = (check.limit, check.measured);
-    let (name, limit, measured, at): (&str, String, String, &'static str) = match check.gate.as_str() {
+    let (name, limit, measured, at): (Markup, String, String, &'static str) = match check
+        .gate
+        .as_str()
+    {
         "theta_max_deg" => (
-            "largest θ of a used pose",
+            html! { "largest θ of a used pose" },
             format!("≤ {}°", num(l, 2)),
             format!("{}°", num(m, 3)),
             "at ",
         ),
         "e_d_max_mm" => (
-            "largest e<sub>d</sub> of a used pose",
+            html! { "largest " (e_d()) " of a used pose" },
             format!("≤ {} mm", num(l, 1)),
             format!("{} mm", num(m, 2)),
             "at ",
         ),
         "sigma_angle_max_deg" => (
-            "largest σ of α, β, γ",
+            html! { "largest σ of α, β, γ" },
             format!("≤ {}°", num(l, 3)),
             format!("{}°", num(m, 3)),
             "of ",
         ),
         "sigma_position_max_mm" => (
-            "largest σ of p<sub>x</sub>, p<sub>y</sub>, p<sub>z</sub>",
+            html! { "largest σ of " (param_name(3)) ", " (param_name(4)) ", " (param_name(5)) },
             format!("≤ {} mm", num(l, 2)),
             format!("{} mm", num(m, 2)),
             "of ",
         ),
         "depth_scale_max_deviation" => (
-            "depth scale's distance from 1",
+            html! { "depth scale's distance from 1" },
             format!("≤ {} %", num(100.0 * l, 1)),
             format!("{} %", num(100.0 * m, 3)),
             "",
         ),
         "warp_max_mm" => (
-            "depth warp at 2&nbsp;m, not corrected (RMS)",
+            html! { "depth warp at 2\u{a0}m, not corrected (RMS)" },
             format!("≤ {} mm", num(l, 1)),
             format!("{} mm", num(m, 2)),
             "",
         ),
         "pattern_max_mm" => (
-            "largest corrected depth pattern at 2&nbsp;m",
+            html! { "largest corrected depth pattern at 2\u{a0}m" },
             format!("≤ {} mm", num(l, 0)),
             format!("{} mm", num(m, 1)),
             "",
         ),
         "pattern_angle_sigma_growth_max" => (
-            "largest growth of σ of α, β, γ from correcting the depth pattern",
+            html! { "largest growth of σ of α, β, γ from correcting the depth pattern" },
             format!("≤ {}×", num(l, 1)),
             format!("{}×", num(m, 1)),
             "of ",
         ),
         "min_poses_used" => (
-            "poses used",
+            html! { "poses used" },
             format!("≥ {}", num(l, 0)),
             num(m, 0),
             "",
         ),
         "min_used_fraction" => (
-            "share of poses used",
+            html! { "share of poses used" },
             format!("≥ {} %", num(100.0 * l, 0)),
             format!("{} %", num(100.0 * m, 0)),
             "",
@@ -110,7 +106,7 @@ pub(super) fn gate_row(check: &GateCheckJson) -> (String, String, String, Option
         // section (too long for this column on a phone).
         "observable" => {
             return (
-                "tilt spread of the weakest direction (RMS)<span class=\"at\">see “What the schedule could tell”</span>".to_string(),
+                html! { "tilt spread of the weakest direction (RMS)" span.at { "see “What the schedule could tell”" } },
                 format!("≥ {}°", num(spread_deg(l), 1)),
                 format!("{}°", num(spread_deg(m), 1)),
                 None,
@@ -118,51 +114,60 @@ pub(super) fn gate_row(check: &GateCheckJson) -> (String, String, String, Option
         }
         other => {
             return (
-                escape(other),
+                html! { (other) },
                 format!("{} {}", if check.at_least { "≥" } else { "≤" }, num(l, 3)),
                 num(m, 3),
                 Some(""),
             )
         }
     };
-    (name.to_string(), limit, measured, Some(at))
+    (name, limit, measured, Some(at))
 }
 
-pub(super) fn gates_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"gates\"><h2>Quality gates</h2>\n");
+pub(super) fn gates_section(result: &ResultJson) -> Markup {
     if result.gate_checks.is_empty() {
-        page.push_str("<p class=\"none\">No gates were checked: nothing could be solved (see the reasons above).</p>\n</section>\n");
-        return;
+        return html! {
+            section #gates {
+                h2 { "Quality gates" }
+                p.none { "No gates were checked: nothing could be solved (see the reasons above)." }
+            }
+        };
     }
-    let failed = result.gate_checks.iter().filter(|c| !c.passed).count();
-    let _ = writeln!(
-        page,
-        "<p class=\"gates-lead\">{}</p>",
-        match failed {
-            0 => format!("All {} gates passed.", result.gate_checks.len()),
-            1 => format!("1 of {} gates failed.", result.gate_checks.len()),
-            n => format!("{n} of {} gates failed.", result.gate_checks.len()),
+    let total = result.gate_checks.len();
+    let lead = match result.gate_checks.iter().filter(|c| !c.passed).count() {
+        0 => format!("All {total} gates passed."),
+        1 => format!("1 of {total} gates failed."),
+        n => format!("{n} of {total} gates failed."),
+    };
+    html! {
+        section #gates {
+            h2 { "Quality gates" }
+            p.gates-lead { (lead) }
+            div.scroll { table.gates {
+                thead { tr { th.text { "gate" } th { "limit" } th { "measured" } th.text { "result" } } }
+                tbody {
+                    @for check in &result.gate_checks {
+                        @let (name, limit, measured, at_words) = gate_row(check);
+                        @let (class, verdict) = if check.passed { ("pass", "✓ pass") } else { ("fail", "✗ FAIL") };
+                        tr class=(class) data-gate=(check.gate) {
+                            td.text.gate {
+                                (name)
+                                @if let (Some(words), Some(at)) = (at_words, check.at.as_deref()) {
+                                    span.at { (words) (at) }
+                                }
+                            }
+                            td { (limit) }
+                            td { (measured) }
+                            td.text.result { (verdict) }
+                        }
+                    }
+                }
+            } }
+            p.note {
+                "The limits are the " code { "[calibration.gates]" } " the result was judged by (see the setup below); the observability limit is the solve's own. θ's and " (e_d()) "'s limits are drawn as red lines on their charts."
+            }
         }
-    );
-    page.push_str("<div class=\"scroll\"><table class=\"gates\">\n<thead><tr><th class=\"text\">gate</th><th>limit</th><th>measured</th><th class=\"text\">result</th></tr></thead>\n<tbody>\n");
-    for check in &result.gate_checks {
-        let (name, limit, measured, at_words) = gate_row(check);
-        let at = match (at_words, check.at.as_deref()) {
-            (Some(words), Some(at)) => format!("<span class=\"at\">{words}{}</span>", escape(at)),
-            _ => String::new(),
-        };
-        let (class, verdict) = if check.passed {
-            ("pass", "✓ pass")
-        } else {
-            ("fail", "✗ FAIL")
-        };
-        let _ = writeln!(
-            page,
-            "<tr class=\"{class}\" data-gate=\"{}\"><td class=\"text gate\">{name}{at}</td><td>{limit}</td><td>{measured}</td><td class=\"text result\">{verdict}</td></tr>",
-            escape(&check.gate)
-        );
     }
-    page.push_str("</tbody></table></div>\n<p class=\"note\">The limits are the <code>[calibration.gates]</code> the result was judged by (see the setup below); the observability limit is the solve's own. θ's and e<sub>d</sub>'s limits are drawn as red lines on their charts.</p>\n</section>\n");
 }
 
 /// The gate of a key, if the result was checked against it.

@@ -4,13 +4,14 @@
 
 use super::*;
 
-pub(super) fn observability_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"observability\"><h2>What the schedule could tell</h2>\n");
+pub(super) fn observability_section(result: &ResultJson) -> Markup {
     let Some(o) = &result.observability else {
-        page.push_str(
-            "<p class=\"none\">Nothing was solved, so nothing was observed.</p>\n</section>\n",
-        );
-        return;
+        return html! {
+            section #observability {
+                h2 { "What the schedule could tell" }
+                p.none { "Nothing was solved, so nothing was observed." }
+            }
+        };
     };
     let needed = result
         .gate_checks
@@ -20,8 +21,7 @@ pub(super) fn observability_section(page: &mut String, result: &ResultJson) {
             || crate::calib::solve::SolveSettings::default().min_spread,
             |c| c.limit,
         );
-    page.push_str("<ul class=\"weakest\">\n");
-    for (kind, singular, words) in [
+    let directions = [
         (
             "rotation",
             o.rotation_singular_values[2],
@@ -32,47 +32,49 @@ pub(super) fn observability_section(page: &mut String, result: &ResultJson) {
             o.translation_singular_values[2],
             o.translation_weakest_axis.map(|a| position_words(&a)),
         ),
-    ] {
-        let told = singular >= needed;
-        let what = words.map_or_else(
-            || format!("the weakest {kind} direction"),
-            |w| {
-                // Capitalised as the start of a sentence.
-                let mut chars = w.chars();
-                let w = chars.next().map_or_else(String::new, |first| {
-                    first.to_uppercase().collect::<String>() + chars.as_str()
-                });
-                escape(&w)
-            },
-        );
-        let _ = writeln!(
-            page,
-            "<li class=\"{}\" data-kind=\"{kind}\"><strong>Weakest {kind}:</strong> <span class=\"direction\">{what}</span>. {}</li>",
-            if told { "told" } else { "untold" },
-            if told {
-                format!(
-                    "The body's tilts spread it by {}° (RMS); at least {}° is needed.",
-                    num(spread_deg(singular), 1),
-                    num(spread_deg(needed), 1)
-                )
-            } else {
-                format!(
-                    "The schedule cannot tell it: the body's tilts spread it by only {}° (RMS), at least {}° is needed. Add poses that tilt the body about other axes.",
-                    num(spread_deg(singular), 1),
-                    num(spread_deg(needed), 1)
-                )
-            }
-        );
-    }
-    page.push_str("</ul>\n<p class=\"note\">The ground tells a rotation of the sensor or a shift of its position only as far as the body's tilts turn the ground's direction seen along it: the more the schedule tilts the body, and about more axes, the better every direction is pinned down. The other directions are pinned down better than these two.</p>\n");
+    ];
     let list = |v: &[f64; 3]| v.map(|x| num(x, 3)).join(", ");
-    let _ = writeln!(
-        page,
-        "<details><summary>Singular values</summary>\n<dl class=\"facts\">\n<dt>rotation</dt><dd>{}</dd>\n<dt>translation</dt><dd>{}</dd>\n</dl>\n<p class=\"note\">Of the solve's Jacobian per observation; each is about the sine of the tilts' RMS spread in its direction, and a value near 0 means the schedule cannot tell that direction.</p>\n</details>",
-        list(&o.rotation_singular_values),
-        list(&o.translation_singular_values)
-    );
-    page.push_str("</section>\n");
+    html! {
+        section #observability {
+            h2 { "What the schedule could tell" }
+            ul.weakest {
+                @for (kind, singular, words) in directions {
+                    @let told = singular >= needed;
+                    @let what = words.map_or_else(
+                        || format!("the weakest {kind} direction"),
+                        |w| {
+                            // Capitalised as the start of a sentence.
+                            let mut chars = w.chars();
+                            chars.next().map_or_else(String::new, |first| {
+                                first.to_uppercase().collect::<String>() + chars.as_str()
+                            })
+                        },
+                    );
+                    li class=(if told { "told" } else { "untold" }) data-kind=(kind) {
+                        strong { "Weakest " (kind) ":" } " " span.direction { (what) } ". "
+                        @if told {
+                            "The body's tilts spread it by " (num(spread_deg(singular), 1))
+                            "° (RMS); at least " (num(spread_deg(needed), 1)) "° is needed."
+                        } @else {
+                            "The schedule cannot tell it: the body's tilts spread it by only "
+                            (num(spread_deg(singular), 1)) "° (RMS), at least "
+                            (num(spread_deg(needed), 1))
+                            "° is needed. Add poses that tilt the body about other axes."
+                        }
+                    }
+                }
+            }
+            p.note { "The ground tells a rotation of the sensor or a shift of its position only as far as the body's tilts turn the ground's direction seen along it: the more the schedule tilts the body, and about more axes, the better every direction is pinned down. The other directions are pinned down better than these two." }
+            details {
+                summary { "Singular values" }
+                dl.facts {
+                    dt { "rotation" } dd { (list(&o.rotation_singular_values)) }
+                    dt { "translation" } dd { (list(&o.translation_singular_values)) }
+                }
+                p.note { "Of the solve's Jacobian per observation; each is about the sine of the tilts' RMS spread in its direction, and a value near 0 means the schedule cannot tell that direction." }
+            }
+        }
+    }
 }
 
 /// The heat map's colour of a correlation: paler for |r| near 0, darker
@@ -89,91 +91,76 @@ pub(super) fn heat_colour(r: f64) -> (String, &'static str) {
     )
 }
 
-pub(super) fn correlations_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"correlations\"><h2>Correlations of the six parameters</h2>\n");
+pub(super) fn correlations_section(result: &ResultJson) -> Markup {
     let Some(r) = &result.correlations else {
-        page.push_str("<p class=\"none\">No correlations: nothing was solved.</p>\n</section>\n");
-        return;
+        return html! {
+            section #correlations {
+                h2 { "Correlations of the six parameters" }
+                p.none { "No correlations: nothing was solved." }
+            }
+        };
     };
-    const NAMES: [&str; 6] = [
-        "α",
-        "β",
-        "γ",
-        "p<sub>x</sub>",
-        "p<sub>y</sub>",
-        "p<sub>z</sub>",
-    ];
     const PLAIN: [&str; 6] = ["α", "β", "γ", "p_x", "p_y", "p_z"];
-    page.push_str("<div class=\"scroll\"><table class=\"heat\">\n<thead><tr><th></th>");
-    for name in NAMES {
-        let _ = write!(page, "<th scope=\"col\">{name}</th>");
-    }
-    page.push_str("</tr></thead>\n<tbody>\n");
-    for (i, row) in r.iter().enumerate() {
-        let _ = write!(page, "<tr><th scope=\"row\">{}</th>", NAMES[i]);
-        for (j, &value) in row.iter().enumerate() {
-            let (background, ink) = if i == j {
-                ("#eceff1".to_string(), "#5f6368")
-            } else {
-                heat_colour(value)
-            };
-            let text = if i == j && value.is_finite() {
-                "1".to_string()
-            } else {
-                num(value, 2)
-            };
-            let _ = write!(
-                page,
-                "<td class=\"cell{}\" style=\"background:{background};color:{ink}\" title=\"{} and {}: r = {}\">{text}</td>",
-                if i == j { " diagonal" } else { "" },
-                PLAIN[i],
-                PLAIN[j],
-                num(value, 3)
-            );
-        }
-        page.push_str("</tr>\n");
-    }
-    page.push_str("</tbody></table></div>\n");
     // The strongest pair, in words.
     let strongest = (0..6)
         .flat_map(|i| (i + 1..6).map(move |j| (i, j)))
         .filter(|&(i, j)| r[i][j].is_finite())
         .max_by(|&(a, b), &(c, d)| r[a][b].abs().total_cmp(&r[c][d].abs()));
-    if let Some((i, j)) = strongest {
-        let v = r[i][j];
-        let words = if v.abs() >= 0.9 {
-            "the schedule hardly tells them apart: an error in one is mostly an error in the other"
-        } else if v.abs() >= 0.6 {
-            "their errors move together noticeably"
-        } else {
-            "no pair of parameters is strongly tied"
-        };
-        let _ = writeln!(
-            page,
-            "<p class=\"strongest\">Strongest: {} and {}, r = {}: {words}.</p>",
-            NAMES[i],
-            NAMES[j],
-            num(v, 2)
-        );
-    }
     let decoupled = (0..3).all(|i| (3..6).all(|j| r[i][j].abs() < 1e-9));
-    let _ = writeln!(
-        page,
-        "<p class=\"note\"><span class=\"heat-key\" aria-hidden=\"true\"></span> |r| from 0 (pale) to 1 (dark): how much the errors of two parameters move together (the sign says whether in the same or opposite directions).{}</p>",
-        if decoupled {
-            " The angles come from the ground's direction and the position from its distance, so the two groups do not correlate (the zeros)."
-        } else {
-            ""
+    html! {
+        section #correlations {
+            h2 { "Correlations of the six parameters" }
+            div.scroll { table.heat {
+                thead { tr { th {} @for k in 0..6 { th scope="col" { (param_name(k)) } } } }
+                tbody {
+                    @for (i, row) in r.iter().enumerate() {
+                        tr {
+                            th scope="row" { (param_name(i)) }
+                            @for (j, &value) in row.iter().enumerate() {
+                                @let (background, ink) = if i == j {
+                                    ("#eceff1".to_string(), "#5f6368")
+                                } else {
+                                    heat_colour(value)
+                                };
+                                @let text = if i == j && value.is_finite() { "1".to_string() } else { num(value, 2) };
+                                td class=(if i == j { "cell diagonal" } else { "cell" })
+                                    style={ "background:" (background) ";color:" (ink) }
+                                    title={ (PLAIN[i]) " and " (PLAIN[j]) ": r = " (num(value, 3)) } { (text) }
+                            }
+                        }
+                    }
+                }
+            } }
+            @if let Some((i, j)) = strongest {
+                @let v = r[i][j];
+                @let words = if v.abs() >= 0.9 {
+                    "the schedule hardly tells them apart: an error in one is mostly an error in the other"
+                } else if v.abs() >= 0.6 {
+                    "their errors move together noticeably"
+                } else {
+                    "no pair of parameters is strongly tied"
+                };
+                p.strongest { "Strongest: " (param_name(i)) " and " (param_name(j)) ", r = " (num(v, 2)) ": " (words) "." }
+            }
+            p.note {
+                span.heat-key aria-hidden="true" {}
+                " |r| from 0 (pale) to 1 (dark): how much the errors of two parameters move together (the sign says whether in the same or opposite directions)."
+                @if decoupled {
+                    " The angles come from the ground's direction and the position from its distance, so the two groups do not correlate (the zeros)."
+                }
+            }
         }
-    );
-    page.push_str("</section>\n");
+    }
 }
 
-pub(super) fn accuracy_section(page: &mut String, result: &ResultJson) {
-    page.push_str("<section id=\"accuracy\"><h2>Accuracy per pose</h2>\n");
+pub(super) fn accuracy_section(result: &ResultJson) -> Markup {
     if result.robot_from_sensor.is_none() {
-        page.push_str("<p class=\"none\">No θ or e<sub>d</sub>: without a result there is no predicted ground to compare with.</p>\n</section>\n");
-        return;
+        return html! {
+            section #accuracy {
+                h2 { "Accuracy per pose" }
+                p.none { "No θ or " (e_d()) ": without a result there is no predicted ground to compare with." }
+            }
+        };
     }
     let mean_max =
         |f: fn(&crate::formats::output::SummaryJson) -> (f64, f64)| result.summary.as_ref().map(f);
@@ -203,10 +190,8 @@ pub(super) fn accuracy_section(page: &mut String, result: &ResultJson) {
         }
         marks
     };
-    page.push_str("<div class=\"charts\">\n");
-    figure(
-        page,
-        "θ per pose",
+    let theta = figure(
+        html! { "θ per pose" },
         "the angle between the measured and the predicted ground (the paper's Fig. 17)",
         &ChartSpec {
             description: "theta per pose",
@@ -225,9 +210,8 @@ pub(super) fn accuracy_section(page: &mut String, result: &ResultJson) {
         },
         &result.poses,
     );
-    figure(
-        page,
-        "e<sub>d</sub> per pose",
+    let e_d_chart = figure(
+        html! { (e_d()) " per pose" },
         "the difference between the measured and the predicted distance of the ground (the paper's Fig. 18)",
         &ChartSpec {
             description: "e_d per pose",
@@ -246,7 +230,6 @@ pub(super) fn accuracy_section(page: &mut String, result: &ResultJson) {
         },
         &result.poses,
     );
-    page.push_str("</div>\n");
     let mut items = vec![
         LegendItem::Dot(USED, "used pose"),
         LegendItem::Cross(SET_ASIDE, "set aside"),
@@ -261,6 +244,11 @@ pub(super) fn accuracy_section(page: &mut String, result: &ResultJson) {
     if !result.gate_checks.is_empty() {
         items.push(LegendItem::Solid(GATE, "quality gate (the limit)"));
     }
-    page.push_str(&legend(&items));
-    page.push_str("</section>\n");
+    html! {
+        section #accuracy {
+            h2 { "Accuracy per pose" }
+            div.charts { (theta) (e_d_chart) }
+            (legend(&items))
+        }
+    }
 }
