@@ -17,6 +17,10 @@
 //!
 //! The normal's residual depends on the rotation only and the offset's on the
 //! translation only (eq. 31), so the two blocks have separate variance factors.
+//!
+//! Here: the steps and the Levenberg-Marquardt problem; step 2 in
+//! [`outliers`], the depth scale solved with the translation in [`scale`],
+//! step 4's observability in [`observability`].
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{
@@ -29,6 +33,13 @@ use super::geometry::{
     PoseParams, Transform,
 };
 use crate::outcome::{position_axis_words, DepthScale, Observability, PoseOutcome, Solution};
+
+mod observability;
+mod outliers;
+mod scale;
+pub use observability::*;
+use outliers::*;
+use scale::*;
 
 /// One pose's evidence.
 #[derive(Debug, Clone, PartialEq)]
@@ -341,126 +352,6 @@ pub fn closed_form(observations: &[&Observation], settings: &SolveSettings) -> P
     PoseParams::from_rotation_translation(&rotation, translation)
 }
 
-/// θ and e_d of an observation under a result.
-fn errors(robot_from_sensor: &PoseParams, obs: &Observation) -> (Plane, f64, f64) {
-    let predicted = predict(robot_from_sensor, &obs.ground_from_robot);
-    let theta = angle_between(&predicted.normal, &obs.plane.normal);
-    (predicted, theta, (predicted.d - obs.plane.d).abs())
-}
-
-/// The spread of a leave-one-out prediction: the noise of the left-out
-/// observation plus what the others leave unknown (its leverage).
-struct Prediction {
-    /// Standard deviation of each tangent component of the normal, radians.
-    normal_sigma: f64,
-    /// Standard deviation of the offset, metres.
-    offset_sigma: f64,
-}
-
-/// How well `others` predict `target`, with the noise level estimated from
-/// the others' own residuals under `estimate`.
-fn prediction_spread(
-    others: &[&Observation],
-    estimate: &PoseParams,
-    target: &Observation,
-    settings: &SolveSettings,
-) -> Prediction {
-    let mut rotation_info = Matrix3::zeros();
-    let mut translation_info = Matrix3::zeros();
-    let (mut chi2_n, mut chi2_d) = (0.0, 0.0);
-    for o in others {
-        let w = Weights::of(o, settings);
-        let (wn, wd) = (w.normal_weight(), w.offset_whitener.powi(2));
-        let up = o.up_in_robot();
-        rotation_info += (Matrix3::identity() - up * up.transpose()) * wn;
-        translation_info += up * up.transpose() * wd;
-        let (_, theta, e_d) = errors(estimate, o);
-        chi2_n += wn * theta * theta;
-        chi2_d += wd * e_d * e_d;
-    }
-    let n = others.len() as f64;
-    // Two tangent components per normal, one offset; three parameters each.
-    let s2_n = chi2_n / (2.0 * n - 3.0).max(1.0);
-    let s2_d = chi2_d / (n - 3.0).max(1.0);
-    let w = Weights::of(target, settings);
-    let up = target.up_in_robot();
-    let cross = up.cross_matrix();
-    let leverage_n = rotation_info
-        .try_inverse()
-        .map(|h| (cross * h * cross.transpose()).trace() / 2.0)
-        .unwrap_or(f64::INFINITY);
-    let leverage_d = translation_info
-        .try_inverse()
-        .map(|h| (up.transpose() * h * up)[(0, 0)])
-        .unwrap_or(f64::INFINITY);
-    Prediction {
-        normal_sigma: (s2_n * (1.0 / w.normal_weight() + leverage_n)).sqrt(),
-        offset_sigma: (s2_d * (1.0 / w.offset_whitener.powi(2) + leverage_d)).sqrt(),
-    }
-}
-
-/// Finds the observation that disagrees most with all the others, if any is
-/// beyond the thresholds, with a reason in words.
-///
-/// For each candidate, the others are solved without it (closed form) and its
-/// prediction error is compared with the prediction's spread: the others' own
-/// residual level and the candidate's leverage. A bad observation stands out
-/// only once it is left out, so a single outlier among few poses cannot hide
-/// by spoiling every fit it is in, and a pose that alone pins a direction down
-/// is not blamed for the others' uncertainty there.
-fn worst_outlier(used: &[&Observation], settings: &SolveSettings) -> Option<(u32, String)> {
-    if used.len() < 5 {
-        return None;
-    }
-    struct Candidate {
-        position: usize,
-        theta: f64,
-        e_d: f64,
-        theta_limit: f64,
-        offset_limit: f64,
-    }
-    let candidates = (0..used.len()).map(|i| {
-        let others: Vec<&Observation> = used
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != i)
-            .map(|(_, o)| *o)
-            .collect();
-        let estimate = closed_form(&others, settings);
-        let spread = prediction_spread(&others, &estimate, used[i], settings);
-        let (_, theta, e_d) = errors(&estimate, used[i]);
-        Candidate {
-            position: i,
-            theta,
-            e_d,
-            // θ of a 2-D error: its RMS is √2 per-component σ.
-            theta_limit: (settings.outlier_k * std::f64::consts::SQRT_2 * spread.normal_sigma)
-                .max(settings.outlier_angle_floor),
-            offset_limit: (settings.outlier_k * spread.offset_sigma)
-                .max(settings.outlier_offset_floor),
-        }
-    });
-    let ratio = |c: &Candidate| (c.theta / c.theta_limit).max(c.e_d / c.offset_limit);
-    let worst = candidates.max_by(|a, b| ratio(a).total_cmp(&ratio(b)))?;
-    if ratio(&worst) <= 1.0 {
-        return None;
-    }
-    let reason = if worst.theta / worst.theta_limit >= worst.e_d / worst.offset_limit {
-        format!(
-            "inconsistent with the other poses: its ground is tilted {:.2}° from where they put it (limit {:.2}°): a misfit plane, a slipped foot or a wrong pose",
-            worst.theta.to_degrees(),
-            worst.theta_limit.to_degrees()
-        )
-    } else {
-        format!(
-            "inconsistent with the other poses: its ground is {:.1} mm from where they put it (limit {:.1} mm): a misfit plane, a slipped foot or a wrong pose",
-            worst.e_d * 1e3,
-            worst.offset_limit * 1e3
-        )
-    };
-    Some((used[worst.position].index, reason))
-}
-
 /// Identifies `robot_from_sensor` from the observations: what it found, with
 /// its covariance and observability, and the depth scale. Whether that is
 /// good enough is for [`crate::quality`] to say.
@@ -570,87 +461,6 @@ pub fn solve(
     }
     solution.depth_scale = DepthScale::fixed(scale, "the estimate did not settle".into());
     Ok(solution)
-}
-
-fn solve_fallback(settings: &SolveSettings) -> f64 {
-    match settings.depth_scale {
-        DepthScaleSetting::Estimate { fallback } => fallback,
-        DepthScaleSetting::Fixed(s) => s,
-    }
-}
-
-/// The joint fit of the translation and the depth scale's correction.
-struct ScaleFit {
-    /// q: the factor by which the current scale's inverse is off (the next
-    /// scale is the current one divided by q).
-    scale_ratio: f64,
-    /// Covariance of (p_x, p_y, p_z, q) for unit noise.
-    covariance: Matrix4<f64>,
-    /// RMS (weighted) of the distances beyond what the tilts explain.
-    leverage: f64,
-}
-
-/// Weighted least squares of `up · p − q·d' + h = 0` over the used poses
-/// (d' the distance at the current scale), with the solve's offset weights.
-fn scale_fit(used: &[&Observation], settings: &SolveSettings, scale: f64) -> Option<ScaleFit> {
-    if used.len() < 5 {
-        return None;
-    }
-    let mut normal = Matrix4::zeros();
-    let mut rhs = nalgebra::Vector4::zeros();
-    let mut up_block = Matrix3::zeros();
-    let mut up_d = Vector3::zeros();
-    let (mut dd, mut weight_sum) = (0.0, 0.0);
-    for o in used {
-        let w = Weights::of(o, settings).offset_whitener.powi(2) * scale * scale;
-        let up = o.up_in_robot();
-        let d = o.plane.d / scale;
-        let row = nalgebra::Vector4::new(up.x, up.y, up.z, -d);
-        normal += row * row.transpose() * w;
-        rhs += row * (-o.body_height() * w);
-        up_block += up * up.transpose() * w;
-        up_d += up * (d * w);
-        dd += d * d * w;
-        weight_sum += w;
-    }
-    let covariance = normal.try_inverse()?;
-    let x = covariance * rhs;
-    // The part of the distances the tilts' up vectors cannot explain.
-    let explained = up_block
-        .try_inverse()
-        .map_or(0.0, |h| (up_d.transpose() * h * up_d)[(0, 0)]);
-    let leverage = ((dd - explained).max(0.0) / weight_sum).sqrt();
-    Some(ScaleFit {
-        scale_ratio: 1.0 / x[3],
-        covariance,
-        leverage,
-    })
-}
-
-/// The six parameters with the measured distances divided by `scale`.
-fn solve_at_scale(
-    observations: &[Observation],
-    settings: &SolveSettings,
-    scale: f64,
-) -> Result<Solution, SolveError> {
-    if scale != 1.0 {
-        let scaled: Vec<Observation> = observations
-            .iter()
-            .map(|o| {
-                let mut o = o.clone();
-                o.plane.d /= scale;
-                if let Some(c) = &mut o.plane_covariance {
-                    for i in 0..4 {
-                        c[(3, i)] /= scale;
-                        c[(i, 3)] /= scale;
-                    }
-                }
-                o
-            })
-            .collect();
-        return solve_six(&scaled, settings);
-    }
-    solve_six(observations, settings)
 }
 
 /// The six parameters from the observations as they are.
@@ -920,129 +730,6 @@ fn outcomes(
             }
         })
         .collect()
-}
-
-/// An eigenvector with a fixed sign (its largest component positive), so
-/// that equal directions print equally.
-fn signed_axis(v: &Vector3<f64>) -> [f64; 3] {
-    let largest = v
-        .iter()
-        .copied()
-        .fold(0.0, |m: f64, x| if x.abs() > m.abs() { x } else { m });
-    let sign = if largest < 0.0 { -1.0 } else { 1.0 };
-    [v.x * sign, v.y * sign, v.z * sign]
-}
-
-/// Singular values of the per-observation Jacobian blocks and the words for
-/// every direction the schedule cannot observe.
-///
-/// With unit noise, the rotation block of observation i is `[up_i]×` (how the
-/// normal moves as the sensor turns), and the translation block is `up_iᵀ`.
-/// Their Gram matrices, divided by the number of observations, are
-/// `mean(I - up·upᵀ)` and `mean(up·upᵀ)`.
-pub fn observability(used: &[&Observation], settings: &SolveSettings) -> Observability {
-    let n = used.len().max(1) as f64;
-    let ups: Vec<Vector3<f64>> = used.iter().map(|o| o.up_in_robot()).collect();
-    let rotation_gram: Matrix3<f64> = ups
-        .iter()
-        .map(|u| Matrix3::identity() - u * u.transpose())
-        .sum::<Matrix3<f64>>()
-        / n;
-    let translation_gram: Matrix3<f64> =
-        ups.iter().map(|u| u * u.transpose()).sum::<Matrix3<f64>>() / n;
-    let spectrum = |gram: Matrix3<f64>| {
-        let eigen = SymmetricEigen::new(gram);
-        let mut pairs: Vec<(f64, Vector3<f64>)> = (0..3)
-            .map(|k| {
-                (
-                    eigen.eigenvalues[k].max(0.0).sqrt(),
-                    eigen.eigenvectors.column(k).into_owned(),
-                )
-            })
-            .collect();
-        pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
-        pairs
-    };
-    let rotation = spectrum(rotation_gram);
-    let translation = spectrum(translation_gram);
-
-    let mean_up = ups.iter().sum::<Vector3<f64>>().normalize();
-    let max_tilt_spread = ups
-        .iter()
-        .map(|u| angle_between(u, &mean_up))
-        .fold(0.0, f64::max);
-    let never_tilts = max_tilt_spread < 1f64.to_radians();
-
-    let mut problems = Vec::new();
-    let weak_rotations: Vec<&Vector3<f64>> = rotation
-        .iter()
-        .filter(|(s, _)| *s < settings.min_spread)
-        .map(|(_, v)| v)
-        .collect();
-    if !weak_rotations.is_empty() {
-        problems.push(if never_tilts {
-            "rotation of the sensor about the ground normal (α) is not observable: the schedule never tilts the body".to_string()
-        } else {
-            let v = weak_rotations[0];
-            format!(
-                "rotation of the sensor about the axis ({:.2}, {:.2}, {:.2}) of the body is not observable: the body's tilts barely change the ground's direction; use larger tilts",
-                v.x, v.y, v.z
-            )
-        });
-    }
-    let weak_translations: Vec<&Vector3<f64>> = translation
-        .iter()
-        .filter(|(s, _)| *s < settings.min_spread)
-        .map(|(_, v)| v)
-        .collect();
-    if !weak_translations.is_empty() {
-        // Which body axes lie in the unobservable subspace.
-        let mut axes: Vec<(usize, f64)> = (0..3)
-            .map(|a| {
-                (
-                    a,
-                    weak_translations
-                        .iter()
-                        .map(|v| v[a].powi(2))
-                        .sum::<f64>()
-                        .sqrt(),
-                )
-            })
-            .collect();
-        axes.sort_by(|a, b| b.1.total_cmp(&a.1));
-        let named: Vec<usize> = axes
-            .iter()
-            .take(weak_translations.len())
-            .map(|(a, _)| *a)
-            .collect();
-        let position_words: Vec<String> = named.iter().map(|&a| position_axis_words(a)).collect();
-        let what = format!(
-            "the sensor's {} position{}",
-            position_words.join(" and "),
-            if named.len() > 1 { "s" } else { "" }
-        );
-        let why = if never_tilts {
-            "the schedule never tilts the body".to_string()
-        } else if named == [2] {
-            "the schedule only pitches the body (turns it about its sideways Z axis, β′); add poses that roll it (γ′)".to_string()
-        } else if named == [0] {
-            "the schedule only rolls the body (turns it about its forward X axis, γ′); add poses that pitch it (β′)".to_string()
-        } else {
-            "the body's tilts all share one axis; add poses that tilt it about another".to_string()
-        };
-        problems.push(format!(
-            "{what} {} not observable: {why}",
-            if named.len() > 1 { "are" } else { "is" }
-        ));
-    }
-    Observability {
-        rotation_singular_values: [rotation[0].0, rotation[1].0, rotation[2].0],
-        translation_singular_values: [translation[0].0, translation[1].0, translation[2].0],
-        rotation_weakest_axis: signed_axis(&rotation[2].1),
-        translation_weakest_axis: signed_axis(&translation[2].1),
-        min_singular_value: settings.min_spread,
-        problems,
-    }
 }
 
 #[cfg(test)]
