@@ -2,6 +2,10 @@
 //! for simulated hardware): strict TOML (`deny_unknown_fields`), then semantic
 //! checks, so that a typo is an error naming the key rather than a default
 //! silently used. `groundcal check-config FILE` runs both.
+//!
+//! Here: the sections and their checks; the simulator's section in
+//! [`simulator`], the choices a word makes (robot, sensor, world) in
+//! [`choices`].
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -181,6 +185,11 @@ pub struct CalibrationConfig {
 
 pub use crate::calib::solve::DepthScaleSetting;
 
+mod choices;
+mod simulator;
+pub use choices::*;
+pub use simulator::*;
+
 /// Tilts to calibrate at: none, or two or more different ones within the
 /// Kinect's motor range (±27°).
 pub fn check_tilts(tilts: &[f64]) -> Result<(), String> {
@@ -252,177 +261,6 @@ fn depth_scale_setting<'de, D: Deserializer<'de>>(
     .map_err(serde::de::Error::custom)
 }
 
-fn default_slip_mm() -> f64 {
-    10.0
-}
-
-/// The simulated robot and world (`--robot sim`, `--sensor sim`).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SimConfig {
-    pub seed: u64,
-    /// Motions and frames this many times faster than real time.
-    pub time_scale: f64,
-    /// The simulated robot's true `robot_from_sensor`: what a calibration
-    /// should find.
-    pub mount: crate::calib::geometry::PoseDegMm,
-    /// `flat`, `boxes-and-wall`, `uneven` or `corridor`.
-    #[serde(deserialize_with = "sim_world")]
-    pub world: SimWorld,
-    /// A foot that sinks into soft ground from a pose on (tests of slipped
-    /// feet): `{ foot = 3, from_pose = 30, depth_mm = 15.0 }`.
-    #[serde(default)]
-    pub sinking_foot: Option<SinkingFootConfig>,
-    /// The simulated Kinect's depth as a multiple of the truth (1.01: reads
-    /// 1 % long); default 1.
-    #[serde(default)]
-    pub depth_scale: Option<f64>,
-    /// A tilt motor that slips during a calibration (tests of the motor's
-    /// check): `{ from_pose = 26, degrees = 1.0 }`.
-    #[serde(default)]
-    pub motor_slip: Option<MotorSlipConfig>,
-    /// The fixed pattern the simulated Kinect adds to its raw depth:
-    /// by default one drawn as a real unit's (`shape = "measured"`, 0.8 raw
-    /// units RMS with its plane part); `{ shape = "radial", amplitude_raw =
-    /// 0.5 }` and the other shapes for tests; `{ shape = "none" }` for none.
-    #[serde(default)]
-    pub depth_distortion: Option<SimDistortionConfig>,
-    /// The simulated Kinect's depth noise: `kinect` (the default: measured
-    /// on real frames, correlated over the image and held through a pose),
-    /// `white` (independent per pixel and frame, the former model), or a
-    /// table of the measured model's parts for another sensor or a test:
-    /// `{ white_raw = 0.38, short_raw = 0, medium_raw = 0.25, long_raw = 0,
-    /// gain_per_m = 0, held = "frame" }` (what is left out is as measured).
-    #[serde(default, deserialize_with = "sim_noise")]
-    pub depth_noise: SimNoise,
-}
-
-/// `[sim] depth_noise`.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum SimNoise {
-    #[default]
-    Kinect,
-    White,
-    /// The measured model with parts of its own.
-    Parts(groundcal_hal::sim::noise::KinectNoise),
-}
-
-/// `[sim] depth_noise` as a table: the measured model's parts, each
-/// optional.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SimNoiseParts {
-    white_raw: Option<f64>,
-    short_raw: Option<f64>,
-    medium_raw: Option<f64>,
-    long_raw: Option<f64>,
-    gain_from_m: Option<f64>,
-    gain_per_m: Option<f64>,
-    held: Option<String>,
-}
-
-fn sim_noise<'de, D: serde::Deserializer<'de>>(d: D) -> Result<SimNoise, D::Error> {
-    let value = toml::Value::deserialize(d)?;
-    sim_noise_of(value).map_err(|e| serde::de::Error::custom(format!("sim.depth_noise: {e}")))
-}
-
-fn sim_noise_of(value: toml::Value) -> Result<SimNoise, String> {
-    use groundcal_hal::sim::noise::{KinectNoise, NoiseHeld};
-    let parts = match value {
-        toml::Value::String(name) => {
-            return match name.as_str() {
-                "kinect" => Ok(SimNoise::Kinect),
-                "white" => Ok(SimNoise::White),
-                other => Err(format!(
-                    "\"{other}\" is not a noise of the simulated Kinect (kinect, white, or a table of parts)"
-                )),
-            }
-        }
-        table @ toml::Value::Table(_) => {
-            SimNoiseParts::deserialize(table).map_err(|e| e.to_string())?
-        }
-        other => {
-            return Err(format!(
-                "a TOML {} is not a noise of the simulated Kinect (kinect, white, or a table of parts)",
-                other.type_str()
-            ))
-        }
-    };
-    let measured = KinectNoise::default();
-    let held = match parts.held.as_deref() {
-        None | Some("pose") => NoiseHeld::PerPose,
-        Some("frame") => NoiseHeld::PerFrame,
-        Some(other) => {
-            return Err(format!(
-                "held = \"{other}\": the smooth noise is held a \"pose\" or a \"frame\""
-            ))
-        }
-    };
-    let noise = KinectNoise {
-        white_raw: parts.white_raw.unwrap_or(measured.white_raw),
-        short_raw: parts.short_raw.unwrap_or(measured.short_raw),
-        medium_raw: parts.medium_raw.unwrap_or(measured.medium_raw),
-        long_raw: parts.long_raw.unwrap_or(measured.long_raw),
-        gain_from_m: parts.gain_from_m.unwrap_or(measured.gain_from_m),
-        gain_per_m: parts.gain_per_m.unwrap_or(measured.gain_per_m),
-        held,
-    };
-    noise.validate()?;
-    Ok(SimNoise::Parts(noise))
-}
-
-/// `[sim] depth_distortion`: the simulated Kinect's fixed pattern.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SimDistortionConfig {
-    pub shape: SimDistortionShape,
-    /// Raw units: the shapes' peak, or the measured pattern's RMS (0.8 by
-    /// default); not needed for `none`.
-    #[serde(default)]
-    pub amplitude_raw: Option<f64>,
-    /// For `measured`: whether the pattern keeps the plane part a real
-    /// unit's carries (default true), which only the poses' heights tell
-    /// from the mount.
-    #[serde(default)]
-    pub plane_part: Option<bool>,
-    /// Herrera's weakening with depth, per metre; default 0.
-    #[serde(default)]
-    pub decay_per_m: f64,
-    /// The stripes' period for `shape = "bands"`, pixels; default 64.
-    #[serde(default)]
-    pub band_period_px: Option<f64>,
-}
-
-/// The shapes of `[sim] depth_distortion`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SimDistortionShape {
-    None,
-    Measured,
-    Radial,
-    Tilted,
-    Saddle,
-    Bands,
-    Waves,
-}
-
-/// `[sim] motor_slip`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MotorSlipConfig {
-    pub from_pose: u16,
-    pub degrees: f64,
-}
-
-/// `[sim] sinking_foot`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SinkingFootConfig {
-    pub foot: usize,
-    pub from_pose: u16,
-    pub depth_mm: f64,
-}
-
 /// The daemon's HTTP terminal.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -470,8 +308,8 @@ impl Config {
         reason = "files built into the binary, parsed by the unit tests: not input"
     )]
     pub fn embedded_sim() -> (Self, Schedule) {
-        const CONFIG: &str = include_str!("../../config/sim.toml");
-        const SCHEDULE: &str = include_str!("../../config/schedules/octopus-52.toml");
+        const CONFIG: &str = include_str!("../../../config/sim.toml");
+        const SCHEDULE: &str = include_str!("../../../config/schedules/octopus-52.toml");
         let config = Self::parse(Path::new("(built-in config/sim.toml)"), CONFIG)
             .expect("the shipped sim.toml parses (tested)");
         let schedule = Schedule::parse(Path::new("(built-in octopus-52.toml)"), SCHEDULE)
@@ -668,162 +506,6 @@ impl Config {
         }
         Ok(())
     }
-}
-
-/// Where the lower computer is (`robot.address`, `--robot`).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum RobotAddress {
-    /// The simulated lower computer, in process.
-    Sim,
-    /// A lower computer at `host:port` (hexapod-udp.md), resolved when the
-    /// link opens, IPv4 first.
-    HostPort(String),
-}
-
-impl FromStr for RobotAddress {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, String> {
-        if text == "sim" {
-            return Ok(Self::Sim);
-        }
-        // A host name is allowed too; it must at least have a host and a port.
-        let host_and_port = text
-            .rsplit_once(':')
-            .filter(|(host, _)| !host.is_empty())
-            .and_then(|(_, port)| port.parse::<u16>().ok())
-            .is_some();
-        if text.parse::<std::net::SocketAddr>().is_ok() || host_and_port {
-            Ok(Self::HostPort(text.to_string()))
-        } else {
-            Err(format!("\"{text}\" is neither `sim` nor host:port"))
-        }
-    }
-}
-
-impl fmt::Display for RobotAddress {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Sim => f.write_str("sim"),
-            Self::HostPort(address) => f.write_str(address),
-        }
-    }
-}
-
-/// Where depth frames come from (`sensor.source`, `--sensor`).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum SensorSource {
-    /// A Kinect v1 through libfreenect.
-    Kinect,
-    /// The simulated Kinect, seeing the simulated world.
-    Sim,
-    /// The frames of a recording played back pose by pose, as if live
-    /// (`replay:DIR`, the spelling of cli.md).
-    Playback(PathBuf),
-}
-
-impl FromStr for SensorSource {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, String> {
-        match text {
-            "kinect" => Ok(Self::Kinect),
-            "sim" => Ok(Self::Sim),
-            _ => match text.strip_prefix("replay:") {
-                Some(dir) if !dir.is_empty() => Ok(Self::Playback(PathBuf::from(dir))),
-                _ => Err(format!("\"{text}\" is not kinect, sim or replay:DIR")),
-            },
-        }
-    }
-}
-
-impl fmt::Display for SensorSource {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Kinect => f.write_str("kinect"),
-            Self::Sim => f.write_str("sim"),
-            Self::Playback(dir) => write!(f, "replay:{}", dir.display()),
-        }
-    }
-}
-
-/// The simulated world (`sim.world`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SimWorld {
-    /// Flat ground, nothing else.
-    Flat,
-    /// Boxes on the ground and a wall in view.
-    BoxesAndWall,
-    /// Ground with 1 cm bumps.
-    Uneven,
-    /// A corridor with people: the floor a tenth of the view.
-    Corridor,
-    /// Four boxes and a wall across the far end of the view.
-    Clutter,
-    /// Boxes 5–10 cm tall, their tops near the floor.
-    LowBoxes,
-    /// A wall meeting the floor in view.
-    WallMeetingFloor,
-}
-
-impl SimWorld {
-    const NAMES: [(&'static str, SimWorld); 7] = [
-        ("flat", SimWorld::Flat),
-        ("boxes-and-wall", SimWorld::BoxesAndWall),
-        ("uneven", SimWorld::Uneven),
-        ("corridor", SimWorld::Corridor),
-        ("clutter", SimWorld::Clutter),
-        ("low-boxes", SimWorld::LowBoxes),
-        ("wall-meeting-floor", SimWorld::WallMeetingFloor),
-    ];
-}
-
-impl FromStr for SimWorld {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, String> {
-        Self::NAMES
-            .iter()
-            .find(|(name, _)| *name == text)
-            .map(|(_, world)| *world)
-            .ok_or_else(|| {
-                let names: Vec<&str> = Self::NAMES.iter().map(|(name, _)| *name).collect();
-                format!("\"{text}\" is not one of {}", names.join(", "))
-            })
-    }
-}
-
-impl fmt::Display for SimWorld {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let name = Self::NAMES
-            .iter()
-            .find(|(_, world)| world == self)
-            .map_or("?", |(name, _)| name);
-        f.write_str(name)
-    }
-}
-
-/// A string value parsed as `T`, an error naming `key` (the TOML error adds
-/// the file and line).
-fn parsed<'de, D: Deserializer<'de>, T: FromStr<Err = String>>(
-    deserializer: D,
-    key: &str,
-) -> Result<T, D::Error> {
-    let text = String::deserialize(deserializer)?;
-    text.parse()
-        .map_err(|e| serde::de::Error::custom(format!("{key}: {e}")))
-}
-
-fn robot_address<'de, D: Deserializer<'de>>(d: D) -> Result<RobotAddress, D::Error> {
-    parsed(d, "robot.address")
-}
-
-fn sensor_source<'de, D: Deserializer<'de>>(d: D) -> Result<SensorSource, D::Error> {
-    parsed(d, "sensor.source")
-}
-
-fn sim_world<'de, D: Deserializer<'de>>(d: D) -> Result<SimWorld, D::Error> {
-    parsed(d, "sim.world")
 }
 
 /// A path named in the configuration: relative paths are relative to the
