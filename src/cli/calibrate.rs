@@ -5,6 +5,7 @@
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
+use super::args::HardwareArgs;
 use super::{finish, ExitStatus};
 use crate::calib::plane::GroundFitMethod;
 use crate::hardware::{self, Selection};
@@ -182,6 +183,52 @@ pub(super) async fn stop_signal() -> String {
         let _ = tokio::signal::ctrl_c().await;
         "interrupted".to_string()
     }
+}
+
+/// The arguments of `groundcal calibrate`: the configuration, the hardware and what to keep.
+#[derive(Debug, clap::Args)]
+pub struct CalibrateArgs {
+    /// The configuration (default: built-in simulation with --robot sim, else /etc/groundcal/groundcal.toml).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    #[command(flatten)]
+    pub hardware: HardwareArgs,
+    /// Write everything as a recording into this new directory, as it goes.
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
+    /// Also write the session as an MCAP file (ROS 2 messages) for
+    /// Foxglove and ros2 bag, once the calibration is solved.
+    #[arg(long, value_name = "FILE")]
+    pub record_mcap: Option<PathBuf>,
+    /// One JSON document on stdout (progress stays on stderr).
+    #[arg(long)]
+    pub json: bool,
+    /// The ground fit, overriding calibration.ground_fit: disparity or paper.
+    #[arg(long, value_name = "disparity|paper")]
+    pub ground_fit: Option<GroundFitMethod>,
+    /// The Kinect's depth scale, overriding calibration.depth_scale: estimate
+    /// (with the mount, when the body's heights observe it) or a known value such as 1.0032.
+    #[arg(long, value_name = "estimate|VALUE", value_parser = crate::setup::config::parse_depth_scale)]
+    pub depth_scale: Option<crate::setup::config::DepthScaleSetting>,
+    /// Calibrate at each of these tilts of the Kinect's motor (degrees, two or
+    /// more, e.g. -20,-10,0) and fit the motor's axis: the result then holds at
+    /// any tilt between them (export --tilt). Overrides calibration.tilts.
+    #[arg(long, value_name = "T1,T2,...", allow_hyphen_values = true, value_parser = crate::setup::config::parse_tilts)]
+    pub tilts: Option<crate::setup::config::Tilts>,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: CalibrateArgs) -> ExitStatus {
+    run(&CalibrateOptions {
+        config: args.config,
+        selection: args.hardware.into(),
+        record: args.record,
+        record_mcap: args.record_mcap,
+        json: args.json,
+        ground_fit: args.ground_fit,
+        depth_scale: args.depth_scale,
+        tilts: args.tilts.map(|t| t.0),
+    })
 }
 
 /// Runs the command.

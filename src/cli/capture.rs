@@ -37,6 +37,7 @@ use crate::formats::depth_image::DepthImage;
 use crate::formats::recording::dump::RawTiltState;
 use crate::formats::recording::session::{Home, KinectInfo, Session};
 use crate::formats::recording::writer::{RecordingWriter, WriteError};
+use crate::setup::config::SensorSource;
 
 /// What a capture wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -206,6 +207,51 @@ pub async fn capture<S: DepthSensor>(
         frames: names,
         tilt_snapshot,
     })
+}
+
+/// The arguments of `groundcal capture`: the sensor and the frames to record.
+#[derive(Debug, clap::Args)]
+pub struct CaptureArgs {
+    /// The configuration (sensor, library); the flags override it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The sensor: kinect (libfreenect); default the configuration's, else kinect.
+    #[arg(long)]
+    pub sensor: Option<SensorSource>,
+    /// The libfreenect library file to load (e.g. libfreenect's fakenect, to play a dump back).
+    #[arg(long, value_name = "PATH")]
+    pub freenect_lib: Option<PathBuf>,
+    /// How many depth frames to record.
+    #[arg(long)]
+    pub frames: usize,
+    /// The new recording's directory (must not exist, or be empty).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: CaptureArgs) -> ExitStatus {
+    // The configuration's sensor and library, the flags overriding them.
+    let sensor_config = match &args.config {
+        Some(path) => match crate::setup::config::Config::load(path) {
+            Ok((config, _)) => Some(config.sensor),
+            Err(e) => return super::usage_error(e.to_string()),
+        },
+        None => None,
+    };
+    let source = args
+        .sensor
+        .or_else(|| sensor_config.as_ref().map(|s| s.source.clone()))
+        .unwrap_or(SensorSource::Kinect);
+    let library = args
+        .freenect_lib
+        .or_else(|| sensor_config.and_then(|s| s.freenect_lib));
+    match source {
+        SensorSource::Kinect => run(library.as_deref(), args.frames, &args.out),
+        other => super::usage_error(format!(
+            "--sensor: \"{other}\" cannot capture (yet); use kinect"
+        )),
+    }
 }
 
 /// `groundcal capture --sensor kinect [--freenect-lib PATH] --frames N --out DIR`:

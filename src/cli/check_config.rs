@@ -7,6 +7,19 @@ use std::path::Path;
 use super::ExitStatus;
 use crate::setup::config::Config;
 use crate::terminal::read_token;
+use std::path::PathBuf;
+
+/// The arguments of `groundcal check-config`: the file.
+#[derive(Debug, clap::Args)]
+pub struct CheckConfigArgs {
+    /// The configuration file.
+    pub file: PathBuf,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: CheckConfigArgs) -> ExitStatus {
+    run(&args.file)
+}
 
 /// Runs the command: one line on stdout when valid, the reason on stderr
 /// (exit 2) when not.

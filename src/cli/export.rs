@@ -6,6 +6,26 @@ use std::path::Path;
 
 use super::ExitStatus;
 use crate::formats::export::{read_result_with_scale, ExportFormat, RosMount};
+use std::path::PathBuf;
+
+/// The arguments of `groundcal export`: a result and the format.
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// A result document (`groundcal solve|replay|calibrate --json`).
+    pub file: PathBuf,
+    /// The format to write on stdout.
+    #[arg(long, value_enum)]
+    pub format: crate::formats::export::ExportFormat,
+    /// The mount at this tilt of the Kinect's motor (degrees), from a
+    /// calibration made at several tilts (calibrate --tilts), within their range.
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+    pub tilt: Option<f64>,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: ExportArgs) -> ExitStatus {
+    run(&args.file, args.format, args.tilt)
+}
 
 /// Runs the command: the export on stdout, messages on stderr. A rejected
 /// calibration, a missing file or an inconsistent result is bad input (exit 2).

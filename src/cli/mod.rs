@@ -1,8 +1,11 @@
 //! The `groundcal` subcommands, as library functions that return an exit status.
 //!
-//! `main.rs` only parses arguments and sets up logging; everything a command
-//! does lives here so that tests can call it directly.
+//! `main.rs` only parses arguments and sets up logging; each command's
+//! arguments (`SolveArgs`, …) and everything it does live here, its `main`
+//! taking the arguments and its `run` the options, so that tests can call it
+//! directly.
 
+pub mod args;
 pub mod calibrate;
 pub mod capture;
 pub mod check_config;
@@ -29,6 +32,12 @@ pub enum ExitStatus {
     Rejected = 3,
     /// `verify` only: the sensor no longer agrees with the calibration.
     Drift = 4,
+}
+
+/// A usage error: said on standard error, exit status 2.
+pub fn usage_error(message: String) -> ExitStatus {
+    eprintln!("groundcal: {message}");
+    ExitStatus::BadInput
 }
 
 impl ExitStatus {

@@ -78,6 +78,34 @@ pub struct ExpectedJson {
     pub e_d_mm: f64,
 }
 
+/// The arguments of `groundcal plan`: the schedule to judge, or the one to design.
+#[derive(Debug, clap::Args)]
+pub struct PlanArgs {
+    /// The configuration (nominal mount, limits, gates, [calibration.noise]); default /etc/groundcal/groundcal.toml.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The schedule to judge (default: the configuration's).
+    pub schedule: Option<PathBuf>,
+    /// Design a schedule of N poses within the robot's limits instead (needs --out).
+    #[arg(long, value_name = "N", requires = "out")]
+    pub design: Option<usize>,
+    /// Where --design writes the schedule (a config/schedules/*.toml file).
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// One JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: PlanArgs) -> ExitStatus {
+    match (args.design, args.out) {
+        (Some(count), Some(out)) => run_design(args.config.as_deref(), count, &out, args.json),
+        (None, None) => run(args.config.as_deref(), args.schedule.as_deref(), args.json),
+        _ => super::usage_error("plan: --design N and --out FILE go together".into()),
+    }
+}
+
 /// Runs the command.
 pub fn run(config_path: Option<&Path>, schedule_path: Option<&Path>, json: bool) -> ExitStatus {
     let Inputs {

@@ -13,6 +13,7 @@ use crate::calib::plane::{
 use crate::calib::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::formats::depth_image::{read_depth_image, DepthUnits};
 use crate::formats::output::PlaneJson;
+use std::path::PathBuf;
 
 /// The command's options, already parsed from flags.
 #[derive(Debug, Clone)]
@@ -145,6 +146,73 @@ pub fn fit_file(file: &Path, options: &PlaneOptions) -> Result<GroundFit, (ExitS
             format!("{}: {e}", file.display()),
         )
     })
+}
+
+/// The arguments of `groundcal plane`: one depth image and how to read it.
+#[derive(Debug, clap::Args)]
+pub struct PlaneArgs {
+    /// The depth image: fakenect PGM, 16-bit PGM, PNG or TIFF.
+    pub file: PathBuf,
+    /// One JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// raw11 (fakenect .pgm), mm, or tum (5000 per metre).
+    #[arg(long)]
+    pub units: Option<DepthUnits>,
+    /// zero-plane or inverse-linear:A,B (raw11 only).
+    #[arg(long, default_value = "zero-plane")]
+    pub model: String,
+    /// Focal length along x, pixels (default: the Kinect's).
+    #[arg(long)]
+    pub fx: Option<f64>,
+    /// Focal length along y, pixels (default: the Kinect's).
+    #[arg(long)]
+    pub fy: Option<f64>,
+    /// Principal point x, pixels (default: the Kinect's).
+    #[arg(long)]
+    pub cx: Option<f64>,
+    /// Principal point y, pixels (default: the Kinect's).
+    #[arg(long)]
+    pub cy: Option<f64>,
+    /// Expected up direction in the optical frame.
+    #[arg(long, default_value = "0,-1,0", allow_hyphen_values = true)]
+    pub up: String,
+    /// Largest angle between the ground's normal and --up, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub up_tolerance: f64,
+    /// The ground fit: disparity (least squares in inverse depth, unbiased)
+    /// or paper (the paper's eigenvector fit in metres, to compare).
+    #[arg(long, value_name = "disparity|paper", default_value = "disparity")]
+    pub ground_fit: GroundFitMethod,
+    /// The Kinect's depth pattern to take out of the image first: a
+    /// document of `groundcal export RESULT.json --format depth-correction`.
+    #[arg(long, value_name = "FILE")]
+    pub depth_correction: Option<PathBuf>,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: PlaneArgs) -> ExitStatus {
+    let model = match parse_model(&args.model) {
+        Ok(m) => m,
+        Err(e) => return super::usage_error(e),
+    };
+    let up = match super::parse_numbers::<3>("--up", &args.up) {
+        Ok([x, y, z]) => nalgebra::Vector3::new(x, y, z),
+        Err(e) => return super::usage_error(e),
+    };
+    let options = PlaneOptions {
+        units: args.units,
+        model,
+        fx: args.fx,
+        fy: args.fy,
+        cx: args.cx,
+        cy: args.cy,
+        up_optical: up,
+        up_tolerance_deg: args.up_tolerance,
+        ground_fit: args.ground_fit,
+        depth_correction: args.depth_correction,
+    };
+    run(&args.file, args.json, &options)
 }
 
 /// Runs the command.

@@ -2,10 +2,13 @@
 
 use std::path::Path;
 
+use super::args::BagArgs;
 use super::{finish, ExitStatus};
+use crate::calib::plane::GroundFitMethod;
 use crate::formats::recording::Recording;
 use crate::formats::report::{write_report, Provenance};
 use crate::solving::replay::{replay, ReplayOptions};
+use std::path::PathBuf;
 
 /// What a replay writes besides its result.
 #[derive(Debug, Clone, Copy, Default)]
@@ -21,6 +24,124 @@ pub struct Outputs<'a> {
     /// The input as it was named, when the recording was read out of it
     /// (groundcal's own session MCAP): the report's provenance says it.
     pub read_from: Option<&'a Path>,
+}
+
+/// The arguments of `groundcal replay`: a recording or a bag, and what to write.
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// The recording's directory, or a ROS 2 bag's .mcap file.
+    pub dir: PathBuf,
+    #[command(flatten)]
+    pub bag: BagArgs,
+    /// One JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// The rough robot_from_sensor (degrees, millimetres) that tells which
+    /// plane is the ground; overrides the recording's.
+    #[arg(long, value_name = "a,b,g,x,y,z", allow_hyphen_values = true)]
+    pub nominal_mount: Option<String>,
+    /// Write a self-contained HTML report (index.html) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub report: Option<PathBuf>,
+    /// Write the session as an MCAP file (ROS 2 messages) for Foxglove and
+    /// ros2 bag: the frames, the body and feet, the mount, the ground found.
+    #[arg(long, value_name = "FILE")]
+    pub mcap: Option<PathBuf>,
+    /// Worker threads (default: every core). The result does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// The ground fit: disparity (least squares in inverse depth, unbiased)
+    /// or paper (the paper's eigenvector fit in metres, to compare).
+    #[arg(long, value_name = "disparity|paper", default_value = "disparity")]
+    pub ground_fit: GroundFitMethod,
+    /// Judge by this configuration's quality gates (default: those the
+    /// recording stores from its live run, else the built-in ones).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The Kinect's depth scale: estimate (the default, or --config's
+    /// calibration.depth_scale) or a known value such as 1.0032.
+    #[arg(long, value_name = "estimate|VALUE", value_parser = crate::setup::config::parse_depth_scale)]
+    pub depth_scale: Option<crate::setup::config::DepthScaleSetting>,
+    /// Replay a recording whose poses.jsonl ends part-way through a
+    /// record (a power cut while recording) without that pose; the result
+    /// says so. Without it such a recording is refused, naming the cut.
+    #[arg(long)]
+    pub cut_off: bool,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: ReplayArgs) -> ExitStatus {
+    let (gates, noise, verify, configured_scale) = match args
+        .config
+        .as_deref()
+        .map(crate::setup::config::Config::load)
+    {
+        None => (None, None, Default::default(), Default::default()),
+        Some(Ok((config, _))) => (
+            Some(config.calibration.gates),
+            Some(
+                config
+                    .calibration
+                    .noise
+                    .unwrap_or_else(crate::calib::plan::NoiseModel::solve_floors),
+            ),
+            config.verify.settings(&config.calibration),
+            config.calibration.depth_scale,
+        ),
+        Some(Err(e)) => return super::usage_error(e.to_string()),
+    };
+    let nominal_mount = match args
+        .nominal_mount
+        .map(|m| super::parse_numbers::<6>("--nominal-mount", &m))
+    {
+        None => None,
+        Some(Ok(values)) => Some(crate::calib::observe::NominalMount::from_values(values)),
+        Some(Err(e)) => return super::usage_error(e),
+    };
+    let mut options = ReplayOptions {
+        nominal_mount,
+        threads: args.threads,
+        gates,
+        noise,
+        verify,
+        depth_scale: args.depth_scale.unwrap_or(configured_scale),
+        keep: crate::solving::replay::AlsoKeep {
+            ground_points: args.mcap.is_some(),
+            input_digest: args.report.is_some(),
+        },
+        ..Default::default()
+    };
+    options.pose.plane.method = args.ground_fit;
+    let outputs = Outputs {
+        json: args.json,
+        report: args.report.as_deref(),
+        mcap: args.mcap.as_deref(),
+        cut_off: args.cut_off,
+        read_from: None,
+    };
+    let dir = args.dir;
+    if crate::solving::bag::is_mcap_file(&dir) {
+        // groundcal's own session carries its recording whole.
+        match crate::solving::bag::own::own_recording(&dir) {
+            Ok(Some(own)) => {
+                let outputs = Outputs {
+                    read_from: Some(&dir),
+                    ..outputs
+                };
+                return run(own.dir(), &outputs, &options);
+            }
+            Ok(None) => {}
+            Err(e) => {
+                eprintln!("groundcal replay: {e}");
+                return ExitStatus::BadInput;
+            }
+        }
+        return match args.bag.options() {
+            Ok(bag) => run_bag(&dir, &bag, &outputs, &options),
+            Err(e) => super::usage_error(e),
+        };
+    }
+    run(&dir, &outputs, &options)
 }
 
 /// Runs the command; the result goes to stdout, messages to stderr, and the

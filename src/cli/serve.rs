@@ -7,6 +7,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use super::args::HardwareArgs;
 use super::ExitStatus;
 use crate::hardware::{self, Selection};
 use crate::setup::config::Config;
@@ -39,6 +40,28 @@ fn stop_signal() -> impl std::future::Future<Output = ()> + Send + 'static {
             }
         }
     }
+}
+
+/// The arguments of `groundcal serve`: the configuration and the hardware.
+#[derive(Debug, clap::Args)]
+pub struct ServeArgs {
+    /// The configuration ([serve]: listen, token_file, state_dir, allowed_hosts).
+    #[arg(long)]
+    pub config: PathBuf,
+    #[command(flatten)]
+    pub hardware: HardwareArgs,
+    /// Overrides serve.listen (HOST:PORT; port 0 picks one).
+    #[arg(long)]
+    pub listen: Option<String>,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: ServeArgs) -> ExitStatus {
+    run(&ServeOptions {
+        config: args.config,
+        selection: args.hardware.into(),
+        listen: args.listen,
+    })
 }
 
 /// Runs the command.

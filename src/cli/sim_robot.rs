@@ -26,6 +26,35 @@ use groundcal_hal::udp::link::resolve_ipv4_first;
 
 use super::ExitStatus;
 
+/// The arguments of `groundcal sim-robot`: where to listen, and how the robot behaves.
+#[derive(Debug, clap::Args)]
+pub struct SimRobotArgs {
+    /// The address to listen on, e.g. 127.0.0.1:7400 (port 0: any free port; the
+    /// bound address is printed on stdout as `listening on IP:PORT`).
+    #[arg(long, value_name = "ADDR")]
+    pub listen: String,
+    /// Picks the robot's kinematic error and noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Motions take duration / X (50: fifty times faster than real time).
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    pub time_scale: f64,
+    /// Play this recording's robot back: accept only its poses, exactly as
+    /// commanded, and report its feet.
+    #[arg(long, value_name = "DIR")]
+    pub replay: Option<PathBuf>,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: SimRobotArgs) -> ExitStatus {
+    run(
+        &args.listen,
+        args.seed,
+        args.time_scale,
+        args.replay.as_deref(),
+    )
+}
+
 /// Runs the simulated lower computer until a signal.
 pub fn run(listen: &str, seed: u64, time_scale: f64, replay: Option<&Path>) -> ExitStatus {
     let usage = |message: String| {

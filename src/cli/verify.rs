@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use super::args::HardwareArgs;
 use super::calibrate::{show_progress, stop_signal};
 use super::{print_json, print_stdout, ExitStatus};
 use crate::formats::recording::Recording;
@@ -46,6 +47,44 @@ fn finish(document: &VerifyJson, json: bool) -> ExitStatus {
     } else {
         ExitStatus::Success
     }
+}
+
+/// The arguments of `groundcal verify`: the calibration to check, and on what.
+#[derive(Debug, clap::Args)]
+pub struct VerifyArgs {
+    /// The configuration (default: built-in simulation with --robot sim, else /etc/groundcal/groundcal.toml).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The calibration to check: a result of calibrate/replay/solve --json, or an active.json (default: the store's active calibration, [serve] state_dir).
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
+    #[command(flatten)]
+    pub hardware: HardwareArgs,
+    /// Check a recording's poses offline instead of the robot now.
+    #[arg(long, value_name = "DIR", conflicts_with = "poses")]
+    pub recording: Option<PathBuf>,
+    /// Tilted poses besides the still stance (default [verify] poses, 0 = stand still).
+    #[arg(long, value_name = "N")]
+    pub poses: Option<usize>,
+    /// Keep what the check saw as a recording in this new directory.
+    #[arg(long, value_name = "DIR", conflicts_with = "recording")]
+    pub record: Option<PathBuf>,
+    /// One JSON document on stdout (progress stays on stderr).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs the command with its arguments from the command line.
+pub fn main(args: VerifyArgs) -> ExitStatus {
+    run(&VerifyOptions {
+        config: args.config,
+        calibration: args.calibration,
+        selection: args.hardware.into(),
+        recording: args.recording,
+        poses: args.poses,
+        record: args.record,
+        json: args.json,
+    })
 }
 
 /// Runs the command.
