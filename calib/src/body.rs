@@ -1,22 +1,31 @@
 //! The body pose from the feet (paper section 4.2, conventions.md).
 //!
-//! The feet stay planted while the body moves. At the home stance the six feet,
+//! The feet stay planted while the body moves. At the home stance the feet,
 //! reported in the body frame R by forward kinematics, fix the ground frame G.
 //! At every pose the feet are reported again, and `ground_from_robot` is the
 //! rigid transform that best maps them back onto their ground coordinates: a
-//! least-squares fit over all six feet (the paper uses feet 1, 3 and 5 only).
+//! least-squares fit over all the feet (the paper uses the hexapod's feet 1,
+//! 3 and 5 only).
 //! The commanded pose is never trusted: the real one differs from it by the
 //! robot's manufacturing and installation errors.
+//!
+//! Any legged robot: three planted feet fix the body exactly, with nothing to
+//! spare; from four on (a quadruped), one foot that moved is found by
+//! leaving each out in turn, and from five on (the hexapod's six) a second.
 
 use nalgebra::{Matrix3, Rotation3, SymmetricEigen, Translation3, Vector3};
 
 use super::geometry::Transform;
 
-/// Number of feet of the hexapod.
-pub const FEET: usize = 6;
+/// The fewest planted feet that fix a body: three points not on a line.
+pub const MIN_FEET: usize = 3;
 
-/// Six feet, foot 1 first, in metres.
-pub type Feet = [Vector3<f64>; FEET];
+/// The fewest feet among which one that moved can be found: each left out,
+/// the others (at least three) still fix the body.
+pub const MIN_FEET_TO_FIND_A_SLIP: usize = MIN_FEET + 1;
+
+/// The feet, foot 1 first, in metres.
+pub type Feet = Vec<Vector3<f64>>;
 
 /// Why feet do not give a pose.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -25,6 +34,10 @@ pub enum BodyError {
     NotFinite { foot: usize },
     #[error("the feet are (nearly) collinear, so they do not fix a ground plane")]
     Degenerate,
+    #[error("{found} feet cannot fix a body: at least {MIN_FEET} are needed")]
+    TooFewFeet { found: usize },
+    #[error("{found} feet reported where the home stance had {planted}")]
+    FeetChanged { found: usize, planted: usize },
 }
 
 /// The ground frame fixed by the home stance.
@@ -42,17 +55,18 @@ pub struct BodyPose {
     pub ground_from_robot: Transform,
     /// Distance from each reported foot, mapped to the ground, to where it was
     /// planted, metres.
-    pub foot_residuals: [f64; FEET],
+    pub foot_residuals: Vec<f64>,
     /// The foot that moved since it was planted, if one did (1-based), with
-    /// how far it is from where the other five put it, metres. The pose is
-    /// then the other five's: five planted feet fix the body exactly.
+    /// how far it is from where the others put it, metres. The pose is then
+    /// the others': the remaining planted feet fix the body. Never found
+    /// among fewer than [`MIN_FEET_TO_FIND_A_SLIP`] feet.
     pub slipped_foot: Option<(usize, f64)>,
     /// Why the feet do not fix the pose, if they do not: a second foot that
     /// moved, with how far, metres (1-based).
     pub second_slipped_foot: Option<(usize, f64)>,
 }
 
-fn check_finite(feet: &Feet) -> Result<(), BodyError> {
+fn check_finite(feet: &[Vector3<f64>]) -> Result<(), BodyError> {
     for (i, f) in feet.iter().enumerate() {
         if !f.iter().all(|v| v.is_finite()) {
             return Err(BodyError::NotFinite { foot: i + 1 });
@@ -69,7 +83,12 @@ impl GroundFrame {
     /// The ground frame of conventions.md: the least-squares plane through the
     /// home feet, Y up (towards the body), origin below the body origin, X the
     /// projection of the body's X.
-    pub fn from_home_feet(feet_robot: &Feet) -> Result<Self, BodyError> {
+    pub fn from_home_feet(feet_robot: &[Vector3<f64>]) -> Result<Self, BodyError> {
+        if feet_robot.len() < MIN_FEET {
+            return Err(BodyError::TooFewFeet {
+                found: feet_robot.len(),
+            });
+        }
         check_finite(feet_robot)?;
         let c = centroid(feet_robot);
         let scatter: Matrix3<f64> = feet_robot
@@ -107,8 +126,9 @@ impl GroundFrame {
             Rotation3::from_matrix_unchecked(rotation),
         );
         let feet_ground = feet_robot
-            .map(|f| ground_from_robot_home * nalgebra::Point3::from(f))
-            .map(|p| p.coords);
+            .iter()
+            .map(|f| (ground_from_robot_home * nalgebra::Point3::from(*f)).coords)
+            .collect();
         Ok(Self {
             ground_from_robot_home,
             feet_ground,
@@ -119,31 +139,45 @@ impl GroundFrame {
     ///
     /// A foot has slipped when, fitted without it, it lies more than
     /// `slip_threshold` (metres) from where the other feet put it. The worst
-    /// such foot is left out and the pose is the other five's. A second foot
-    /// that disagrees with the remaining four is reported too: the feet then
-    /// do not fix the pose.
-    pub fn body_pose(&self, feet_robot: &Feet, slip_threshold: f64) -> Result<BodyPose, BodyError> {
+    /// such foot is left out and the pose is the others'. A second foot that
+    /// disagrees with the remaining ones is reported too: the feet then do
+    /// not fix the pose. Among three feet neither can be found: each is
+    /// needed to fix the body.
+    pub fn body_pose(
+        &self,
+        feet_robot: &[Vector3<f64>],
+        slip_threshold: f64,
+    ) -> Result<BodyPose, BodyError> {
+        if feet_robot.len() != self.feet_ground.len() {
+            return Err(BodyError::FeetChanged {
+                found: feet_robot.len(),
+                planted: self.feet_ground.len(),
+            });
+        }
         check_finite(feet_robot)?;
-        let all: Vec<usize> = (0..FEET).collect();
-        let worst = self.worst_miss(feet_robot, &all)?;
-        let slipped_foot = worst.filter(|(_, miss)| *miss > slip_threshold);
+        let all: Vec<usize> = (0..feet_robot.len()).collect();
+        let slipped_foot = self
+            .worst_miss(feet_robot, &all)?
+            .filter(|(_, miss)| *miss > slip_threshold);
         let (kept, second_slipped_foot) = match slipped_foot {
             None => (all, None),
             Some((foot, _)) => {
-                let five: Vec<usize> = all.into_iter().filter(|&i| i != foot).collect();
+                let others: Vec<usize> = all.into_iter().filter(|&i| i != foot).collect();
                 let second = self
-                    .worst_miss(feet_robot, &five)?
+                    .worst_miss(feet_robot, &others)?
                     .filter(|(_, miss)| *miss > slip_threshold)
                     .map(|(f, miss)| (f + 1, miss));
-                (five, second)
+                (others, second)
             }
         };
         let ground_from_robot = rigid_fit(feet_robot, &self.feet_ground, &kept)?;
-        let foot_residuals = std::array::from_fn(|i| {
-            ((ground_from_robot * nalgebra::Point3::from(feet_robot[i])).coords
-                - self.feet_ground[i])
-                .norm()
-        });
+        let foot_residuals = feet_robot
+            .iter()
+            .zip(&self.feet_ground)
+            .map(|(foot, ground)| {
+                ((ground_from_robot * nalgebra::Point3::from(*foot)).coords - ground).norm()
+            })
+            .collect();
         Ok(BodyPose {
             ground_from_robot,
             foot_residuals,
@@ -153,12 +187,16 @@ impl GroundFrame {
     }
 
     /// Among `feet`, the foot (0-based) farthest from where the others put
-    /// it, with that distance.
+    /// it, with that distance; none when the others are too few to fix the
+    /// body without it.
     fn worst_miss(
         &self,
-        feet_robot: &Feet,
+        feet_robot: &[Vector3<f64>],
         feet: &[usize],
     ) -> Result<Option<(usize, f64)>, BodyError> {
+        if feet.len() < MIN_FEET_TO_FIND_A_SLIP {
+            return Ok(None);
+        }
         let mut worst: Option<(usize, f64)> = None;
         for &out in feet {
             let others: Vec<usize> = feet.iter().copied().filter(|&i| i != out).collect();
@@ -176,19 +214,29 @@ impl GroundFrame {
     /// Plants a foot anew where it is now (1-based `foot`), seen from the body
     /// pose the other feet give: a foot that slipped and stays where it
     /// slipped agrees again at the following poses.
-    pub fn replant(&mut self, foot: usize, feet_robot: &Feet, ground_from_robot: &Transform) {
-        if let Some(anchor) = foot
-            .checked_sub(1)
-            .and_then(|i| self.feet_ground.get_mut(i))
-        {
-            *anchor = (ground_from_robot * nalgebra::Point3::from(feet_robot[foot - 1])).coords;
+    pub fn replant(
+        &mut self,
+        foot: usize,
+        feet_robot: &[Vector3<f64>],
+        ground_from_robot: &Transform,
+    ) {
+        let index = foot.checked_sub(1);
+        if let (Some(anchor), Some(now)) = (
+            index.and_then(|i| self.feet_ground.get_mut(i)),
+            index.and_then(|i| feet_robot.get(i)),
+        ) {
+            *anchor = (ground_from_robot * nalgebra::Point3::from(*now)).coords;
         }
     }
 }
 
 /// Least-squares rigid transform `to_from_from` mapping `from[i]` onto `to[i]` for
 /// the chosen indices (Kabsch / Umeyama without scale).
-fn rigid_fit(from: &Feet, to: &Feet, indices: &[usize]) -> Result<Transform, BodyError> {
+fn rigid_fit(
+    from: &[Vector3<f64>],
+    to: &[Vector3<f64>],
+    indices: &[usize],
+) -> Result<Transform, BodyError> {
     let a: Vec<Vector3<f64>> = indices.iter().map(|&i| from[i]).collect();
     let b: Vec<Vector3<f64>> = indices.iter().map(|&i| to[i]).collect();
     let ca = centroid(&a);
@@ -224,7 +272,7 @@ mod tests {
 
     /// The sample's home stance: a hexagon 600 mm below the body.
     fn home_feet() -> Feet {
-        [
+        vec![
             Vector3::new(0.693, -0.600, 0.400),
             Vector3::new(0.000, -0.600, 0.800),
             Vector3::new(-0.693, -0.600, 0.400),
@@ -250,7 +298,10 @@ mod tests {
     #[test]
     fn a_tilted_home_stance_is_levelled() {
         let tilt = PoseParams::new(0.0, 0.05, -0.03, Vector3::new(0.0, 0.0, 0.0)).to_transform();
-        let feet = home_feet().map(|f| (tilt * nalgebra::Point3::from(f)).coords);
+        let feet: Feet = home_feet()
+            .iter()
+            .map(|f| (tilt * nalgebra::Point3::from(*f)).coords)
+            .collect();
         let frame = GroundFrame::from_home_feet(&feet).unwrap();
         assert!(frame.feet_ground.iter().all(|f| f.y.abs() < 1e-12));
         // The body origin is 600 mm above the ground.
@@ -268,7 +319,9 @@ mod tests {
             PoseParams::new(0.01, 0.2, 0.3, Vector3::new(0.002, 0.65, -0.001)).to_transform();
         let feet = frame
             .feet_ground
-            .map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords);
+            .iter()
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(*g)).coords)
+            .collect::<Feet>();
         let pose = frame.body_pose(&feet, 0.005).unwrap();
         assert_abs_diff_eq!(
             pose.ground_from_robot.to_homogeneous(),
@@ -285,7 +338,9 @@ mod tests {
         let truth = PoseParams::new(0.0, -0.1, 0.2, Vector3::new(0.0, 0.7, 0.0)).to_transform();
         let mut feet = frame
             .feet_ground
-            .map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords);
+            .iter()
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(*g)).coords)
+            .collect::<Feet>();
         feet[2] += Vector3::new(0.03, 0.0, 0.01);
         let pose = frame.body_pose(&feet, 0.005).unwrap();
         let (foot, miss) = pose.slipped_foot.unwrap();
@@ -305,9 +360,12 @@ mod tests {
         let mut frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
         let sunk = Vector3::new(0.0, -0.015, 0.0);
         let feet_at = |truth: &Transform, frame: &GroundFrame| {
-            let mut ground = frame.feet_ground;
+            let mut ground = frame.feet_ground.clone();
             ground[4] = home_feet()[4] + Vector3::new(0.0, 0.6, 0.0) + sunk;
-            ground.map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords)
+            ground
+                .iter()
+                .map(|g| (truth.inverse() * nalgebra::Point3::from(*g)).coords)
+                .collect::<Feet>()
         };
         let first = PoseParams::new(0.0, 0.1, 0.0, Vector3::new(0.0, 0.65, 0.0)).to_transform();
         let feet = feet_at(&first, &frame);
@@ -331,7 +389,9 @@ mod tests {
         let truth = PoseParams::new(0.0, 0.0, 0.1, Vector3::new(0.0, 0.6, 0.0)).to_transform();
         let mut feet = frame
             .feet_ground
-            .map(|g| (truth.inverse() * nalgebra::Point3::from(g)).coords);
+            .iter()
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(*g)).coords)
+            .collect::<Feet>();
         feet[0] += Vector3::new(0.0, 0.03, 0.0);
         feet[3] += Vector3::new(0.02, 0.0, 0.0);
         let pose = frame.body_pose(&feet, 0.010).unwrap();
@@ -341,7 +401,7 @@ mod tests {
 
     #[test]
     fn collinear_or_broken_feet_are_errors() {
-        let line = std::array::from_fn(|i| Vector3::new(i as f64, -0.6, 0.0));
+        let line: Feet = (0..6).map(|i| Vector3::new(i as f64, -0.6, 0.0)).collect();
         assert_eq!(
             GroundFrame::from_home_feet(&line),
             Err(BodyError::Degenerate)
@@ -352,5 +412,85 @@ mod tests {
             GroundFrame::from_home_feet(&feet),
             Err(BodyError::NotFinite { foot: 5 })
         );
+        assert_eq!(
+            GroundFrame::from_home_feet(&home_feet()[..2]),
+            Err(BodyError::TooFewFeet { found: 2 })
+        );
+        let frame = GroundFrame::from_home_feet(&home_feet()).unwrap();
+        assert_eq!(
+            frame.body_pose(&home_feet()[..5], 0.01),
+            Err(BodyError::FeetChanged {
+                found: 5,
+                planted: 6
+            })
+        );
+    }
+
+    /// A quadruped's stance: four feet in a rectangle 350 mm below the body.
+    fn quadruped_feet() -> Feet {
+        vec![
+            Vector3::new(0.25, -0.35, -0.15),
+            Vector3::new(0.25, -0.35, 0.15),
+            Vector3::new(-0.25, -0.35, -0.15),
+            Vector3::new(-0.25, -0.35, 0.15),
+        ]
+    }
+
+    fn feet_seen_from(frame: &GroundFrame, truth: &Transform) -> Feet {
+        frame
+            .feet_ground
+            .iter()
+            .map(|g| (truth.inverse() * nalgebra::Point3::from(*g)).coords)
+            .collect()
+    }
+
+    #[test]
+    fn four_feet_give_the_pose_and_name_a_slipped_one() {
+        let frame = GroundFrame::from_home_feet(&quadruped_feet()).unwrap();
+        let truth =
+            PoseParams::new(0.02, -0.08, 0.12, Vector3::new(0.01, 0.37, -0.02)).to_transform();
+        let feet = feet_seen_from(&frame, &truth);
+        let pose = frame.body_pose(&feet, 0.005).unwrap();
+        assert_abs_diff_eq!(
+            pose.ground_from_robot.to_homogeneous(),
+            truth.to_homogeneous(),
+            epsilon = 1e-12
+        );
+        assert_eq!(pose.slipped_foot, None);
+        assert_eq!(pose.foot_residuals.len(), 4);
+        // Foot 2 slides 20 mm: named, and the other three fix the body.
+        let mut slipped = feet.clone();
+        slipped[1] += Vector3::new(0.02, 0.0, 0.0);
+        let pose = frame.body_pose(&slipped, 0.005).unwrap();
+        let (foot, miss) = pose.slipped_foot.unwrap();
+        assert_eq!(foot, 2);
+        assert!((miss - 0.02).abs() < 1e-9, "{miss}");
+        assert_eq!(
+            pose.second_slipped_foot, None,
+            "three feet cannot tell a second"
+        );
+        assert_abs_diff_eq!(
+            pose.ground_from_robot.to_homogeneous(),
+            truth.to_homogeneous(),
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn three_feet_fix_the_pose_but_cannot_find_a_slip() {
+        let three = &quadruped_feet()[..3];
+        let frame = GroundFrame::from_home_feet(three).unwrap();
+        let truth = PoseParams::new(0.0, 0.05, -0.04, Vector3::new(0.0, 0.36, 0.0)).to_transform();
+        let mut feet = feet_seen_from(&frame, &truth);
+        let pose = frame.body_pose(&feet, 0.005).unwrap();
+        assert_abs_diff_eq!(
+            pose.ground_from_robot.to_homogeneous(),
+            truth.to_homogeneous(),
+            epsilon = 1e-12
+        );
+        feet[0] += Vector3::new(0.03, 0.0, 0.0);
+        let pose = frame.body_pose(&feet, 0.005).unwrap();
+        assert_eq!(pose.slipped_foot, None);
+        assert!(pose.foot_residuals.iter().any(|r| *r > 0.005));
     }
 }

@@ -6,7 +6,7 @@
 
 use nalgebra::Vector3;
 
-use crate::body::{Feet, GroundFrame};
+use crate::body::{Feet, GroundFrame, MIN_FEET, MIN_FEET_TO_FIND_A_SLIP};
 use crate::geometry::{PoseDegMm, Transform};
 use crate::plane::{
     fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitSettings,
@@ -97,7 +97,7 @@ pub enum BodyPoseSource {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObserveSettings {
     pub plane: PlaneFitSettings,
-    /// A foot farther than this from where the other five put it has slipped, metres.
+    /// A foot farther than this from where the other feet put it has slipped, metres.
     pub slip_threshold_m: f64,
     pub body_pose_source: BodyPoseSource,
     pub depth_range: DepthRange,
@@ -121,8 +121,11 @@ impl Default for ObserveSettings {
 
 /// Feet in millimetres (files, messages) to metres.
 pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
-    if feet_mm.len() != 6 {
-        return Err(format!("expected six feet, got {}", feet_mm.len()));
+    if feet_mm.len() < MIN_FEET {
+        return Err(format!(
+            "{} feet cannot fix a body: at least {MIN_FEET} are needed",
+            feet_mm.len()
+        ));
     }
     // A hundred metres is far beyond any leg: larger numbers are a fault,
     // and are named as one rather than surfacing as a NaN further on.
@@ -138,9 +141,10 @@ pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
             ));
         }
     }
-    Ok(std::array::from_fn(|i| {
-        Vector3::new(feet_mm[i][0], feet_mm[i][1], feet_mm[i][2]) / 1000.0
-    }))
+    Ok(feet_mm
+        .iter()
+        .map(|[x, y, z]| Vector3::new(*x, *y, *z) / 1000.0)
+        .collect())
 }
 
 /// Where the ground should be in the sensor frame, at a body pose, from the
@@ -198,9 +202,9 @@ impl FeetTracker {
     /// The real body pose from the feet reported at a pose (or the commanded
     /// pose, if so configured).
     ///
-    /// One foot that moved since it was planted is left out (five planted
-    /// feet fix the body exactly) and planted anew where it is; two feet that
-    /// moved set the pose aside.
+    /// One foot that moved since it was planted is left out (the other
+    /// planted feet, three or more, fix the body) and planted anew where it
+    /// is; two feet that moved set the pose aside.
     pub fn body_pose(
         &mut self,
         commanded: &PoseDegMm,
@@ -227,8 +231,9 @@ impl FeetTracker {
                 (
                     None,
                     Some(format!(
-                        "foot {foot} slipped ({:.1} mm from where it was planted, limit {limit_mm:.1} mm): the body pose is the other five feet's, and the foot counts from where it is now",
-                        miss * 1e3
+                        "foot {foot} slipped ({:.1} mm from where it was planted, limit {limit_mm:.1} mm): the body pose is the other {} feet's, and the foot counts from where it is now",
+                        miss * 1e3,
+                        feet.len() - 1
                     )),
                 )
             }
@@ -303,6 +308,17 @@ impl PoseObserver {
     pub fn prior_note(&self) -> Option<String> {
         self.nominal.is_none().then(|| {
             "no nominal mount was given: the ground is taken as the dominant plane facing the sensor (give --nominal-mount to rule out walls and boxes)".to_string()
+        })
+    }
+
+    /// What the number of feet cannot do, in words: three fix the body with
+    /// none to spare, so a foot that slipped cannot be found.
+    pub fn feet_note(&self) -> Option<String> {
+        let feet = self.ground_frame.feet_ground.len();
+        (feet < MIN_FEET_TO_FIND_A_SLIP).then(|| {
+            format!(
+                "the body pose comes from {feet} planted feet, which fix it with none to spare: a foot that slipped cannot be found (it takes {MIN_FEET_TO_FIND_A_SLIP}), so the result rests on every foot having held"
+            )
         })
     }
 
@@ -399,6 +415,9 @@ mod tests {
     fn feet_out_of_reach_are_named() {
         let mut feet = [[600.0, -600.0, 400.0]; 6];
         assert!(feet_from_mm(&feet).is_ok());
+        assert!(feet_from_mm(&feet[..4]).is_ok(), "a quadruped's");
+        let e = feet_from_mm(&feet[..2]).unwrap_err();
+        assert!(e.contains("2 feet cannot fix a body"), "{e}");
         feet[3][1] = 1e308;
         let e = feet_from_mm(&feet).unwrap_err();
         assert!(e.contains("foot 4") && e.contains("not a foot"), "{e}");

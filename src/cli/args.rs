@@ -46,10 +46,11 @@ pub struct BagArgs {
     /// A bag's body frame in /tf (REP 103 axes).
     #[arg(long, value_name = "FRAME", default_value = "base_link")]
     pub body_frame: String,
-    /// A bag's six foot frames in /tf, foot 1 first (conventions.md's order).
+    /// A bag's foot frames in /tf, foot 1 first: three or more (a quadruped's
+    /// four, a hexapod's six in conventions.md's order).
     #[arg(
         long,
-        value_name = "F1,..,F6",
+        value_name = "F1,F2,F3,..",
         default_value = "foot_1,foot_2,foot_3,foot_4,foot_5,foot_6"
     )]
     pub foot_frames: String,
@@ -62,12 +63,14 @@ impl BagArgs {
             .split(',')
             .map(|f| f.trim().to_string())
             .collect();
-        let foot_frames: [String; 6] = feet.try_into().map_err(|feet: Vec<String>| {
-            format!(
-                "--foot-frames: six frames, foot 1 first, separated by commas; found {}",
+        if feet.len() < crate::calib::body::MIN_FEET {
+            return Err(format!(
+                "--foot-frames: at least {} frames (a quadruped's four, a hexapod's six), foot 1 first, separated by commas; found {}",
+                crate::calib::body::MIN_FEET,
                 feet.len()
-            )
-        })?;
+            ));
+        }
+        let foot_frames = feet;
         if foot_frames.iter().any(String::is_empty) {
             return Err("--foot-frames: a frame's name is empty".into());
         }

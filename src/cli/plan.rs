@@ -200,7 +200,11 @@ fn depth_pattern_note(without: &SigmaJson, with: &SigmaJson, growth_max: f64) ->
         [without.alpha_deg, without.beta_deg, without.gamma_deg],
     );
     let name = ["alpha", "beta", "gamma"][k];
-    (growth > growth_max).then(|| {
+    // As the gate judges: within its ratio, or every angle within what costs nothing.
+    let negligible = [with.alpha_deg, with.beta_deg, with.gamma_deg]
+        .iter()
+        .all(|s| *s <= crate::calib::quality::PATTERN_COST_NEGLIGIBLE_DEG);
+    (growth > growth_max && !negligible).then(|| {
         format!(
             "a Kinect's depth pattern (a real one always has one) would make {name} {growth:.1} times less certain than without it, more than the {growth_max} times the gate pattern_angle_sigma_growth_max allows: its calibration will be rejected on this schedule; groundcal plan --design spreads the body's heights wider"
         )

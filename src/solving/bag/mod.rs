@@ -94,6 +94,7 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     result.kinect_tilt_deg = None;
     let mut notes = bag.notes.clone();
     notes.extend(observer.prior_note());
+    notes.extend(observer.feet_note());
     result.notes.splice(0..0, notes);
     let frames_per_pose = bag.poses.iter().map(|p| p.stamps.len() as u32).max();
     result.setup = Some(SetupJson {

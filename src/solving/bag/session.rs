@@ -42,8 +42,9 @@ pub struct BagOptions {
     pub camera_info_topic: String,
     /// The body's frame (groundcal's robot frame in REP 103 axes).
     pub body_frame: String,
-    /// The six feet's frames, foot 1 first (conventions.md's order).
-    pub foot_frames: [String; 6],
+    /// The feet's frames, foot 1 first: three or more (a quadruped's four, a
+    /// hexapod's six in conventions.md's order).
+    pub foot_frames: Vec<String>,
     /// A pose is still while no foot moves in the body by more than this (mm)…
     pub still_mm: f64,
     /// …for at least this long (s).
@@ -59,7 +60,7 @@ impl Default for BagOptions {
             depth_topic: "/camera/depth/image_raw".into(),
             camera_info_topic: "/camera/depth/camera_info".into(),
             body_frame: crate::formats::export::PARENT_FRAME.into(),
-            foot_frames: std::array::from_fn(|k| format!("foot_{}", k + 1)),
+            foot_frames: (1..=6).map(|k| format!("foot_{k}")).collect(),
             still_mm: 0.5,
             still_s: 0.3,
             frames_per_pose: 3,
@@ -98,7 +99,7 @@ pub struct BagPose {
     pub start: u64,
     pub end: u64,
     /// The feet in groundcal's body frame (mm), averaged over the span.
-    pub feet_body_mm: [[f64; 3]; 6],
+    pub feet_body_mm: Vec<[f64; 3]>,
     /// The stamps of the frames fitted (the span's last ones).
     pub stamps: Vec<u64>,
 }
@@ -111,7 +112,7 @@ pub struct BagSession {
     pub units: DepthUnits,
     /// The images' frame (their `header.frame_id`).
     pub camera_frame: String,
-    pub home_feet_mm: [[f64; 3]; 6],
+    pub home_feet_mm: Vec<[f64; 3]>,
     pub poses: Vec<BagPose>,
     /// From the TF tree's body → camera transform, when it has one.
     pub nominal_mount: Option<NominalMount>,
@@ -362,16 +363,19 @@ fn depth_values(image: &Image, units: DepthUnits) -> Result<Vec<u16>, String> {
 }
 
 /// The feet in groundcal's body frame (mm) from `body_from_foot`s.
-fn feet_in_body(tree: &TfTree, chains: &[Vec<&str>], stamp: u64) -> [[f64; 3]; 6] {
+fn feet_in_body(tree: &TfTree, chains: &[Vec<&str>], stamp: u64) -> Vec<[f64; 3]> {
     let robot_from_base_link = base_link_from_robot().transpose();
-    std::array::from_fn(|k| {
-        let p = tree.at(&chains[k], stamp).translation.vector;
-        let p = robot_from_base_link * p * 1e3;
-        [p.x, p.y, p.z]
-    })
+    chains
+        .iter()
+        .map(|chain| {
+            let p = tree.at(chain, stamp).translation.vector;
+            let p = robot_from_base_link * p * 1e3;
+            [p.x, p.y, p.z]
+        })
+        .collect()
 }
 
-fn largest_move(a: &[[f64; 3]; 6], b: &[[f64; 3]; 6]) -> f64 {
+fn largest_move(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     a.iter()
         .zip(b)
         .map(|(a, b)| Vector3::from(*a).metric_distance(&Vector3::from(*b)))
@@ -383,9 +387,9 @@ fn largest_move(a: &[[f64; 3]; 6], b: &[[f64; 3]; 6]) -> f64 {
 struct Span {
     start: u64,
     end: u64,
-    feet_sum: [[f64; 3]; 6],
+    feet_sum: Vec<[f64; 3]>,
     moments: usize,
-    first: [[f64; 3]; 6],
+    first: Vec<[f64; 3]>,
 }
 
 /// Reads a bag and finds its still poses.
@@ -542,7 +546,14 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
     }
 
     // The feet over time.
-    let mut chains = Vec::with_capacity(6);
+    if options.foot_frames.len() < crate::calib::body::MIN_FEET {
+        return Err(fail(format!(
+            "{} foot frames cannot fix a body: give at least {} (--foot-frames)",
+            options.foot_frames.len(),
+            crate::calib::body::MIN_FEET
+        )));
+    }
+    let mut chains = Vec::with_capacity(options.foot_frames.len());
     for foot in &options.foot_frames {
         chains.push(tree.chain(foot, &options.body_frame).ok_or_else(|| {
             fail(format!(
@@ -569,7 +580,7 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
             _ => spans.push(Span {
                 start: moment,
                 end: moment,
-                feet_sum: feet,
+                feet_sum: feet.clone(),
                 moments: 1,
                 first: feet,
             }),
@@ -581,7 +592,7 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         .filter(|s| s.end - s.start >= still_ns)
         .map(|s| {
             let n = s.moments as f64;
-            let feet = s.feet_sum.map(|f| f.map(|x| x / n));
+            let feet: Vec<[f64; 3]> = s.feet_sum.iter().map(|f| f.map(|x| x / n)).collect();
             (s.start, s.end, feet)
         });
     let Some(home) = still.next() else {
@@ -590,7 +601,7 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
             options.still_mm, options.still_s
         )));
     };
-    let home_feet_mm = home.2;
+    let home_feet_mm = home.2.clone();
     let mut poses = Vec::new();
     for (start, end, feet_body_mm) in std::iter::once(home).chain(still) {
         let mut stamps: Vec<u64> = heads
