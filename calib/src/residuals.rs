@@ -22,6 +22,18 @@ const ROW_STEP: usize = 2;
 /// 640 × 480 image, fine enough for stripes 48 pixels apart.
 pub const CELL_PX: usize = 8;
 
+/// The centre of cell `k` of a grid `columns` cells wide, in pixels from the
+/// principal point (`u − cx`, `v − cy`): the one place the pattern's cells
+/// meet the image's coordinates.
+pub fn cell_centre(k: usize, columns: usize, intrinsics: &Intrinsics) -> (f64, f64) {
+    let (column, row) = (k % columns, k / columns);
+    let half = (CELL_PX as f64 - 1.0) / 2.0;
+    (
+        (column * CELL_PX) as f64 + half - intrinsics.cx,
+        (row * CELL_PX) as f64 + half - intrinsics.cy,
+    )
+}
+
 /// The residuals are taken within this many times the fit's band (±2σ):
 /// where the pattern lifts the readings by a σ, the fit's own band cuts
 /// their upper tail and the cells' means would show the pattern smaller

@@ -42,15 +42,6 @@ impl DepthDependence {
     }
 }
 
-/// A cell's centre, pixels from the principal point.
-pub(super) fn cell_centre(k: usize, columns: usize, intrinsics: &Intrinsics) -> (f64, f64) {
-    let (column, row) = (k % columns, k / columns);
-    (
-        (column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - intrinsics.cx,
-        (row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - intrinsics.cy,
-    )
-}
-
 /// [`DepthDependence`] of the sums kept under the shape.
 pub(super) fn depth_dependence(
     poses: &[&GroundResiduals],

@@ -50,7 +50,7 @@ pub use alternatives::{DepthDependence, ReliefTest};
 pub use plane_part::plane_part_cost;
 pub use shape::{estimate_shape, estimate_shape_seen_from, ShapeEstimate};
 
-pub use crate::residuals::{GroundResiduals, CELL_PX};
+pub use crate::residuals::{cell_centre, GroundResiduals, CELL_PX};
 use alternatives::*;
 use bend::*;
 use found::*;

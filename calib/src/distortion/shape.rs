@@ -196,11 +196,7 @@ impl ShapeEstimate {
 
     /// A cell's centre offset from the principal point, pixels.
     pub(super) fn cell_offset(&self, k: usize) -> (f64, f64) {
-        let (column, row) = (k % self.columns, k / self.columns);
-        (
-            ((column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0) - self.intrinsics.cx,
-            ((row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0) - self.intrinsics.cy,
-        )
+        cell_centre(k, self.columns, &self.intrinsics)
     }
 }
 
@@ -726,12 +722,8 @@ pub(super) fn remove_plane_part(
     grid: &GroundResiduals,
 ) {
     let centre = |k: usize| {
-        let (column, row) = (k % grid.columns, k / grid.columns);
-        Vector3::new(
-            1.0,
-            (column * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - grid.intrinsics.cx,
-            (row * CELL_PX) as f64 + (CELL_PX as f64 - 1.0) / 2.0 - grid.intrinsics.cy,
-        )
+        let (du, dv) = cell_centre(k, grid.columns, &grid.intrinsics);
+        Vector3::new(1.0, du, dv)
     };
     let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
     for k in 0..shape.len() {
