@@ -169,3 +169,27 @@ fn a_quadrupeds_slipped_foot_is_named_and_three_feet_say_they_cannot() {
     );
     std::fs::remove_dir_all(&work).ok();
 }
+
+/// A time-of-flight camera measures distance, not disparity: its noise in
+/// inverse depth falls with distance (measured: as (1/z)^1.37, where the
+/// stereo camera above gives 0.04, a simulated Kinect 0.01 and the real
+/// Kinect sequence -0.23). Refused by name, exit 3, whatever its mount.
+#[test]
+fn a_time_of_flight_camera_is_refused_by_name() {
+    let test = "a_time_of_flight_camera_is_refused_by_name";
+    let Some(python) = python_with_rosbags(test) else {
+        return;
+    };
+    let work = temp_dir("quadruped-tof");
+    let truth = make_bag(&python, &work.join("bag"), &["--seed", "3", "--tof"]);
+    let (code, result, stderr) = replay(&truth, "lf_foot,rf_foot,lh_foot,rh_foot");
+    assert_eq!(code, 3, "{stderr}");
+    let first = result["reasons"][0].as_str().unwrap_or_default();
+    assert!(
+        first
+            .starts_with("the depth's noise falls with distance as a time-of-flight camera's does")
+            && first.contains("not supported"),
+        "{first}"
+    );
+    std::fs::remove_dir_all(&work).ok();
+}

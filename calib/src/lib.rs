@@ -40,6 +40,7 @@ pub mod disparity;
 pub mod distortion;
 pub mod geometry;
 pub mod ground_view;
+pub mod noise_with_depth;
 pub mod observe;
 pub mod outcome;
 pub mod plan;

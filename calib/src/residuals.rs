@@ -321,6 +321,29 @@ struct Pass {
 }
 
 impl GroundResiduals {
+    /// Residuals made up by a test: these cells about this plane.
+    #[cfg(test)]
+    pub(crate) fn for_test(
+        columns: usize,
+        rows: usize,
+        cells: Vec<CellSums>,
+        intrinsics: Intrinsics,
+        plane: PixelPlane,
+    ) -> Self {
+        Self {
+            columns,
+            rows,
+            cells,
+            moments: Matrix3::zeros(),
+            rhs: Vector3::zeros(),
+            intrinsics,
+            raw_per_inverse_depth: 325.0,
+            fit_band: 0.01,
+            plane,
+            beside_another_fit: None,
+        }
+    }
+
     /// These residuals, marked as taken from the default fit made beside
     /// another fit of the same frames, with that default fit's plane and
     /// covariance: they judge a warp, they correct nothing.

@@ -22,6 +22,12 @@ make_bag.py uses), with its own renderer of the depth camera:
   nearer than 0.3 m or farther than 4 m.
 - /tf_static also holds a rough mount (3 degrees and 30 mm off the truth), as
   the robot's own URDF would.
+- --tof: a time-of-flight camera instead, which measures the distance: its
+  noise in depth, 3 mm + 0.2 % of the distance, drawn every frame, no
+  disparity and no pattern (groundcal must refuse it, not calibrate it as a
+  disparity camera).
+- --tiny: a 32 x 18 camera and the schedule's first three poses, a bag of a
+  few kilobytes (the fuzzer's seed, fuzz/corpus/bag_session).
 - --slip 2@20: foot 2 slips on its way to pose 20 (15 mm forward and 10 mm
   into the ground) and stays there.
 
@@ -121,7 +127,7 @@ def device_pattern():
     return waves + bowl
 
 
-def render(ground_from_optical, pattern, rng):
+def render(ground_from_optical, pattern, rng, tof=False):
     """One 16UC1 frame of the ground plane y = 0 (millimetres, 0: none)."""
     r, t = ground_from_optical
     v, u = np.mgrid[0:H, 0:W].astype(float)
@@ -130,6 +136,10 @@ def render(ground_from_optical, pattern, rng):
     with np.errstate(divide="ignore", invalid="ignore"):
         z = -t[1] / up
     valid = (z > 0.3) & (z < 4.0) & np.isfinite(z)
+    if tof:
+        noisy = z + (0.003 + 0.002 * z) * rng.standard_normal((H, W))
+        depth = np.where(valid & (noisy > 0.3) & (noisy < 4.0), noisy, 0.0)
+        return np.round(depth * 1e3).astype("<u2")
     disparity = np.where(valid, FB / np.where(valid, z, 1.0), 0.0)
     smooth = box_blur(box_blur(rng.standard_normal((H, W)), 5), 5)
     smooth *= 0.03 / smooth.std()
@@ -159,10 +169,19 @@ def main():
     parser.add_argument("schedule")
     parser.add_argument("out")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--tiny", action="store_true", help="a 32 x 18 camera, three poses")
+    parser.add_argument("--tof", action="store_true", help="a time-of-flight camera")
     parser.add_argument("--slip", help="FOOT@POSE: that foot slips 18 mm on the way to that pose")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     home, poses = read_schedule(args.schedule)
+    if args.tiny:
+        global W, H, FX, FY, CX, CY, FB
+        W, H = 32, 18
+        FX = FY = 425.0 * 32 / 848
+        CX, CY = (W - 1) / 2, (H - 1) / 2
+        FB = FX * BASELINE_M
+        poses = poses[:3]
     slip = tuple(int(x) for x in args.slip.split("@")) if args.slip else None
     mount_r, mount_t = pose(MOUNT)
     robot_from_optical = (mount_r @ SENSOR_FROM_OPTICAL, mount_t)
@@ -229,7 +248,7 @@ def main():
         def write_frame(ns, body):
             r, t = body
             ground_from_optical = (r @ robot_from_optical[0], r @ robot_from_optical[1] + t)
-            depth = render(ground_from_optical, pattern, rng)
+            depth = render(ground_from_optical, pattern, rng, tof=args.tof)
             write(
                 image_topic,
                 ns,

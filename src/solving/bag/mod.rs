@@ -13,6 +13,7 @@ pub mod stream;
 
 use crate::calib::depth::DepthEncoding;
 use crate::calib::geometry::PoseDegMm;
+use crate::calib::noise_with_depth;
 use crate::calib::observe::{BodyPoseSource, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::formats::output::{ResultJson, SetupJson};
@@ -69,6 +70,12 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
         .map_err(|e| fail(format!("cannot start worker threads: {e}")))?;
     let (fits, frames_read) = fit_poses(bag, &observer, &bodies, &pool, threads)?;
     let (observations, failed) = split(bag, fits);
+    let exponent = noise_with_depth::noise_exponent(
+        &observations
+            .iter()
+            .filter_map(|o| o.ground_residuals.as_deref())
+            .collect::<Vec<_>>(),
+    );
     // A bag stores no gates and no noise of a live run.
     let (settings, gates_from) = options.settings(None, None);
     let mut result =
@@ -89,6 +96,16 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
         Ok::<_, BagError>((result, ()))
     })? {
         result = again;
+    }
+    // A camera that measures distance, not disparity: refused by name.
+    if let Some(p) = exponent.filter(|p| *p > noise_with_depth::MAX_DISPARITY_EXPONENT) {
+        result.status = crate::formats::output::ResultStatus::Rejected;
+        result.reasons.insert(
+            0,
+            format!(
+                "the depth's noise falls with distance as a time-of-flight camera's does (in inverse depth as (1/z)^{p:.2}, where a disparity camera's stays about level: -0.23 to 0.04 measured), and groundcal's fit and checks are made for disparity cameras (structured light, stereo): a time-of-flight camera is not supported, so this result must not be used"
+            ),
+        );
     }
     // The motor's tilt is not in a bag: not claimed.
     result.kinect_tilt_deg = None;
