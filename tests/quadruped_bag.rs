@@ -40,21 +40,20 @@ fn make_bag(python: &Path, out: &Path, args: &[&str]) -> Value {
     serde_json::from_slice(&made.stdout).expect("the truth as JSON")
 }
 
-/// `groundcal replay` of the bag with these feet: exit status and result.
-fn replay(truth: &Value, feet: &str) -> (i32, Value, String) {
+/// `groundcal replay` of the bag with `config/quadruped.toml` (its topics
+/// and four feet in `[bag]`), and these flags: exit status and result.
+fn replay(truth: &Value, flags: &[&str]) -> (i32, Value, String) {
     let bag = truth["bag"].as_str().unwrap();
     let config = root().join("config/quadruped.toml");
-    let (code, stdout, stderr) = groundcal(&[
+    let mut args = vec![
         "replay",
         bag,
         "--config",
         config.to_str().unwrap(),
-        "--foot-frames",
-        feet,
-        "--depth-topic",
-        "/camera/depth/image_rect_raw",
         "--json",
-    ]);
+    ];
+    args.extend_from_slice(flags);
+    let (code, stdout, stderr) = groundcal(&args);
     let result = serde_json::from_str(&stdout).unwrap_or(Value::Null);
     (code, result, stderr)
 }
@@ -95,7 +94,7 @@ fn a_quadrupeds_bag_is_calibrated_from_its_four_feet() {
     let work = temp_dir("quadruped-bag");
     let truth = make_bag(&python, &work.join("bag"), &["--seed", "1"]);
     assert_eq!(truth["counts"]["images"], 104, "{truth}");
-    let (code, result, stderr) = replay(&truth, "lf_foot,rf_foot,lh_foot,rh_foot");
+    let (code, result, stderr) = replay(&truth, &[]);
     assert_eq!(code, 0, "accepted: {stderr}\n{}", result["reasons"]);
     assert_eq!(result["summary"]["poses_used"], 52, "{stderr}");
     let (angle, position) = errors(&result, &truth);
@@ -125,7 +124,7 @@ fn a_quadrupeds_slipped_foot_is_named_and_three_feet_say_they_cannot() {
         &work.join("bag"),
         &["--seed", "2", "--slip", "2@20"],
     );
-    let (code, result, stderr) = replay(&truth, "lf_foot,rf_foot,lh_foot,rh_foot");
+    let (code, result, stderr) = replay(&truth, &[]);
     assert_eq!(code, 0, "accepted: {stderr}\n{}", result["reasons"]);
     let noted: Vec<(u64, &str)> = result["poses"]
         .as_array()
@@ -146,7 +145,7 @@ fn a_quadrupeds_slipped_foot_is_named_and_three_feet_say_they_cannot() {
         "{angle}° and {position} mm off"
     );
 
-    let (code, three, stderr) = replay(&truth, "lf_foot,rf_foot,lh_foot");
+    let (code, three, stderr) = replay(&truth, &["--foot-frames", "lf_foot,rf_foot,lh_foot"]);
     assert_eq!(code, 3, "rejected, not accepted off: {stderr}");
     let notes = three["notes"].as_array().expect(&stderr);
     assert!(
@@ -161,7 +160,7 @@ fn a_quadrupeds_slipped_foot_is_named_and_three_feet_say_they_cannot() {
         .iter()
         .all(|p| p["note"].is_null()));
 
-    let (code, _, stderr) = replay(&truth, "lf_foot,rf_foot");
+    let (code, _, stderr) = replay(&truth, &["--foot-frames", "lf_foot,rf_foot"]);
     assert_eq!(code, 2, "{stderr}");
     assert!(
         stderr.contains("--foot-frames: at least 3 frames"),
@@ -182,7 +181,7 @@ fn a_time_of_flight_camera_is_refused_by_name() {
     };
     let work = temp_dir("quadruped-tof");
     let truth = make_bag(&python, &work.join("bag"), &["--seed", "3", "--tof"]);
-    let (code, result, stderr) = replay(&truth, "lf_foot,rf_foot,lh_foot,rh_foot");
+    let (code, result, stderr) = replay(&truth, &[]);
     assert_eq!(code, 3, "{stderr}");
     let first = result["reasons"][0].as_str().unwrap_or_default();
     assert!(

@@ -52,6 +52,10 @@ const KEYS: &[&str] = &[
     "serve.preview_interval_ms",
     "sim.depth_distortion.amplitude_raw",
     "sim.depth_distortion.plane_part",
+    "bag.depth_topic",
+    "bag.camera_info_topic",
+    "bag.body_frame",
+    "bag.foot_frames",
 ];
 
 fn plain_relative(path: &Path) -> bool {

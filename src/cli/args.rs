@@ -30,56 +30,69 @@ impl From<HardwareArgs> for crate::hardware::Selection {
     }
 }
 
-/// What to read from a ROS 2 bag (`replay BAG.mcap`).
+/// What to read from a ROS 2 bag (`replay BAG.mcap`): each flag overrides
+/// the configuration's `[bag]`, which overrides the defaults named here.
 #[derive(Debug, clap::Args)]
 pub struct BagArgs {
-    /// A bag's depth images (sensor_msgs/msg/Image, 16UC1 or 32FC1).
-    #[arg(long, value_name = "TOPIC", default_value = "/camera/depth/image_raw")]
-    pub depth_topic: String,
-    /// A bag's intrinsics (sensor_msgs/msg/CameraInfo).
-    #[arg(
-        long,
-        value_name = "TOPIC",
-        default_value = "/camera/depth/camera_info"
-    )]
-    pub camera_info_topic: String,
-    /// A bag's body frame in /tf (REP 103 axes).
-    #[arg(long, value_name = "FRAME", default_value = "base_link")]
-    pub body_frame: String,
+    /// A bag's depth images (sensor_msgs/msg/Image, 16UC1 or 32FC1); default
+    /// [bag] depth_topic, else /camera/depth/image_raw.
+    #[arg(long, value_name = "TOPIC")]
+    pub depth_topic: Option<String>,
+    /// A bag's intrinsics (sensor_msgs/msg/CameraInfo); default [bag]
+    /// camera_info_topic, else /camera/depth/camera_info.
+    #[arg(long, value_name = "TOPIC")]
+    pub camera_info_topic: Option<String>,
+    /// A bag's body frame in /tf (REP 103 axes); default [bag] body_frame,
+    /// else base_link.
+    #[arg(long, value_name = "FRAME")]
+    pub body_frame: Option<String>,
     /// A bag's foot frames in /tf, foot 1 first: three or more (a quadruped's
-    /// four, a hexapod's six in conventions.md's order).
-    #[arg(
-        long,
-        value_name = "F1,F2,F3,..",
-        default_value = "foot_1,foot_2,foot_3,foot_4,foot_5,foot_6"
-    )]
-    pub foot_frames: String,
+    /// four, a hexapod's six in conventions.md's order); default [bag]
+    /// foot_frames, else foot_1,…,foot_6.
+    #[arg(long, value_name = "F1,F2,F3,..")]
+    pub foot_frames: Option<String>,
 }
 
 impl BagArgs {
-    pub fn options(self) -> Result<crate::solving::bag::BagOptions, String> {
-        let feet: Vec<String> = self
-            .foot_frames
-            .split(',')
-            .map(|f| f.trim().to_string())
-            .collect();
-        if feet.len() < crate::calib::body::MIN_FEET {
-            return Err(format!(
-                "--foot-frames: at least {} frames (a quadruped's four, a hexapod's six), foot 1 first, separated by commas; found {}",
-                crate::calib::body::MIN_FEET,
-                feet.len()
-            ));
-        }
-        let foot_frames = feet;
-        if foot_frames.iter().any(String::is_empty) {
-            return Err("--foot-frames: a frame's name is empty".into());
-        }
+    /// The options, from these flags over the configuration's `[bag]`.
+    pub fn options(
+        self,
+        configured: Option<&crate::setup::config::BagConfig>,
+    ) -> Result<crate::solving::bag::BagOptions, String> {
+        let defaults = crate::solving::bag::BagOptions::default();
+        let configured = configured.cloned().unwrap_or_default();
+        let foot_frames = match self.foot_frames {
+            Some(list) => {
+                let feet: Vec<String> = list.split(',').map(|f| f.trim().to_string()).collect();
+                if feet.len() < crate::calib::body::MIN_FEET {
+                    return Err(format!(
+                        "--foot-frames: at least {} frames (a quadruped's four, a hexapod's six), foot 1 first, separated by commas; found {}",
+                        crate::calib::body::MIN_FEET,
+                        feet.len()
+                    ));
+                }
+                if feet.iter().any(String::is_empty) {
+                    return Err("--foot-frames: a frame's name is empty".into());
+                }
+                feet
+            }
+            None => configured.foot_frames.unwrap_or(defaults.foot_frames),
+        };
         Ok(crate::solving::bag::BagOptions {
-            depth_topic: self.depth_topic,
-            camera_info_topic: self.camera_info_topic,
-            body_frame: self.body_frame,
+            depth_topic: self
+                .depth_topic
+                .or(configured.depth_topic)
+                .unwrap_or(defaults.depth_topic),
+            camera_info_topic: self
+                .camera_info_topic
+                .or(configured.camera_info_topic)
+                .unwrap_or(defaults.camera_info_topic),
+            body_frame: self
+                .body_frame
+                .or(configured.body_frame)
+                .unwrap_or(defaults.body_frame),
             foot_frames,
-            ..Default::default()
+            ..defaults
         })
     }
 }

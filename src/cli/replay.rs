@@ -71,12 +71,12 @@ pub struct ReplayArgs {
 
 /// Runs the command with its arguments from the command line.
 pub fn main(args: ReplayArgs) -> ExitStatus {
-    let (gates, noise, verify, configured_scale) = match args
+    let (gates, noise, verify, configured_scale, configured_bag) = match args
         .config
         .as_deref()
         .map(crate::setup::config::Config::load)
     {
-        None => (None, None, Default::default(), Default::default()),
+        None => (None, None, Default::default(), Default::default(), None),
         Some(Ok((config, _))) => (
             Some(config.calibration.gates),
             Some(
@@ -87,6 +87,7 @@ pub fn main(args: ReplayArgs) -> ExitStatus {
             ),
             config.verify.settings(&config.calibration),
             config.calibration.depth_scale,
+            config.bag,
         ),
         Some(Err(e)) => return super::usage_error(e.to_string()),
     };
@@ -136,7 +137,7 @@ pub fn main(args: ReplayArgs) -> ExitStatus {
                 return ExitStatus::BadInput;
             }
         }
-        return match args.bag.options() {
+        return match args.bag.options(configured_bag.as_ref()) {
             Ok(bag) => run_bag(&dir, &bag, &outputs, &options),
             Err(e) => super::usage_error(e),
         };

@@ -33,6 +33,24 @@ pub struct Config {
     /// `groundcal verify` and the daemon's checks (defaults if absent).
     #[serde(default)]
     pub verify: VerifyConfig,
+    /// How this robot's ROS 2 bags name its topics and frames
+    /// (`replay BAG.mcap --config`; the flags override it).
+    #[serde(default)]
+    pub bag: Option<BagConfig>,
+}
+
+/// A robot's bags (`[bag]`): what `replay BAG.mcap` reads, so that a
+/// quadruped's configuration names its feet once. Each key is optional; a
+/// flag given overrides it, and without either the built-in default holds.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct BagConfig {
+    pub depth_topic: Option<String>,
+    pub camera_info_topic: Option<String>,
+    /// The body's frame in the TF tree (REP 103 axes).
+    pub body_frame: Option<String>,
+    /// The feet's frames, foot 1 first: three or more.
+    pub foot_frames: Option<Vec<String>>,
 }
 
 /// How a calibration is checked against the ground and the accelerometer
@@ -366,6 +384,31 @@ impl Config {
                 ));
             }
         }
+        if let Some(bag) = &self.bag {
+            let named =
+                |name: &String| !name.trim().is_empty() && !name.chars().any(char::is_control);
+            for (key, value) in [
+                ("bag.depth_topic", &bag.depth_topic),
+                ("bag.camera_info_topic", &bag.camera_info_topic),
+                ("bag.body_frame", &bag.body_frame),
+            ] {
+                if value.as_ref().is_some_and(|v| !named(v)) {
+                    return Err(bad(key, "must be a topic or frame name, not empty".into()));
+                }
+            }
+            if let Some(feet) = &bag.foot_frames {
+                if feet.len() < crate::calib::body::MIN_FEET || !feet.iter().all(named) {
+                    return Err(bad(
+                        "bag.foot_frames",
+                        format!(
+                            "{} frames: at least {} names of the feet's frames, foot 1 first",
+                            feet.len(),
+                            crate::calib::body::MIN_FEET
+                        ),
+                    ));
+                }
+            }
+        }
         if let Some(serve) = &self.serve {
             let interval = serve.preview_interval_ms;
             if interval != 0 && !(200..=60_000).contains(&interval) {
@@ -529,11 +572,39 @@ mod tests {
 
     #[test]
     fn every_shipped_configuration_is_valid() {
-        for name in ["groundcal.toml", "sim.toml"] {
+        for name in ["groundcal.toml", "sim.toml", "quadruped.toml"] {
             let (config, schedule) = Config::load(&shipped(name)).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(schedule.poses.len(), 52, "{name}");
             assert!(config.calibration.frames_per_pose >= 1);
         }
+    }
+
+    #[test]
+    fn a_robots_bag_names_three_feet_or_more() {
+        let path = shipped("quadruped.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let (config, _) = Config::load(&path).unwrap();
+        let bag = config.bag.unwrap();
+        assert_eq!(bag.foot_frames.unwrap().len(), 4);
+        assert_eq!(
+            bag.depth_topic.as_deref(),
+            Some("/camera/depth/image_rect_raw")
+        );
+        let two = Config::parse(
+            &path,
+            &text.replace(
+                r#"foot_frames = ["lf_foot", "rf_foot", "lh_foot", "rh_foot"]"#,
+                r#"foot_frames = ["lf_foot", "rf_foot"]"#,
+            ),
+        )
+        .unwrap();
+        let err = two.validate_settings(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("bag.foot_frames: 2 frames: at least 3"),
+            "{err}"
+        );
+        let typo = Config::parse(&path, &text.replace("body_frame =", "body_fram =")).unwrap_err();
+        assert!(typo.to_string().contains("body_fram"), "{typo}");
     }
 
     #[test]
