@@ -330,6 +330,22 @@ mod tests {
         assert!(html.contains("tilted -5.0°"));
     }
 
+    /// Rejected for a reason that is no gate (a time-of-flight camera):
+    /// the page does not say a gate failed when the table shows none did.
+    #[test]
+    fn a_rejection_without_a_failed_gate_says_so() {
+        let mut result = solved();
+        for check in &mut result.gate_checks {
+            check.passed = true;
+        }
+        result.reasons = vec!["a time-of-flight camera is not supported".into()];
+        let html = render_html(&result, &provenance());
+        assert!(html.contains("<h1>Failed its checks</h1>"));
+        assert!(html.contains("passed its quality gates, but must not be used:"));
+        assert!(!html.contains("did not pass its quality gates"));
+        assert!(html.contains("All 7 gates passed."));
+    }
+
     #[test]
     fn escapes_every_text_from_outside() {
         let mut result = solved();

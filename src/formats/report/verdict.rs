@@ -6,10 +6,17 @@ use super::*;
 pub(super) fn verdict_section(result: &ResultJson, verdict: &str) -> Markup {
     // Coloured by the status (green or red), whatever the words.
     let class = result.status.as_str();
+    // Rejected with every gate passed: for a reason that is not a gate
+    // (a camera groundcal does not support), not "its quality gates".
+    let gates_passed =
+        !result.gate_checks.is_empty() && result.gate_checks.iter().all(|c| c.passed);
     let lead = match (result.accepted(), result.reasons.is_empty()) {
         (true, true) => "The calibration passed every quality gate.",
         (true, false) => "The calibration passed its quality gates, with these notes:",
         _ if result.robot_from_sensor.is_none() => "No calibration could be made:",
+        (false, false) if gates_passed => {
+            "The calibration passed its quality gates, but must not be used:"
+        }
         (false, true) => "The calibration did not pass its quality gates.",
         (false, false) => "The calibration did not pass its quality gates:",
     };
