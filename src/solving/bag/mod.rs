@@ -76,6 +76,9 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             .filter_map(|o| o.ground_residuals.as_deref())
             .collect::<Vec<_>>(),
     );
+    if let Some(p) = exponent {
+        tracing::info!("the depth's noise against distance: σ(1/z) ∝ (1/z)^{p:.3}");
+    }
     // A bag stores no gates and no noise of a live run.
     let (settings, gates_from) = options.settings(None, None);
     let mut result =
