@@ -11,17 +11,8 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use common::{groundcal, mcap_python, prerequisite_missing, root, temp_dir};
+use common::{groundcal, mcap_python, prerequisite_missing, root, temp_dir, MOUNT_KEYS as KEYS};
 use serde_json::Value;
-
-const KEYS: [&str; 6] = [
-    "alpha_deg",
-    "beta_deg",
-    "gamma_deg",
-    "px_mm",
-    "py_mm",
-    "pz_mm",
-];
 
 /// Writes the bag with `args`; its truth, as the script prints it.
 fn make_bag(python: &Path, out: &Path, args: &[&str]) -> Value {

@@ -556,14 +556,7 @@ fn design_text(report: &DesignJson, how: &str) -> String {
     );
     let pick = |s: &Option<SigmaJson>, k: usize| {
         s.as_ref().map_or("-".to_string(), |s| {
-            let v = [
-                s.alpha_deg,
-                s.beta_deg,
-                s.gamma_deg,
-                s.px_mm,
-                s.py_mm,
-                s.pz_mm,
-            ][k];
+            let v = s.values()[k];
             if k < 3 {
                 format!("{v:.4}°")
             } else {

@@ -96,7 +96,19 @@ pub struct SigmaJson {
 }
 
 impl SigmaJson {
-    /// From σ in radians and metres, in the order α, β, γ, px, py, pz.
+    /// σ as the document has them (degrees, millimetres), in the order α,
+    /// β, γ, px, py, pz.
+    pub fn values(&self) -> [f64; 6] {
+        [
+            self.alpha_deg,
+            self.beta_deg,
+            self.gamma_deg,
+            self.px_mm,
+            self.py_mm,
+            self.pz_mm,
+        ]
+    }
+
     /// σ in radians and metres, in the order α, β, γ, px, py, pz (the
     /// inverse of [`SigmaJson::from_radians_metres`]).
     pub fn radians_metres(&self) -> [f64; 6] {

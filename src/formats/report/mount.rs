@@ -2,6 +2,7 @@
 //! nominal mount, and the summary of the poses.
 
 use super::*;
+use crate::formats::output::SigmaJson;
 
 pub(super) fn parameters_section(result: &ResultJson) -> Markup {
     let Some(m) = &result.robot_from_sensor else {
@@ -12,16 +13,7 @@ pub(super) fn parameters_section(result: &ResultJson) -> Markup {
             }
         };
     };
-    let sigmas = result.sigma.as_ref().map(|s| {
-        [
-            s.alpha_deg,
-            s.beta_deg,
-            s.gamma_deg,
-            s.px_mm,
-            s.py_mm,
-            s.pz_mm,
-        ]
-    });
+    let sigmas = result.sigma.as_ref().map(SigmaJson::values);
     let scale = result.depth_scale.map(|scale| {
         let estimated = result.depth_scale_estimated.unwrap_or(false);
         let sigma = result
