@@ -127,7 +127,7 @@ fn a_quadrupeds_slipped_foot_is_named_and_three_feet_say_they_cannot() {
     assert_eq!(noted[0].0, 20);
     assert!(
         noted[0].1.starts_with("foot 2 slipped (18.0 mm")
-            && noted[0].1.contains("the other 3 feet's"),
+            && noted[0].1.contains("the other three feet's"),
         "{noted:?}"
     );
     let (angle, position) = errors(&result, &truth);

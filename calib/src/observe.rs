@@ -119,6 +119,14 @@ impl Default for ObserveSettings {
     }
 }
 
+/// A small count as the notes write it ("five"), a larger one in digits.
+fn count_in_words(n: usize) -> String {
+    const WORDS: [&str; 8] = ["no", "one", "two", "three", "four", "five", "six", "seven"];
+    WORDS
+        .get(n)
+        .map_or_else(|| n.to_string(), |w| (*w).to_string())
+}
+
 /// Feet in millimetres (files, messages) to metres.
 pub fn feet_from_mm(feet_mm: &[[f64; 3]]) -> Result<Feet, String> {
     if feet_mm.len() < MIN_FEET {
@@ -233,7 +241,7 @@ impl FeetTracker {
                     Some(format!(
                         "foot {foot} slipped ({:.1} mm from where it was planted, limit {limit_mm:.1} mm): the body pose is the other {} feet's, and the foot counts from where it is now",
                         miss * 1e3,
-                        feet.len() - 1
+                        count_in_words(feet.len() - 1)
                     )),
                 )
             }
