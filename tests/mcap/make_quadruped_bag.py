@@ -17,7 +17,7 @@ make_bag.py uses), with its own renderer of the depth camera:
   each still pose. Its errors are in its own disparity, after the Kinect as it
   really is (issue 41) scaled to pixels: white noise of 0.05 px and a field
   smoothed over about 8 px of 0.03 px, both drawn every frame; a fixed pattern
-  of the device (smooth waves and a bowl, 0.09 px RMS, about 17 mm at 2 m);
+  of the device (smooth waves and a bowl, 0.051 px RMS, 9.5 mm RMS at 2 m);
   the disparity rounded to 1/32 px and the depth to the millimetre; nothing
   nearer than 0.3 m or farther than 4 m.
 - /tf_static also holds a rough mount (3 degrees and 30 mm off the truth), as
