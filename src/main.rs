@@ -108,8 +108,19 @@ fn run(args: Args) -> ExitStatus {
     }
 }
 
+/// Looks at standard output before Rust's runtime replaces a closed one
+/// with `/dev/null` (`cli::note_whether_stdout_is_closed`): an ELF
+/// constructor, run by the C library before `main`.
+#[used]
+#[link_section = ".init_array"]
+static NOTE_WHETHER_STDOUT_IS_CLOSED: extern "C" fn() = {
+    extern "C" fn note() {
+        cli::note_whether_stdout_is_closed();
+    }
+    note
+};
+
 fn main() -> ExitCode {
-    cli::guard_standard_descriptors();
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_env_filter(

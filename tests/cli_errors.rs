@@ -86,7 +86,9 @@ fn a_fifo_as_an_input_file_is_refused_not_waited_on() {
 }
 
 /// A result printed to a closed standard output (`>&-`) is a failure, exit
-/// 1, said on stderr; to `/dev/null` it is printed as asked (exit 0).
+/// 1, said on stderr; to `/dev/null` it is printed as asked (exit 0),
+/// whether opened for writing (a shell's `>`) or for reading and writing (a
+/// shell's `<>`, Python's `subprocess.DEVNULL`, a supervisor's null output).
 #[test]
 fn a_result_printed_to_a_closed_output_is_a_failure() {
     let sample = common::shared().join("data/sample-12");
@@ -107,6 +109,8 @@ fn a_result_printed_to_a_closed_output_is_a_failure() {
     assert_eq!(code, 1, "{stderr}");
     assert!(stderr.contains("standard output is closed"), "{stderr}");
     let (code, stderr) = run(">/dev/null");
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stderr) = run("1<>/dev/null");
     assert_eq!(code, 0, "{stderr}");
 }
 

@@ -66,29 +66,23 @@ pub fn ends_quietly_on_a_closed_pipe() {
     }
 }
 
-/// Whether standard output was closed when the process started (`>&-`).
+/// Whether standard output was closed when the process started (`>&-`):
+/// set by [`note_whether_stdout_is_closed`].
 static STDOUT_WAS_CLOSED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
-/// Notes whether standard output was closed when the process started
-/// (`>&-`). Rust's runtime gives a closed standard descriptor `/dev/null`,
-/// opened read and write, before `main` (so that no file opened later takes
-/// its number), and its stdout then reports every print as written. A
-/// shell's `>/dev/null` opens it for writing only; so `/dev/null` opened
-/// read and write on descriptor 1 is taken for a closed output, and
-/// printing the result to it is a failure ([`print_stdout`]).
-pub fn guard_standard_descriptors() {
-    use std::os::unix::fs::{FileTypeExt, MetadataExt};
-    let Ok(null) = std::fs::metadata("/dev/null") else {
-        return;
-    };
-    let Ok(out) = std::fs::metadata("/proc/self/fd/1") else {
-        return;
-    };
-    // SAFETY: F_GETFL reads descriptor 1's status flags; no memory is passed.
+/// Notes whether standard output is closed (`>&-`), from the constructor
+/// `main.rs` registers, which the C library runs before Rust's runtime
+/// starts. The runtime then gives a closed standard descriptor `/dev/null`,
+/// opened for reading and writing (so that no file opened later takes its
+/// number), and its stdout reports every print as written; after that, a
+/// closed output and a `/dev/null` a caller opened for reading and writing
+/// (a shell's `<>`, Python's `subprocess.DEVNULL`) cannot be told apart,
+/// and taking the second for the first failed every such caller.
+pub fn note_whether_stdout_is_closed() {
+    // SAFETY: F_GETFD reads descriptor 1's flags; no memory is passed.
     #[allow(unsafe_code)]
-    let flags = unsafe { libc::fcntl(libc::STDOUT_FILENO, libc::F_GETFL) };
-    let is_null = out.file_type().is_char_device() && out.rdev() == null.rdev();
-    if is_null && flags != -1 && flags & libc::O_ACCMODE == libc::O_RDWR {
+    let flags = unsafe { libc::fcntl(libc::STDOUT_FILENO, libc::F_GETFD) };
+    if flags == -1 {
         STDOUT_WAS_CLOSED.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 }
