@@ -7,6 +7,21 @@ use serde::{Deserialize, Serialize};
 /// The raw value the Kinect reports for "no reading".
 pub const RAW_NO_READING: u16 = 2047;
 
+/// The Kinect's raw disparity counts eighths of a pixel of its 640-pixel
+/// image: its matcher's subpixel step (libfreenect's zero-plane model shifts
+/// by `raw/4` pixels of the 1,280-pixel reference, half the width). With it
+/// the Kinect's limits, set in raw units, become pixels of disparity, which
+/// another camera's can be compared with ([`kinect_pixels_per_inverse_depth`]).
+pub const KINECT_RAW_PER_PIXEL: f64 = 8.0;
+
+/// The default Kinect's pixels of disparity per 1/m of inverse depth (its
+/// focal length times its baseline, px·m): 42.8 for the default model,
+/// where the sensor's own figures give about 580 px × 75 mm (43.5).
+pub fn kinect_pixels_per_inverse_depth() -> f64 {
+    let (_, metres_inverse_per_raw) = DepthModel::default().inverse_depth_affine();
+    1.0 / (metres_inverse_per_raw.abs() * KINECT_RAW_PER_PIXEL)
+}
+
 /// How raw 11-bit Kinect values map to depth (conventions.md).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]

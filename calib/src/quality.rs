@@ -72,6 +72,25 @@ impl Default for Gates {
 }
 
 impl Gates {
+    /// These gates for a disparity camera of `pixels_per_inverse_depth`
+    /// (its focal length times its baseline, px·m) other than the Kinect.
+    /// The pattern's gate is the range its correction was checked over on
+    /// the Kinect, in millimetres at 2 m; what the correction depends on is
+    /// the pattern's size against the noise and the fit's band, which a
+    /// camera's matcher makes in its own pixels of disparity. So the gate is
+    /// carried over in pixels: 45 mm at 2 m is 0.48 px on the Kinect, and
+    /// 0.48 px is 91 mm at 2 m on a camera of 425 px and a 50-mm baseline.
+    /// The others stay: the warp left uncorrected and the ground's
+    /// disagreement are errors of the ground in millimetres, whatever camera
+    /// saw them.
+    pub fn at_camera_disparity(self, pixels_per_inverse_depth: f64) -> Self {
+        let kinect = crate::depth::kinect_pixels_per_inverse_depth();
+        Self {
+            pattern_max_mm: self.pattern_max_mm * kinect / pixels_per_inverse_depth,
+            ..self
+        }
+    }
+
     /// Whether the thresholds make sense.
     pub fn validate(&self) -> Result<(), String> {
         let positive = [
@@ -153,7 +172,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
                 use crate::outcome::WarpCause;
                 let why = match pattern.uncorrected_because {
                     Some(WarpCause::ChangesWithDepth { per_m, sigma }) => format!(
-                        "it changes with the distance ({} by {:.0} ± {:.0} % a metre farther), so no correction fixed in the image takes it out: the Kinect's depth pattern needs a maintainer (the ground you calibrated on is not the cause)",
+                        "it changes with the distance ({} by {:.0} ± {:.0} % a metre farther), so no correction fixed in the image takes it out: the depth camera's pattern needs a maintainer (the ground you calibrated on is not the cause)",
                         if per_m > 0.0 { "weaker" } else { "stronger" },
                         100.0 * per_m.abs(),
                         100.0 * sigma
@@ -182,9 +201,10 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         }
         if let Some(check) = pattern_check(gates, pattern) {
             if !check.passed {
+                // Rounded apart: "91 mm, more than the 91 mm" said nothing.
+                let (measured, limit) = apart(check.measured, check.limit, 0);
                 reasons.push(format!(
-                    "the depth image is warped by up to {:.0} mm at 2 m, more than the {:.0} mm its correction is checked for, so the pattern's offset, and the mount with it, may be further off than their σ say: have a maintainer check the Kinect",
-                    check.measured, check.limit
+                    "the depth image is warped by up to {measured} mm at 2 m, more than the {limit} mm its correction is checked for, so the pattern's offset, and the mount with it, may be further off than their σ say: have a maintainer check the depth camera"
                 ));
             }
             checks.push(check);
@@ -857,6 +877,35 @@ mod tests {
         let past = pattern_check(&gates, &pattern(true, -3.7)).unwrap();
         assert!((past.measured - 45.455).abs() < 1e-3, "{}", past.measured);
         assert!(!past.passed);
+    }
+
+    /// Another disparity camera's pattern is judged in its own pixels: the
+    /// Kinect's 45 mm at 2 m is 0.48 px, which on a camera of 425 px and a
+    /// 50-mm baseline (21.25 px·m) is 91 mm at 2 m; only that gate moves.
+    #[test]
+    fn the_patterns_gate_is_carried_to_another_camera_in_pixels_of_disparity() {
+        let kinect = crate::depth::kinect_pixels_per_inverse_depth();
+        assert!((kinect - 42.78).abs() < 0.01, "{kinect}");
+        let kinect_limit_px = 0.045 / 4.0 * kinect;
+        assert!((kinect_limit_px - 0.481).abs() < 0.001, "{kinect_limit_px}");
+        let stereo = Gates::default().at_camera_disparity(425.0 * 0.050);
+        let at_2m_mm = kinect_limit_px / 21.25 * 4.0 * 1e3;
+        assert!((stereo.pattern_max_mm - at_2m_mm).abs() < 1e-9);
+        assert!(
+            (stereo.pattern_max_mm - 90.6).abs() < 0.1,
+            "{}",
+            stereo.pattern_max_mm
+        );
+        assert_eq!(
+            Gates {
+                pattern_max_mm: 45.0,
+                ..stereo
+            },
+            Gates::default(),
+            "the other gates stay"
+        );
+        let same = Gates::default().at_camera_disparity(kinect);
+        assert!((same.pattern_max_mm - 45.0).abs() < 1e-9);
     }
 
     /// A corrected pattern's plane part costs the angles σ (docs/method.md):

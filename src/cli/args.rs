@@ -51,6 +51,12 @@ pub struct BagArgs {
     /// foot_frames, else foot_1,…,foot_6.
     #[arg(long, value_name = "F1,F2,F3,..")]
     pub foot_frames: Option<String>,
+    /// A bag's stereo baseline in millimetres, for a disparity camera other
+    /// than a Kinect (its pattern reported and gated in its own pixels of
+    /// disparity); default [bag] baseline_mm, else CameraInfo P's baseline
+    /// term, else the camera is judged as a Kinect.
+    #[arg(long, value_name = "MM")]
+    pub baseline_mm: Option<f64>,
 }
 
 impl BagArgs {
@@ -78,6 +84,15 @@ impl BagArgs {
             }
             None => configured.foot_frames.unwrap_or(defaults.foot_frames),
         };
+        let baseline = match (self.baseline_mm, configured.baseline_mm) {
+            (Some(mm), _) => {
+                crate::solving::bag::check_baseline_mm(mm)
+                    .map_err(|why| format!("--baseline-mm: {why}"))?;
+                Some(crate::solving::bag::GivenBaseline { mm, from: "flag" })
+            }
+            (None, Some(mm)) => Some(crate::solving::bag::GivenBaseline { mm, from: "config" }),
+            (None, None) => None,
+        };
         Ok(crate::solving::bag::BagOptions {
             depth_topic: self
                 .depth_topic
@@ -92,6 +107,7 @@ impl BagArgs {
                 .or(configured.body_frame)
                 .unwrap_or(defaults.body_frame),
             foot_frames,
+            baseline,
             ..defaults
         })
     }

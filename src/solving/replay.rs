@@ -396,6 +396,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             (None, None) => None,
         },
         gates_from: Some(gates_from.into()),
+        disparity: None,
     });
     if let Some(cut) = recording.cut_off {
         result.notes.push(format!(

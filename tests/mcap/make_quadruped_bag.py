@@ -4,6 +4,7 @@
 make_bag.py uses), with its own renderer of the depth camera:
 
     make_quadruped_bag.py SCHEDULE.toml OUT_DIR [--seed N] [--slip FOOT@POSE]
+        [--pattern-scale K] [--info-baseline] [--tof] [--tiny]
 
 - The robot: four feet planted in a 500 x 300 mm rectangle, each reached
   from a hip through a knee (thigh and shank 220 mm, solved in the plane of
@@ -28,6 +29,12 @@ make_bag.py uses), with its own renderer of the depth camera:
   disparity camera).
 - --tiny: a 32 x 18 camera and the schedule's first three poses, a bag of a
   few kilobytes (the fuzzer's seed, fuzz/corpus/bag_session).
+- --pattern-scale 2.5: the fixed pattern 2.5 times as large (0.13 px RMS,
+  0.40 px at its largest cell: 75 mm at 2 m, past the 45 mm a Kinect's
+  pattern is checked for, within the 0.48 px that is on the Kinect).
+- --info-baseline: the CameraInfo's projection matrix carries the baseline
+  (P[3] = -fx * baseline, as a stereo pair's second camera's does); without
+  it P[3] is 0, as a RealSense's depth CameraInfo has it.
 - --slip 2@20: foot 2 slips on its way to pose 20 (15 mm forward and 10 mm
   into the ground) and stays there.
 
@@ -172,6 +179,8 @@ def main():
     parser.add_argument("--tiny", action="store_true", help="a 32 x 18 camera, three poses")
     parser.add_argument("--tof", action="store_true", help="a time-of-flight camera")
     parser.add_argument("--slip", help="FOOT@POSE: that foot slips 18 mm on the way to that pose")
+    parser.add_argument("--pattern-scale", type=float, default=1.0, help="the fixed pattern times this")
+    parser.add_argument("--info-baseline", action="store_true", help="P[3] = -fx * baseline")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     home, poses = read_schedule(args.schedule)
@@ -185,7 +194,7 @@ def main():
     slip = tuple(int(x) for x in args.slip.split("@")) if args.slip else None
     mount_r, mount_t = pose(MOUNT)
     robot_from_optical = (mount_r @ SENSOR_FROM_OPTICAL, mount_t)
-    pattern = device_pattern()
+    pattern = args.pattern_scale * device_pattern()
     feet_g = [np.array([x / 1e3, 0.0, z / 1e3]) for x, z in FEET_G]
     hips_base = [ROS_FROM_GROUNDCAL @ (np.array(h) / 1e3) for h in HIPS_R]
 
@@ -273,7 +282,7 @@ def main():
                     d=np.zeros(5),
                     k=np.array([FX, 0, CX, 0, FY, CY, 0, 0, 1], float),
                     r=np.eye(3).flatten(),
-                    p=np.array([FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], float),
+                    p=np.array([FX, 0, CX, -FB if args.info_baseline else 0, 0, FY, CY, 0, 0, 0, 1, 0], float),
                     binning_x=0,
                     binning_y=0,
                     roi=Roi(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
@@ -308,6 +317,7 @@ def main():
             "mount": dict(zip(["alpha_deg", "beta_deg", "gamma_deg", "px_mm", "py_mm", "pz_mm"], MOUNT)),
             "foot_frames": [f"{name}_foot" for name in FEET_NAMES],
             "counts": counts,
+            "pattern_rms_px": float(pattern.std()),
         },
         sys.stdout,
     )

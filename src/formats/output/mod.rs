@@ -570,6 +570,7 @@ mod tests {
             ])),
             nominal_mount_from: Some("recording".into()),
             gates_from: Some("built-in".into()),
+            disparity: None,
         });
         result.poses[0].commanded = Some(PoseDegMm {
             alpha_deg: 0.0,

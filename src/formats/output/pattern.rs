@@ -69,12 +69,39 @@ pub struct DepthPatternJson {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncorrected_raw: Option<Vec<Option<f64>>>,
     /// Raw units per 1/m of inverse depth (the depth model's 1/b): the depth
-    /// error at z metres is −z²·raw/raw_per_inverse_depth.
+    /// error at z metres is −z²·raw/raw_per_inverse_depth. For a camera
+    /// other than a Kinect, the cells are in a Kinect's raw units of the
+    /// same inverse depth, and `disparity` gives the camera's own.
     pub raw_per_inverse_depth: f64,
+    /// The pattern in the camera's own pixels of disparity, for a bag's
+    /// camera of known baseline (`setup.disparity`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub disparity: Option<PatternDisparityJson>,
     /// The shape to take out of the frames before fitting their ground
     /// again (the fit's band cut its peaks); not part of the document.
     #[serde(skip)]
     pub fit_again_about: Option<crate::calib::distortion::DepthCorrection>,
+}
+
+/// A pattern in a camera's own pixels of disparity.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PatternDisparityJson {
+    /// RMS of its shape (as `shape_rms_raw`), pixels.
+    pub shape_rms_px: f64,
+    /// Its largest cell (as `largest_mm_at_2m`), pixels.
+    pub largest_px: f64,
+}
+
+impl PatternDisparityJson {
+    /// `pattern`'s figures on a camera of `pixels_per_inverse_depth` (px·m).
+    pub fn of(pattern: &DepthPatternJson, pixels_per_inverse_depth: f64) -> Option<Self> {
+        (pattern.raw_per_inverse_depth != 0.0).then(|| PatternDisparityJson {
+            shape_rms_px: pattern.shape_rms_raw / pattern.raw_per_inverse_depth.abs()
+                * pixels_per_inverse_depth,
+            // |δ(1/z)| = δz/z² at 2 m.
+            largest_px: pattern.largest_mm_at_2m * 1e-3 / 4.0 * pixels_per_inverse_depth,
+        })
+    }
 }
 
 /// A figure the document can carry: JSON has no infinity (a test whose
@@ -131,6 +158,7 @@ impl DepthPatternJson {
                 .as_ref()
                 .map(|cells| cells.iter().map(thousandths).collect()),
             raw_per_inverse_depth: p.raw_per_inverse_depth,
+            disparity: None,
             fit_again_about: p.fit_again_about.clone(),
         }
     }

@@ -178,6 +178,21 @@ pub struct SetupJson {
     /// live run's) or `built-in`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gates_from: Option<String>,
+    /// A bag's disparity camera other than a Kinect, when its baseline is
+    /// known: the units its pattern is reported and gated in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub disparity: Option<CameraDisparityJson>,
+}
+
+/// A disparity camera's own units (a bag's camera of known baseline).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraDisparityJson {
+    pub baseline_mm: f64,
+    /// Pixels of disparity per 1/m of inverse depth (`fx · baseline`, px·m).
+    pub pixels_per_inverse_depth: f64,
+    /// Where the baseline came from: `flag` (`--baseline-mm`), `config`
+    /// (`[bag] baseline_mm`) or `camera_info` (its projection matrix).
+    pub from: String,
 }
 
 /// The verdict (`"accepted"` or `"rejected"`).

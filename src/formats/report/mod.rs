@@ -452,6 +452,7 @@ mod tests {
             ])),
             nominal_mount_from: Some("flag".into()),
             gates_from: Some("recording".into()),
+            disparity: None,
         });
         for (k, pose) in result.poses.iter_mut().enumerate() {
             pose.commanded = Some(PoseDegMm {

@@ -131,13 +131,20 @@ pub(super) fn depth_pattern_section(
         (Some(part), Some(sigma), true) => Some((part, sigma)),
         _ => None,
     };
+    // A bag's camera of known baseline is named as what it is, and its
+    // pattern given in its own pixels of disparity; else it is a Kinect.
+    let camera = if pattern.disparity.is_some() {
+        "depth camera"
+    } else {
+        "Kinect"
+    };
     html! {
         section #depth-pattern {
             h2 { "The depth image's own warp" }
             @match image {
                 Some((range, data)) => {
                     p.warp-words {
-                        "The Kinect reads the depth up to " strong { (num(pattern.largest_mm_at_2m, 1)) " mm" }
+                        "The " (camera) " reads the depth up to " strong { (num(pattern.largest_mm_at_2m, 1)) " mm" }
                         " off at 2 m, in a pattern fixed in its image (red: farther than the truth, blue: nearer)"
                         @match too_large_for_mm {
                             Some(limit) => {
@@ -149,7 +156,12 @@ pub(super) fn depth_pattern_section(
                     }
                     (figure(pattern, &data, range, pattern.largest_mm_at_2m))
                     dl.facts {
-                        dt { "shape, RMS" } dd { (num(pattern.shape_rms_raw, 3)) " raw units" }
+                        @if let Some(own) = pattern.disparity {
+                            dt { "shape, RMS" } dd { (num(own.shape_rms_px, 3)) " px of disparity" }
+                            dt { "largest" } dd { (num(own.largest_px, 3)) " px of disparity" }
+                        } @else {
+                            dt { "shape, RMS" } dd { (num(pattern.shape_rms_raw, 3)) " raw units" }
+                        }
                         @if let Some((part, sigma)) = plane_part {
                             dt { "offset" } dd { (signed(part[0], 3)) " ± " (num(sigma[0], 3)) " raw units" }
                             dt { "gradient along a row" } dd { (signed(part[1], 3)) " ± " (num(sigma[1], 3)) " per 100 px" }
@@ -172,6 +184,8 @@ pub(super) fn depth_pattern_section(
             p.note {
                 @if drawn {
                     (pattern.note)
+                } @else if pattern.disparity.is_some() {
+                    "A disparity camera's matching leaves a pattern fixed in its image; groundcal looks for it in the ground's residuals at every calibration."
                 } @else {
                     "A real Kinect v1's depth carries a fixed pattern of most of a raw unit RMS (0.84 in a real sequence of a floor; a raw unit is about 12 mm at 2 m); groundcal looks for it in the ground's residuals at every calibration."
                 }
@@ -244,8 +258,33 @@ mod tests {
             uncorrected_fixed: false,
             uncorrected_raw: None,
             raw_per_inverse_depth: 325.0,
+            disparity: None,
             fit_again_about: None,
         }
+    }
+
+    /// Another camera is not called a Kinect, and its pattern is given in
+    /// its own pixels of disparity.
+    #[test]
+    fn another_cameras_pattern_is_given_in_its_own_pixels() {
+        let kinect = depth_pattern_section(Some(&corrected_pattern()), None).into_string();
+        assert!(
+            kinect.contains("The Kinect reads the depth up to"),
+            "{kinect}"
+        );
+        assert!(!kinect.contains("px of disparity"), "{kinect}");
+        let mut stereo = corrected_pattern();
+        stereo.disparity = crate::formats::output::PatternDisparityJson::of(&stereo, 21.25);
+        let words = depth_pattern_section(Some(&stereo), None).into_string();
+        assert!(
+            words.contains("The depth camera reads the depth up to"),
+            "{words}"
+        );
+        assert!(!words.contains("Kinect"), "{words}");
+        // 1.0 raw of a Kinect's 325 per 1/m is 0.065 px on 21.25 px·m;
+        // 22.6 mm at 2 m is 0.120 px.
+        assert!(words.contains("0.065 px of disparity"), "{words}");
+        assert!(words.contains("0.120 px of disparity"), "{words}");
     }
 
     /// The picture is drawn either way; the words say whether the

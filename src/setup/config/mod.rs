@@ -42,7 +42,7 @@ pub struct Config {
 /// A robot's bags (`[bag]`): what `replay BAG.mcap` reads, so that a
 /// quadruped's configuration names its feet once. Each key is optional; a
 /// flag given overrides it, and without either the built-in default holds.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct BagConfig {
     pub depth_topic: Option<String>,
@@ -51,6 +51,11 @@ pub struct BagConfig {
     pub body_frame: Option<String>,
     /// The feet's frames, foot 1 first: three or more.
     pub foot_frames: Option<Vec<String>>,
+    /// The depth camera's stereo baseline, millimetres, for a disparity
+    /// camera other than a Kinect: with its focal length, the constant
+    /// that turns its inverse depth into its own pixels of disparity, in
+    /// which its pattern is reported and gated.
+    pub baseline_mm: Option<f64>,
 }
 
 /// How a calibration is checked against the ground and the accelerometer
@@ -396,6 +401,10 @@ impl Config {
                     return Err(bad(key, "must be a topic or frame name, not empty".into()));
                 }
             }
+            if let Some(mm) = bag.baseline_mm {
+                crate::solving::bag::check_baseline_mm(mm)
+                    .map_err(|why| bad("bag.baseline_mm", why))?;
+            }
             if let Some(feet) = &bag.foot_frames {
                 if feet.len() < crate::calib::body::MIN_FEET || !feet.iter().all(named) {
                     return Err(bad(
@@ -601,6 +610,22 @@ mod tests {
         let err = two.validate_settings(&path).unwrap_err().to_string();
         assert!(
             err.contains("bag.foot_frames: 2 frames: at least 3"),
+            "{err}"
+        );
+        assert_eq!(bag.baseline_mm, Some(50.0));
+        let no_baseline = Config::parse(
+            &path,
+            &text.replace("baseline_mm = 50.0", "baseline_mm = 0.0"),
+        )
+        .unwrap();
+        let err = no_baseline
+            .validate_settings(&path)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(
+                "bag.baseline_mm: 0 is not a depth camera's stereo baseline (1 to 1000 mm)"
+            ),
             "{err}"
         );
         let typo = Config::parse(&path, &text.replace("body_frame =", "body_fram =")).unwrap_err();

@@ -16,9 +16,11 @@ use crate::calib::geometry::PoseDegMm;
 use crate::calib::noise_with_depth;
 use crate::calib::observe::{BodyPoseSource, PoseObserver};
 use crate::calib::plane::FitBuffers;
-use crate::formats::output::{ResultJson, SetupJson};
+use crate::formats::output::{CameraDisparityJson, PatternDisparityJson, ResultJson, SetupJson};
 use crate::solving::replay::{Replay, ReplayOptions};
-pub use session::{read_bag, BagError, BagOptions, BagSession};
+pub use session::{
+    check_baseline_mm, read_bag, BagError, BagOptions, BagSession, CameraDisparity, GivenBaseline,
+};
 
 /// Whether `path` is an MCAP file (its magic), not a recording's directory.
 pub fn is_mcap_file(path: &std::path::Path) -> bool {
@@ -79,8 +81,14 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     if let Some(p) = exponent {
         tracing::info!("the depth's noise against distance: σ(1/z) ∝ (1/z)^{p:.3}");
     }
-    // A bag stores no gates and no noise of a live run.
-    let (settings, gates_from) = options.settings(None, None);
+    // A bag stores no gates and no noise of a live run. Another camera's
+    // pattern is gated in its own pixels of disparity.
+    let (mut settings, gates_from) = options.settings(None, None);
+    if let Some(camera) = bag.disparity {
+        settings.gates = settings
+            .gates
+            .at_camera_disparity(camera.pixels_per_inverse_depth);
+    }
     let mut result =
         ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
     // A pattern the fit's band cut: the bag read and fitted again about it.
@@ -110,6 +118,9 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             ),
         );
     }
+    if let (Some(camera), Some(pattern)) = (bag.disparity, result.depth_pattern.as_mut()) {
+        pattern.disparity = PatternDisparityJson::of(pattern, camera.pixels_per_inverse_depth);
+    }
     // The motor's tilt is not in a bag: not claimed.
     result.kinect_tilt_deg = None;
     let mut notes = bag.notes.clone();
@@ -131,6 +142,11 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             (None, None) => None,
         },
         gates_from: Some(gates_from.into()),
+        disparity: bag.disparity.map(|camera| CameraDisparityJson {
+            baseline_mm: camera.baseline_mm,
+            pixels_per_inverse_depth: camera.pixels_per_inverse_depth,
+            from: camera.from.into(),
+        }),
     });
     Ok(Replay {
         result,

@@ -52,6 +52,48 @@ pub struct BagOptions {
     /// The last frames of each still span that are fitted.
     pub frames_per_pose: usize,
     pub limits: Limits,
+    /// The camera's stereo baseline as a person gave it (a flag, or the
+    /// configuration's `[bag]`): before the bag's CameraInfo.
+    pub baseline: Option<GivenBaseline>,
+}
+
+/// A stereo baseline given by a person, and where (`flag` or `config`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GivenBaseline {
+    pub mm: f64,
+    pub from: &'static str,
+}
+
+/// A disparity camera's own units: what its matcher measures, in which its
+/// noise and fixed pattern arise. A Kinect's are its raw values (eighths of
+/// a pixel); another camera's are pixels, `fx · baseline` of them per 1/m
+/// of inverse depth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraDisparity {
+    pub baseline_mm: f64,
+    /// Pixels of disparity per 1/m of inverse depth (`fx · baseline`, px·m).
+    pub pixels_per_inverse_depth: f64,
+    /// Where the baseline came from: `flag`, `config` or `camera_info`
+    /// (the projection matrix's baseline term).
+    pub from: &'static str,
+}
+
+/// The baselines groundcal takes for a depth camera's, millimetres: a
+/// structured-light or stereo camera's are 15–120 mm (RealSense 50–95,
+/// Orbbec 40–75, the Kinect 75); a millimetre to a metre covers any.
+pub const BASELINE_MM: std::ops::RangeInclusive<f64> = 1.0..=1000.0;
+
+/// Why `mm` cannot be a depth camera's baseline, if it cannot.
+pub fn check_baseline_mm(mm: f64) -> Result<(), String> {
+    if mm.is_finite() && BASELINE_MM.contains(&mm) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{mm} is not a depth camera's stereo baseline ({} to {} mm)",
+            BASELINE_MM.start(),
+            BASELINE_MM.end()
+        ))
+    }
 }
 
 impl Default for BagOptions {
@@ -65,6 +107,7 @@ impl Default for BagOptions {
             still_s: 0.3,
             frames_per_pose: 3,
             limits: Limits::default(),
+            baseline: None,
         }
     }
 }
@@ -116,6 +159,9 @@ pub struct BagSession {
     pub poses: Vec<BagPose>,
     /// From the TF tree's body → camera transform, when it has one.
     pub nominal_mount: Option<NominalMount>,
+    /// The camera's own disparity, when its baseline is known (given, or in
+    /// its CameraInfo); otherwise it is judged as a Kinect.
+    pub disparity: Option<CameraDisparity>,
     /// What the operator should know (lens distortion ignored, frames left out).
     pub notes: Vec<String>,
     /// Depth images on the depth topic.
@@ -515,6 +561,8 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
             options.camera_info_topic, info.distortion_model, info.d
         ));
     }
+    let disparity = camera_disparity(&info, &intrinsics, options, &mut notes)
+        .map_err(|what| fail(format!("{}: {what}", options.camera_info_topic)))?;
     let units = match first.encoding.as_str() {
         "16UC1" => DepthUnits::Millimetres,
         "32FC1" => DepthUnits::TenthsOfMillimetre,
@@ -658,6 +706,7 @@ pub fn read_bag(path: &Path, options: &BagOptions) -> Result<BagSession, BagErro
         path: path.to_path_buf(),
         intrinsics,
         units,
+        disparity,
         camera_frame,
         home_feet_mm,
         poses,
@@ -737,4 +786,57 @@ impl BagSession {
         }
         Ok(read)
     }
+}
+
+/// The camera's own disparity: its baseline as a person gave it, else as
+/// its CameraInfo's projection matrix gives it (a stereo pair's second
+/// camera: `P[3] = −fx·baseline`), else unknown (judged as a Kinect, and
+/// the notes say so). Where both are known and differ by more than 1 %, the
+/// notes say that too.
+fn camera_disparity(
+    info: &CameraInfo,
+    intrinsics: &Intrinsics,
+    options: &BagOptions,
+    notes: &mut Vec<String>,
+) -> Result<Option<CameraDisparity>, String> {
+    let from_projection = if info.p[3] == 0.0 {
+        None
+    } else {
+        let mm = (info.p[3] / info.p[0]).abs() * 1e3;
+        check_baseline_mm(mm).map_err(|why| {
+            format!(
+                "P[3] = {} with P[0] = {} gives a baseline of {why}",
+                info.p[3], info.p[0]
+            )
+        })?;
+        Some(mm)
+    };
+    let (mm, from) = match (options.baseline, from_projection) {
+        (Some(given), projected) => {
+            if let Some(projected) = projected.filter(|p| (p - given.mm).abs() > 0.01 * given.mm) {
+                notes.push(format!(
+                    "the camera's baseline is taken as {:.1} mm (the {}), where its CameraInfo's projection matrix says {projected:.1} mm",
+                    given.mm,
+                    if given.from == "flag" {
+                        "flag --baseline-mm"
+                    } else {
+                        "configuration's [bag] baseline_mm"
+                    },
+                ));
+            }
+            (given.mm, given.from)
+        }
+        (None, Some(projected)) => (projected, "camera_info"),
+        (None, None) => {
+            notes.push(
+                "the depth camera's baseline is not known (not in its CameraInfo, nor given as [bag] baseline_mm or --baseline-mm): its depth pattern is reported and gated as a Kinect v1's".into(),
+            );
+            return Ok(None);
+        }
+    };
+    Ok(Some(CameraDisparity {
+        baseline_mm: mm,
+        pixels_per_inverse_depth: intrinsics.fx * mm * 1e-3,
+        from,
+    }))
 }
