@@ -90,16 +90,30 @@ pub struct PatternDisparityJson {
     pub shape_rms_px: f64,
     /// Its largest cell (as `largest_mm_at_2m`), pixels.
     pub largest_px: f64,
+    /// Its plane part (as `plane_part_raw`: at the principal point, per 100
+    /// pixels along u and along v) and σ, pixels of disparity (more is
+    /// nearer, the disparity's own sign).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_part_px: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane_part_sigma_px: Option<[f64; 3]>,
 }
 
 impl PatternDisparityJson {
     /// `pattern`'s figures on a camera of `pixels_per_inverse_depth` (px·m).
     pub fn of(pattern: &DepthPatternJson, pixels_per_inverse_depth: f64) -> Option<Self> {
-        (pattern.raw_per_inverse_depth != 0.0).then(|| PatternDisparityJson {
-            shape_rms_px: pattern.shape_rms_raw / pattern.raw_per_inverse_depth.abs()
-                * pixels_per_inverse_depth,
-            // |δ(1/z)| = δz/z² at 2 m.
-            largest_px: pattern.largest_mm_at_2m * 1e-3 / 4.0 * pixels_per_inverse_depth,
+        (pattern.raw_per_inverse_depth != 0.0).then(|| {
+            // In the disparity's own sign: more pixels are nearer, where
+            // more of a Kinect's raw units are farther (k < 0).
+            let px_per_raw = pixels_per_inverse_depth / pattern.raw_per_inverse_depth;
+            let in_px = |raw: [f64; 3]| raw.map(|r| r * px_per_raw);
+            PatternDisparityJson {
+                shape_rms_px: pattern.shape_rms_raw * px_per_raw.abs(),
+                // |δ(1/z)| = δz/z² at 2 m.
+                largest_px: pattern.largest_mm_at_2m * 1e-3 / 4.0 * pixels_per_inverse_depth,
+                plane_part_px: pattern.plane_part_raw.map(in_px),
+                plane_part_sigma_px: pattern.plane_part_sigma_raw.map(|s| in_px(s).map(f64::abs)),
+            }
         })
     }
 }

@@ -56,7 +56,7 @@ pub(super) fn parameters_section(result: &ResultJson) -> Markup {
                     }
                 }
             } }
-            p.note { "X-Y-Z fixed angles (γ about X, then β about Z, then α about Y) and the sensor's position in the body frame; σ is one standard deviation. The depth scale s: the Kinect's depth reads s × the truth; estimated with the mount when the body's heights observe it (σ “—”: not estimated, see the notes)." }
+            p.note { "X-Y-Z fixed angles (γ about X, then β about Z, then α about Y) and the sensor's position in the body frame; σ is one standard deviation. The depth scale s: the sensor's depth reads s × the truth; estimated with the mount when the body's heights observe it (σ “—”: not estimated, see the notes)." }
             @if let Some(tilt) = result.kinect_tilt_deg {
                 p.tilt { "Valid with the Kinect's motor tilted " (num(tilt, 1)) "°." }
             }

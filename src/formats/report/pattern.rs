@@ -128,8 +128,20 @@ pub(super) fn depth_pattern_section(
         pattern.plane_part_sigma_raw,
         pattern.plane_part_taken,
     ) {
-        (Some(part), Some(sigma), true) => Some((part, sigma)),
+        (Some(part), Some(sigma), true) => Some((part, sigma, "raw units", 3)),
         _ => None,
+    };
+    // Another camera's in its own pixels of disparity.
+    let plane_part = match pattern.disparity {
+        Some(own) => plane_part.and_then(|_| {
+            Some((
+                own.plane_part_px?,
+                own.plane_part_sigma_px?,
+                "px of disparity",
+                4,
+            ))
+        }),
+        None => plane_part,
     };
     // A bag's camera of known baseline is named as what it is, and its
     // pattern given in its own pixels of disparity; else it is a Kinect.
@@ -162,10 +174,10 @@ pub(super) fn depth_pattern_section(
                         } @else {
                             dt { "shape, RMS" } dd { (num(pattern.shape_rms_raw, 3)) " raw units" }
                         }
-                        @if let Some((part, sigma)) = plane_part {
-                            dt { "offset" } dd { (signed(part[0], 3)) " ± " (num(sigma[0], 3)) " raw units" }
-                            dt { "gradient along a row" } dd { (signed(part[1], 3)) " ± " (num(sigma[1], 3)) " per 100 px" }
-                            dt { "gradient down a column" } dd { (signed(part[2], 3)) " ± " (num(sigma[2], 3)) " per 100 px" }
+                        @if let Some((part, sigma, unit, digits)) = plane_part {
+                            dt { "offset" } dd { (signed(part[0], digits)) " ± " (num(sigma[0], digits)) " " (unit) }
+                            dt { "gradient along a row" } dd { (signed(part[1], digits)) " ± " (num(sigma[1], digits)) " per 100 px" }
+                            dt { "gradient down a column" } dd { (signed(part[2], digits)) " ± " (num(sigma[2], digits)) " per 100 px" }
                         }
                         dt { "left after it, pose by pose" } dd { (num(pattern.consistency_chi2_per_dof, 2)) " × the noise" }
                     }
