@@ -253,9 +253,57 @@ fn solve_52(c: &mut Criterion) {
     });
 }
 
+/// The depth pattern's test that there is a shape (`cell_noise::flip_test`):
+/// 40 draws of the poses' signs over every pose's cell sums, each made into
+/// a shape. Sized as a 52-pose calibration's: 80 × 60 cells, 3,000 of them
+/// with ground at each pose. It runs four times in a pattern's estimate, and
+/// again when the ground is fitted about the pattern (docs/performance.md).
+fn pattern_flip_test(c: &mut Criterion) {
+    use groundcal_calib::cell_noise::{flip_test, Entry};
+    let (cells, poses) = (80 * 60, 52);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
+    let entries: Vec<Entry> = (0..poses)
+        .flat_map(|pose| (1_200..4_200).map(move |cell| (pose, cell)))
+        .map(|(pose, cell)| Entry {
+            pose,
+            cell,
+            n: 64.0,
+            residual: 0.0,
+            about_plane: rng.gen_range(-1.0..1.0) * 1e-3,
+        })
+        .collect();
+    let mut weights = vec![0.0; cells];
+    let mut sums = vec![0.0; cells];
+    for e in &entries {
+        weights[e.cell as usize] += e.n;
+        sums[e.cell as usize] += e.n * e.about_plane;
+    }
+    let mean = |sums: &[f64]| -> Vec<f64> {
+        sums.iter()
+            .zip(&weights)
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect()
+    };
+    let observed = mean(&sums);
+    c.bench_function(
+        "the pattern's flip test, 52 poses x 3000 cells, 40 draws",
+        |b| {
+            b.iter(|| {
+                flip_test(
+                    black_box(&entries),
+                    poses as usize,
+                    &weights,
+                    &observed,
+                    mean,
+                )
+            })
+        },
+    );
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(50).measurement_time(std::time::Duration::from_secs(5));
-    targets = ground_fit, solve_52
+    targets = ground_fit, solve_52, pattern_flip_test
 }
 criterion_main!(benches);

@@ -144,27 +144,37 @@ pub fn flip_test(
     poses: usize,
     weights: &[f64],
     observed: &[f64],
-    shape_of: impl Fn(&[f64]) -> Vec<f64>,
+    shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
 ) -> FlipTest {
+    use rayon::prelude::*;
     let size = |shape: &[f64]| -> f64 { shape.iter().zip(weights).map(|(s, w)| w * s * s).sum() };
+    // Every flip's signs drawn first, in the one order the seed gives, and
+    // the flips then made on every core: the same sizes, bit for bit, as
+    // one after the other (each sums its entries in their order).
     let mut state = 0x666c_6970_u64;
-    let mut sizes = Vec::with_capacity(FLIPS);
-    for _ in 0..FLIPS {
-        let signs: Vec<f64> = (0..poses)
-            .map(|_| {
-                if splitmix64(&mut state) >> 63 == 1 {
-                    1.0
-                } else {
-                    -1.0
-                }
-            })
-            .collect();
-        let mut sums = vec![0.0; weights.len()];
-        for e in entries {
-            sums[e.cell as usize] += signs[e.pose as usize] * e.n * e.about_plane;
-        }
-        sizes.push(size(&shape_of(&sums)));
-    }
+    let signs: Vec<Vec<f64>> = (0..FLIPS)
+        .map(|_| {
+            (0..poses)
+                .map(|_| {
+                    if splitmix64(&mut state) >> 63 == 1 {
+                        1.0
+                    } else {
+                        -1.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let sizes: Vec<f64> = signs
+        .par_iter()
+        .map(|signs| {
+            let mut sums = vec![0.0; weights.len()];
+            for e in entries {
+                sums[e.cell as usize] += signs[e.pose as usize] * e.n * e.about_plane;
+            }
+            size(&shape_of(&sums))
+        })
+        .collect();
     let n = sizes.len() as f64;
     let mean = sizes.iter().sum::<f64>() / n;
     let sigma = (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();

@@ -248,7 +248,7 @@ pub(super) fn shape_beside_relief(
     bin_of: &[Option<u32>],
     poses: usize,
     weights: &[f64],
-    shape_of: impl Fn(&[f64]) -> Vec<f64>,
+    shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
 ) -> ReliefTest {
     let bins = bin_of.iter().flatten().max().map_or(0, |b| *b as usize + 1);
     let mut seen_by = vec![(0u32, u32::MAX); bins];
