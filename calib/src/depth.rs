@@ -14,6 +14,24 @@ pub const RAW_NO_READING: u16 = 2047;
 /// another camera's can be compared with ([`kinect_pixels_per_inverse_depth`]).
 pub const KINECT_RAW_PER_PIXEL: f64 = 8.0;
 
+/// The baselines groundcal takes for a depth camera's, millimetres: a
+/// structured-light or stereo camera's are 15–120 mm (RealSense 50–95,
+/// Orbbec 40–75, the Kinect 75); a millimetre to a metre covers any.
+pub const BASELINE_MM: std::ops::RangeInclusive<f64> = 1.0..=1000.0;
+
+/// Why `mm` cannot be a depth camera's baseline, if it cannot.
+pub fn check_baseline_mm(mm: f64) -> Result<(), String> {
+    if mm.is_finite() && BASELINE_MM.contains(&mm) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{mm} is not a depth camera's stereo baseline ({} to {} mm)",
+            BASELINE_MM.start(),
+            BASELINE_MM.end()
+        ))
+    }
+}
+
 /// The default Kinect's pixels of disparity per 1/m of inverse depth (its
 /// focal length times its baseline, px·m): 42.8 for the default model,
 /// where the sensor's own figures give about 580 px × 75 mm (43.5).

@@ -400,7 +400,7 @@ impl PoseObserver {
     ) -> Option<GroundResiduals> {
         match fit.method {
             GroundFitMethod::Disparity => {
-                GroundResiduals::of(frames, &self.camera, fit, buffers.residual_image())
+                GroundResiduals::of_fitted(frames, &self.camera, fit, buffers)
             }
             GroundFitMethod::Paper => {
                 let settings = PlaneFitSettings {
@@ -408,7 +408,7 @@ impl PoseObserver {
                     ..self.settings.plane
                 };
                 let beside = fit_ground(frames, &self.camera, prior, &settings, buffers).ok()?;
-                GroundResiduals::of(frames, &self.camera, &beside, buffers.residual_image())
+                GroundResiduals::of_fitted(frames, &self.camera, &beside, buffers)
                     .map(|r| r.beside_another_fit(beside.plane, beside.covariance))
             }
         }

@@ -371,6 +371,27 @@ impl GroundResiduals {
         fit: &GroundFit,
         image: &mut InverseDepthImage,
     ) -> Option<Self> {
+        Self::of_read(Read::Converting(frames, image), camera, fit)
+    }
+
+    /// [`GroundResiduals::of`] the frames that `fit` was just fitted to
+    /// with `buffers`: the frames it converted to inverse depth are read as
+    /// they are, not converted again (the same numbers, bit for bit).
+    pub fn of_fitted(
+        frames: &[&[u16]],
+        camera: &DepthCamera,
+        fit: &GroundFit,
+        buffers: &mut crate::plane::FitBuffers,
+    ) -> Option<Self> {
+        if buffers.converted_images(frames, camera).is_some() {
+            let images = buffers.converted_images(frames, camera)?;
+            Self::of_read(Read::Converted(frames, images), camera, fit)
+        } else {
+            Self::of(frames, camera, fit, buffers.residual_image())
+        }
+    }
+
+    fn of_read(read: Read<'_>, camera: &DepthCamera, fit: &GroundFit) -> Option<Self> {
         let InlierBand::InverseDepth { band, edge_guard } = fit.band else {
             return None;
         };
@@ -383,11 +404,11 @@ impl GroundResiduals {
         // The fit's domain: raw values, or inverse depth (metric frames, a
         // corrected camera), in which the converted frames below are read.
         let domain = camera.value_domain();
-        let whole: Vec<&[u16]> = frames
-            .iter()
-            .copied()
-            .filter(|pixels| pixels.len() == width * height)
-            .collect();
+        let frames = match &read {
+            Read::Converting(frames, _) | Read::Converted(frames, _) => *frames,
+        };
+        let is_whole = |pixels: &&[u16]| pixels.len() == width * height;
+        let whole: Vec<&[u16]> = frames.iter().copied().filter(is_whole).collect();
         if camera.fits_raw_values() {
             // Raw frames as the fit read them, in raw values: no pixel
             // converted (the residuals scaled to 1/m by the cell).
@@ -414,9 +435,18 @@ impl GroundResiduals {
                 guard_rows: edge_guard.map_or(0, |g| g.rows),
                 guard: guard_test(&domain, edge_guard, 1.0),
             };
-            for pixels in whole {
-                camera.inverse_depth_into(pixels, image);
-                sums.add_frames(&[&image.w[..]], &pass);
+            match read {
+                Read::Converting(_, image) => {
+                    for pixels in whole {
+                        camera.inverse_depth_into(pixels, image);
+                        sums.add_frames(&[&image.w[..]], &pass);
+                    }
+                }
+                Read::Converted(frames, images) => {
+                    for (_, image) in frames.iter().zip(images).filter(|(f, _)| is_whole(f)) {
+                        sums.add_frames(&[&image.w[..]], &pass);
+                    }
+                }
             }
         }
         let Sums {
@@ -441,6 +471,14 @@ impl GroundResiduals {
             beside_another_fit: None,
         })
     }
+}
+
+/// How the residuals read a pose's frames: converting them into an image
+/// (or as they are, for a camera that fits raw values), or as the fit
+/// converted them.
+enum Read<'a> {
+    Converting(&'a [&'a [u16]], &'a mut InverseDepthImage),
+    Converted(&'a [&'a [u16]], &'a [InverseDepthImage]),
 }
 
 /// The edge guard's `(limit, lo, hi)` in the domain's units, from its limit

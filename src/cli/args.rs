@@ -86,7 +86,7 @@ impl BagArgs {
         };
         let baseline = match (self.baseline_mm, configured.baseline_mm) {
             (Some(mm), _) => {
-                crate::solving::bag::check_baseline_mm(mm)
+                crate::calib::depth::check_baseline_mm(mm)
                     .map_err(|why| format!("--baseline-mm: {why}"))?;
                 Some(crate::solving::bag::GivenBaseline { mm, from: "flag" })
             }

@@ -257,7 +257,13 @@ pub fn observe_recording(
                 )
             })?
             .install(work),
-        None => work(),
+        None => {
+            let gathered = work();
+            // The workers' buffers (3.7 MB a thread) are not kept past the
+            // fits: the pattern's estimate that follows has the peak.
+            rayon::broadcast(|_| BUFFERS.take());
+            gathered
+        }
     };
     // The first error in pose order, whichever thread met it first.
     let outcomes: Vec<PoseOutcome> = gathered.into_iter().collect::<Result<_, _>>()?;
@@ -329,8 +335,10 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         &settings,
         session.kinect.tilt_deg,
     );
-    // A pattern the fit's band cut: the frames fitted again about it.
+    drop(observations);
     let mut observed = observed;
+    VisitedPose::forget_ground_residuals(&mut observed.poses);
+    // A pattern the fit's band cut: the frames fitted again about it.
     if let Some(again) = result.fit_about_the_pattern(|taken_out| {
         let again = observe_recording(
             recording,
@@ -349,6 +357,8 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
             session.kinect.tilt_deg,
             Some(taken_out),
         );
+        let mut again = again;
+        VisitedPose::forget_ground_residuals(&mut again.poses);
         Ok((result, again))
     })? {
         (result, observed) = (

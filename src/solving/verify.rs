@@ -80,6 +80,18 @@ impl VisitedPose {
         }
         (observations, failed)
     }
+
+    /// Lets go of the poses' ground residuals once the depth pattern has
+    /// been estimated from them: a second fit about the pattern makes its
+    /// own, and holding both doubled them at the peak (9.9 MB for a 52-pose
+    /// calibration's, of 58.7 MB in all).
+    pub fn forget_ground_residuals(poses: &mut [VisitedPose]) {
+        for pose in poses {
+            if let Ok(observation) = &mut pose.fit {
+                observation.ground_residuals = None;
+            }
+        }
+    }
 }
 
 /// The calibration to check: its mount and σ, and the tilt it holds for.

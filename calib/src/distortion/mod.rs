@@ -554,6 +554,31 @@ mod bend_on_frames {
         let i = Intrinsics::default();
         let model = DepthModel::inverse_linear_default();
         let camera = DepthCamera::new(DepthEncoding::Raw11(model), i, DepthRange::default());
+        let frames = frames_of(truth, seed, pattern, lost);
+        let frames: Vec<&[u16]> = frames.iter().map(|f| &f[..]).collect();
+        let fit = fit_ground(
+            &frames,
+            &camera,
+            prior,
+            &PlaneFitSettings::default(),
+            &mut FitBuffers::default(),
+        )
+        .unwrap();
+        let residuals =
+            GroundResiduals::of(&frames, &camera, &fit, &mut InverseDepthImage::default()).unwrap();
+        (fit, residuals)
+    }
+
+    /// Two raw frames of flat ground `truth` carrying `pattern`, as
+    /// [`fitted`] fits them.
+    fn frames_of(
+        truth: &Plane,
+        seed: u64,
+        pattern: impl Fn(f64, f64) -> f64,
+        lost: Lost,
+    ) -> Vec<Vec<u16>> {
+        let i = Intrinsics::default();
+        let model = DepthModel::inverse_linear_default();
         let (a, b) = model.inverse_depth_affine();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let frames: Vec<Vec<u16>> = (0..2)
@@ -581,18 +606,50 @@ mod bend_on_frames {
                 raw
             })
             .collect();
+        frames
+    }
+
+    /// A corrected camera's residuals read the frames its fit converted to
+    /// inverse depth as they are, not converted again: the same sums, bit
+    /// for bit. Other frames, or another camera, are not the fit's.
+    #[test]
+    fn the_residuals_read_the_frames_the_fit_converted() {
+        let truth = Plane::from_coefficients(-0.26, 0.97, 0.03, 1.2).unwrap();
+        let prior = GroundPrior {
+            up: truth.normal,
+            up_tolerance: 15f64.to_radians(),
+            height: Some((1.2, 0.3)),
+        };
+        let waves = |u: f64, v: f64| 0.5 * (u / 40.0).sin() * (v / 60.0).cos();
+        let frames = frames_of(&truth, 5, waves, Lost::ByTheReading);
         let frames: Vec<&[u16]> = frames.iter().map(|f| &f[..]).collect();
-        let fit = fit_ground(
-            &frames,
-            &camera,
-            prior,
-            &PlaneFitSettings::default(),
-            &mut FitBuffers::default(),
+        let camera = DepthCamera::new(
+            DepthEncoding::Raw11(DepthModel::inverse_linear_default()),
+            Intrinsics::default(),
+            DepthRange::default(),
         )
-        .unwrap();
-        let residuals =
+        .with_depth_correction(&crate::depth::DepthCorrection {
+            columns: 80,
+            rows: 60,
+            cell_px: 8,
+            raw: (0..80 * 60)
+                .map(|k| 0.3 * ((k % 80) as f64 / 13.0).sin())
+                .collect(),
+        });
+        assert!(!camera.fits_raw_values(), "a corrected camera converts");
+        let mut buffers = FitBuffers::default();
+        let settings = PlaneFitSettings::default();
+        let fit = fit_ground(&frames, &camera, &prior, &settings, &mut buffers).unwrap();
+        assert!(buffers.converted_images(&frames, &camera).is_some());
+        let read = GroundResiduals::of_fitted(&frames, &camera, &fit, &mut buffers).unwrap();
+        let converted =
             GroundResiduals::of(&frames, &camera, &fit, &mut InverseDepthImage::default()).unwrap();
-        (fit, residuals)
+        assert_eq!(read, converted);
+        let copies: Vec<Vec<u16>> = frames.iter().map(|f| f.to_vec()).collect();
+        let copies: Vec<&[u16]> = copies.iter().map(|f| &f[..]).collect();
+        assert!(buffers.converted_images(&copies, &camera).is_none());
+        assert!(buffers.converted_images(&frames, &camera.clone()).is_none());
+        assert!(buffers.converted_images(&frames[..1], &camera).is_none());
     }
 
     /// The residuals are summed over the pixels the fit read, chosen by

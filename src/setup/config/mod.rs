@@ -402,7 +402,7 @@ impl Config {
                 }
             }
             if let Some(mm) = bag.baseline_mm {
-                crate::solving::bag::check_baseline_mm(mm)
+                crate::calib::depth::check_baseline_mm(mm)
                     .map_err(|why| bad("bag.baseline_mm", why))?;
             }
             if let Some(feet) = &bag.foot_frames {

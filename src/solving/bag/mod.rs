@@ -18,9 +18,7 @@ use crate::calib::observe::{BodyPoseSource, PoseObserver};
 use crate::calib::plane::FitBuffers;
 use crate::formats::output::{CameraDisparityJson, PatternDisparityJson, ResultJson, SetupJson};
 use crate::solving::replay::{Replay, ReplayOptions};
-pub use session::{
-    check_baseline_mm, read_bag, BagError, BagOptions, BagSession, CameraDisparity, GivenBaseline,
-};
+pub use session::{read_bag, BagError, BagOptions, BagSession, CameraDisparity, GivenBaseline};
 
 /// Whether `path` is an MCAP file (its magic), not a recording's directory.
 pub fn is_mcap_file(path: &std::path::Path) -> bool {
@@ -91,6 +89,8 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     }
     let mut result =
         ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
+    // Their residuals are not held through a second fit, which makes its own.
+    drop(observations);
     // A pattern the fit's band cut: the bag read and fitted again about it.
     if let Some((again, _)) = result.fit_about_the_pattern(|taken_out| {
         let observer = observer.clone().with_depth_correction(taken_out);

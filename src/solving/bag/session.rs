@@ -78,24 +78,6 @@ pub struct CameraDisparity {
     pub from: &'static str,
 }
 
-/// The baselines groundcal takes for a depth camera's, millimetres: a
-/// structured-light or stereo camera's are 15–120 mm (RealSense 50–95,
-/// Orbbec 40–75, the Kinect 75); a millimetre to a metre covers any.
-pub const BASELINE_MM: std::ops::RangeInclusive<f64> = 1.0..=1000.0;
-
-/// Why `mm` cannot be a depth camera's baseline, if it cannot.
-pub fn check_baseline_mm(mm: f64) -> Result<(), String> {
-    if mm.is_finite() && BASELINE_MM.contains(&mm) {
-        Ok(())
-    } else {
-        Err(format!(
-            "{mm} is not a depth camera's stereo baseline ({} to {} mm)",
-            BASELINE_MM.start(),
-            BASELINE_MM.end()
-        ))
-    }
-}
-
 impl Default for BagOptions {
     fn default() -> Self {
         Self {
@@ -803,7 +785,7 @@ fn camera_disparity(
         None
     } else {
         let mm = (info.p[3] / info.p[0]).abs() * 1e3;
-        check_baseline_mm(mm).map_err(|why| {
+        crate::calib::depth::check_baseline_mm(mm).map_err(|why| {
             format!(
                 "P[3] = {} with P[0] = {} gives a baseline of {why}",
                 info.p[3], info.p[0]
