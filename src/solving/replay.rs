@@ -328,7 +328,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     )?;
     let (observations, failed) = VisitedPose::fits(&observed.poses);
     let (settings, gates_from) = options.settings(session.gates, session.noise);
-    let mut result = ResultJson::from_poses(
+    let first = ResultJson::from_poses(
         &observations,
         &failed,
         recording.poses.len(),
@@ -339,7 +339,7 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
     let mut observed = observed;
     VisitedPose::forget_ground_residuals(&mut observed.poses);
     // A pattern the fit's band cut: the frames fitted again about it.
-    if let Some(again) = result.fit_about_the_pattern(|taken_out| {
+    let again = first.fit_about_the_pattern(|taken_out| {
         let again = observe_recording(
             recording,
             nominal,
@@ -360,7 +360,9 @@ pub fn replay(recording: &Recording, options: &ReplayOptions) -> Result<Replay, 
         let mut again = again;
         VisitedPose::forget_ground_residuals(&mut again.poses);
         Ok((result, again))
-    })? {
+    })?;
+    let mut result = first.result;
+    if let Some(again) = again {
         (result, observed) = (
             again.0,
             ObservedRecording {

@@ -233,7 +233,7 @@ impl ResultJson {
         poses_total: usize,
         settings: &crate::calib::calibrate::CalibrationSettings,
         kinect_tilt_deg: f64,
-    ) -> Self {
+    ) -> Solved {
         Self::from_poses_taken_out(
             observations,
             failed,
@@ -253,12 +253,19 @@ impl ResultJson {
         settings: &crate::calib::calibrate::CalibrationSettings,
         kinect_tilt_deg: f64,
         taken_out: Option<&crate::calib::distortion::DepthCorrection>,
-    ) -> Self {
+    ) -> Solved {
         use crate::calib::calibrate::calibrate_taken_out;
         use crate::calib::solve::SolveError;
+        let mut fit_again_about = None;
         let mut result =
             match calibrate_taken_out(observations, poses_total, settings, taken_out) {
-                Ok(calibration) => Self::from_calibration(&calibration),
+                Ok(calibration) => {
+                    fit_again_about = calibration
+                        .depth_pattern
+                        .as_ref()
+                        .and_then(|p| p.fit_again_about.clone());
+                    Self::from_calibration(&calibration)
+                }
                 Err(SolveError::TooFewObservations { usable, outcomes }) => Self::unsolved(
                     SolveError::TooFewObservations {
                         usable,
@@ -273,50 +280,10 @@ impl ResultJson {
         for (index, reason) in failed {
             result.notes.push(format!("pose {index}: {reason}"));
         }
-        result
-    }
-
-    /// The shape of a depth pattern whose peaks the ground fit's band cut,
-    /// to take out of the frames before fitting them again; `None` for any
-    /// other result.
-    pub fn pattern_to_fit_about(&self) -> Option<&crate::calib::distortion::DepthCorrection> {
-        self.depth_pattern.as_ref()?.fit_again_about.as_ref()
-    }
-
-    /// When the ground fit's band cut a depth pattern's peaks in this
-    /// result, fits the frames again with its estimate taken out
-    /// (`fit_again`, for a correction taken out of every frame) until what
-    /// is left is a pattern fixed in the image: the result that got there
-    /// (with what `fit_again` kept beside it), or `None` to keep this one
-    /// (what is left is not such a pattern, or the fits ran out).
-    pub fn fit_about_the_pattern<T, E>(
-        &self,
-        mut fit_again: impl FnMut(
-            &crate::calib::distortion::DepthCorrection,
-        ) -> Result<(ResultJson, T), E>,
-    ) -> Result<Option<(ResultJson, T)>, E> {
-        let Some(mut taken_out) = self.pattern_to_fit_about().cloned() else {
-            return Ok(None);
-        };
-        for _ in 1..MOST_GROUND_FITS {
-            let (mut result, kept) = fit_again(&taken_out)?;
-            if let (Some(pattern), Some(first)) = (&mut result.depth_pattern, &self.depth_pattern) {
-                if pattern.corrected {
-                    // The evidence that there is a shape is the first fit's:
-                    // the later ones see what is left of it.
-                    pattern.shape_sigmas = first.shape_sigmas;
-                    pattern.shape_chi2_per_dof = first.shape_chi2_per_dof;
-                    return Ok(Some((result, kept)));
-                }
-            }
-            let Some(more) = result.pattern_to_fit_about() else {
-                break;
-            };
-            for (all, left) in taken_out.raw.iter_mut().zip(&more.raw) {
-                *all += left;
-            }
+        Solved {
+            result,
+            fit_again_about,
         }
-        Ok(None)
     }
 
     /// Adds poses that gave no plane, keeping the list in index order.
@@ -467,6 +434,61 @@ impl ResultJson {
                 .map_err(|e| format!("\"depth_pattern\" {e}"))?;
         }
         Ok(result)
+    }
+}
+
+/// A result, and what a second fit of the ground would start from: the
+/// depth pattern's shape, when the ground fit's band cut its peaks (kept
+/// beside the result document, never in it).
+#[derive(Debug, Clone)]
+pub struct Solved {
+    pub result: ResultJson,
+    /// The shape to take out of the frames before fitting their ground
+    /// again (docs/method.md, "A pattern beyond the fit's band").
+    pub fit_again_about: Option<crate::calib::distortion::DepthCorrection>,
+}
+
+impl Solved {
+    /// When the ground fit's band cut a depth pattern's peaks in this
+    /// result, fits the frames again with its estimate taken out
+    /// (`fit_again`, for a correction taken out of every frame) until what
+    /// is left is a pattern fixed in the image: the result that got there
+    /// (with what `fit_again` kept beside it), or `None` to keep this one
+    /// (what is left is not such a pattern, or the fits ran out).
+    pub fn fit_about_the_pattern<T, E>(
+        &self,
+        mut fit_again: impl FnMut(&crate::calib::distortion::DepthCorrection) -> Result<(Solved, T), E>,
+    ) -> Result<Option<(ResultJson, T)>, E> {
+        let Some(mut taken_out) = self.fit_again_about.clone() else {
+            return Ok(None);
+        };
+        for fit in 2..=MOST_GROUND_FITS {
+            let (again, kept) = fit_again(&taken_out)?;
+            let mut result = again.result;
+            tracing::info!(
+                fit,
+                pattern = result.depth_pattern.as_ref().map(|p| p.note.as_str()),
+                "the ground fitted again about the depth pattern"
+            );
+            if let (Some(pattern), Some(first)) =
+                (&mut result.depth_pattern, &self.result.depth_pattern)
+            {
+                if pattern.corrected {
+                    // The evidence that there is a shape is the first fit's:
+                    // the later ones see what is left of it.
+                    pattern.shape_sigmas = first.shape_sigmas;
+                    pattern.shape_chi2_per_dof = first.shape_chi2_per_dof;
+                    return Ok(Some((result, kept)));
+                }
+            }
+            let Some(more) = again.fit_again_about else {
+                break;
+            };
+            for (all, left) in taken_out.raw.iter_mut().zip(&more.raw) {
+                *all += left;
+            }
+        }
+        Ok(None)
     }
 }
 

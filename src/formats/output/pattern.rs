@@ -77,10 +77,6 @@ pub struct DepthPatternJson {
     /// camera of known baseline (`setup.disparity`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub disparity: Option<PatternDisparityJson>,
-    /// The shape to take out of the frames before fitting their ground
-    /// again (the fit's band cut its peaks); not part of the document.
-    #[serde(skip)]
-    pub fit_again_about: Option<crate::calib::distortion::DepthCorrection>,
 }
 
 /// A pattern in a camera's own pixels of disparity.
@@ -173,7 +169,6 @@ impl DepthPatternJson {
                 .map(|cells| cells.iter().map(thousandths).collect()),
             raw_per_inverse_depth: p.raw_per_inverse_depth,
             disparity: None,
-            fit_again_about: p.fit_again_about.clone(),
         }
     }
 

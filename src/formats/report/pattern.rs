@@ -271,7 +271,6 @@ mod tests {
             uncorrected_raw: None,
             raw_per_inverse_depth: 325.0,
             disparity: None,
-            fit_again_about: None,
         }
     }
 

@@ -170,7 +170,7 @@ pub(super) fn solve_visited(
     events: &UnboundedSender<Event>,
 ) -> SessionOutcome {
     let (observations, failed) = VisitedPose::fits(&visited.poses);
-    let mut result = ResultJson::from_poses(
+    let first = ResultJson::from_poses(
         &observations,
         &failed,
         visited.of,
@@ -179,7 +179,7 @@ pub(super) fn solve_visited(
     );
     // A pattern the fit's band cut: the kept frames fitted again about it,
     // as `replay` fits a recording's.
-    let again = result.fit_about_the_pattern(|taken_out| {
+    let again = first.fit_about_the_pattern(|taken_out| {
         let observer = (*visited.processor)
             .clone()
             .with_depth_correction(taken_out);
@@ -214,9 +214,10 @@ pub(super) fn solve_visited(
         );
         Ok::<_, std::convert::Infallible>((result, poses))
     });
+    let mut result = first.result;
     if let Ok(Some((second, poses))) = again {
         (result, visited.poses) = (second, poses);
-    } else if visited.kept.is_empty() && result.pattern_to_fit_about().is_some() {
+    } else if visited.kept.is_empty() && first.fit_again_about.is_some() {
         result.notes.push(format!(
             "the depth pattern reaches beyond the ground fit's band, but this session kept no frames to fit again about it (more than {MOST_KEPT_FRAMES} frames): `groundcal replay` of its recording fits them again"
         ));

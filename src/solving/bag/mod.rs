@@ -87,12 +87,11 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             .gates
             .at_camera_disparity(camera.pixels_per_inverse_depth);
     }
-    let mut result =
-        ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
+    let first = ResultJson::from_poses(&observations, &failed, bag.poses.len(), &settings, 0.0);
     // Their residuals are not held through a second fit, which makes its own.
     drop(observations);
     // A pattern the fit's band cut: the bag read and fitted again about it.
-    if let Some((again, _)) = result.fit_about_the_pattern(|taken_out| {
+    let again = first.fit_about_the_pattern(|taken_out| {
         let observer = observer.clone().with_depth_correction(taken_out);
         let (fits, _) = fit_poses(bag, &observer, &bodies, &pool, threads)?;
         let (observations, failed) = split(bag, fits);
@@ -105,9 +104,11 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             Some(taken_out),
         );
         Ok::<_, BagError>((result, ()))
-    })? {
-        result = again;
-    }
+    })?;
+    let mut result = match again {
+        Some((again, ())) => again,
+        None => first.result,
+    };
     // A camera that measures distance, not disparity: refused by name.
     if let Some(p) = exponent.filter(|p| *p > noise_with_depth::MAX_DISPARITY_EXPONENT) {
         result.status = crate::formats::output::ResultStatus::Rejected;
