@@ -121,8 +121,12 @@ static NOTE_WHETHER_STDOUT_IS_CLOSED: extern "C" fn() = {
 };
 
 fn main() -> ExitCode {
+    // Colours only on a terminal: the journal, a file or a pipe would keep
+    // the escape codes as bytes.
+    let on_a_terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
+        .with_ansi(on_a_terminal)
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("GROUNDCAL_LOG")
                 .unwrap_or_else(|_| "warn".into()),
