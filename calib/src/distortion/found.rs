@@ -59,6 +59,12 @@ pub(super) fn fit_again_about(
     if after_a_first_estimate || !shape.peaks_cut_by_the_fit() || !(shape_taken || cut) {
         return None;
     }
+    shape_cells(shape)
+}
+
+/// The shape as a correction of every cell, raw units, the cells no pose
+/// saw given their neighbours' values.
+pub(super) fn shape_cells(shape: &ShapeEstimate) -> Option<DepthCorrection> {
     let k_raw = shape.raw_per_inverse_depth;
     let mut cells: Vec<Option<f64>> = (0..shape.shape.len())
         .map(|k| shape.seen[k].then(|| shape.shape[k] * k_raw))

@@ -223,6 +223,13 @@ pub fn solve_with_pattern_taken_out(
         None => shape.consistent(),
     };
     let shape_taken = shape.significant() && consistent;
+    // What a first estimate left, when it stands out of the noise but is
+    // not yet a pattern fixed in the image: the first estimate was biased
+    // by the fit's cut, and the fit about it cuts less; what is left is
+    // added to it for another fit (`MOST_GROUND_FITS` in all).
+    let left_to_fit_about = (taken_out.is_some() && !consistent && shape.significant())
+        .then(|| found::shape_cells(&shape))
+        .flatten();
     let taken_out = taken_out.filter(|_| consistent);
     let mut corrected = observations.to_vec();
     if shape_taken {
@@ -270,9 +277,13 @@ pub fn solve_with_pattern_taken_out(
         ),
     };
     let mut solution = solution;
+    let mut pattern = pattern_of(&shape, shape_taken, plane_part.as_ref(), taken_out);
+    if left_to_fit_about.is_some() {
+        pattern.fit_again_about = left_to_fit_about;
+    }
     solution.depth_pattern = Some(DepthPattern {
         angle_sigma_known_plane_part: angle_sigma_known_part,
-        ..pattern_of(&shape, shape_taken, plane_part.as_ref(), taken_out)
+        ..pattern
     });
     Ok(solution)
 }
