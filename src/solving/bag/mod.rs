@@ -127,6 +127,9 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     let mut notes = bag.notes.clone();
     notes.extend(observer.prior_note());
     notes.extend(observer.feet_note());
+    if let Some(camera) = bag.disparity {
+        notes.extend(raw_units_note(&result, camera));
+    }
     result.notes.splice(0..0, notes);
     let frames_per_pose = bag.poses.iter().map(|p| p.stamps.len() as u32).max();
     result.setup = Some(SetupJson {
@@ -158,6 +161,28 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
             .map(|b| b.as_ref().ok().map(|b| b.ground_from_robot))
             .collect(),
         ground_points: vec![None; bag.poses.len()],
+    })
+}
+
+/// What "raw units" in the result's words are, for a camera other than a
+/// Kinect: a Kinect's raw units of the same inverse depth, given in this
+/// camera's pixels of disparity and in millimetres at 2 m; `None` when the
+/// words name none.
+fn raw_units_note(result: &ResultJson, camera: session::CameraDisparity) -> Option<String> {
+    let named = result
+        .reasons
+        .iter()
+        .chain(result.depth_pattern.as_ref().map(|p| &p.note))
+        .any(|words| words.contains("raw unit"));
+    let (_, inverse_depth_per_raw) =
+        crate::calib::depth::DepthModel::default().inverse_depth_affine();
+    let per_raw = inverse_depth_per_raw.abs();
+    named.then(|| {
+        format!(
+            "the raw units in these words are a Kinect v1's of the same inverse depth: one is {:.4} px of this camera's disparity, {:.1} mm at 2 m",
+            per_raw * camera.pixels_per_inverse_depth,
+            per_raw * 4.0 * 1e3
+        )
     })
 }
 
@@ -233,4 +258,33 @@ fn split(
         }
     }
     (observations, failed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Another camera's words in raw units say what a raw unit is on it: a
+    /// Kinect's of the same inverse depth (1/342.2 per metre for the default
+    /// model), 0.0621 px on 425 px × 50 mm, 11.7 mm at 2 m; words without
+    /// raw units get no such note.
+    #[test]
+    fn raw_units_are_given_in_the_cameras_own_pixels() {
+        let camera = session::CameraDisparity {
+            baseline_mm: 50.0,
+            pixels_per_inverse_depth: 425.0 * 0.050,
+            from: "config",
+        };
+        let without = ResultJson::unsolved("too few poses".into(), &[]);
+        assert_eq!(raw_units_note(&without, camera), None);
+        let with = ResultJson::unsolved(
+            "it reaches 7.7 raw units from the ground's plane".into(),
+            &[],
+        );
+        let note = raw_units_note(&with, camera).expect("a note");
+        assert!(
+            note.ends_with("one is 0.0621 px of this camera's disparity, 11.7 mm at 2 m"),
+            "{note}"
+        );
+    }
 }
