@@ -42,6 +42,47 @@ fn calibrate_and_replay(config: &Path, dir: &Path) -> [(i32, Value); 2] {
     [live, replayed]
 }
 
+/// The outside check's noise: white 0.38 raw units and a field smoothed
+/// over about 8 px of 0.25, drawn every frame.
+const OUTSIDE_CHECK_NOISE: (&str, &str) = (
+    "depth_noise = \"white\"",
+    "depth_noise = { white_raw = 0.38, short_raw = 0, medium_raw = 0.25, long_raw = 0, gain_per_m = 0, held = \"frame\" }",
+);
+
+/// config/sim.toml, unmeasured, with a real unit's pattern (0.8 raw units
+/// RMS) under the outside check's noise, on the robot's schedule, with
+/// `frames_per_pose` frames a pose.
+fn measured_on_designed_52(dir: &Path, frames_per_pose: u32) -> std::path::PathBuf {
+    let frames = format!("frames_per_pose = {frames_per_pose}");
+    let config = common::sim_config_unmeasured(
+        dir,
+        &[
+            (
+                common::SIM_NO_PATTERN_LINE,
+                "depth_distortion = { shape = \"measured\" }",
+            ),
+            OUTSIDE_CHECK_NOISE,
+            ("frames_per_pose = 2", &frames),
+        ],
+    );
+    common::on_schedule(&config, "designed-52");
+    config
+}
+
+/// groundcal with `args`, logging at INFO: exit status, stdout and the log.
+fn logged(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_groundcal"))
+        .args(args)
+        .env("GROUNDCAL_LOG", "info")
+        .output()
+        .expect("groundcal runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// The largest angle (°) and position (mm) errors, and each in σ.
 fn errors(result: &Value) -> ((f64, f64), (f64, f64)) {
     let mount = &result["robot_from_sensor"];
@@ -400,24 +441,11 @@ fn a_pattern_that_changes_with_depth_is_rejected_in_words() {
 #[test]
 fn a_pattern_beyond_the_fits_band_is_fitted_about_and_corrected() {
     let dir = temp_dir("depth-pattern-beyond-the-fit");
-    let noise = (
-        "depth_noise = \"white\"",
-        "depth_noise = { white_raw = 0.38, short_raw = 0, medium_raw = 0.25, long_raw = 0, gain_per_m = 0, held = \"frame\" }",
-    );
+    let noise = OUTSIDE_CHECK_NOISE;
     for place in ["real", "uneven"] {
         std::fs::create_dir_all(dir.join(place)).expect("a directory for each run");
     }
-    let real = common::sim_config_unmeasured(
-        &dir.join("real"),
-        &[
-            (
-                common::SIM_NO_PATTERN_LINE,
-                "depth_distortion = { shape = \"measured\" }",
-            ),
-            noise,
-        ],
-    );
-    common::on_schedule(&real, "designed-52");
+    let real = measured_on_designed_52(&dir.join("real"), 2);
     let uneven = common::sim_config_unmeasured(
         &dir.join("uneven"),
         &[
@@ -510,21 +538,7 @@ fn a_pattern_beyond_the_fits_band_is_fitted_about_and_corrected() {
 #[test]
 fn a_session_past_the_frames_it_keeps_says_so_and_its_replay_fits_about_the_pattern() {
     let dir = temp_dir("depth-pattern-past-the-kept-frames");
-    let config = common::sim_config_unmeasured(
-        &dir,
-        &[
-            (
-                common::SIM_NO_PATTERN_LINE,
-                "depth_distortion = { shape = \"measured\" }",
-            ),
-            (
-                "depth_noise = \"white\"",
-                "depth_noise = { white_raw = 0.38, short_raw = 0, medium_raw = 0.25, long_raw = 0, gain_per_m = 0, held = \"frame\" }",
-            ),
-            ("frames_per_pose = 2", "frames_per_pose = 12"),
-        ],
-    );
-    common::on_schedule(&config, "designed-52");
+    let config = measured_on_designed_52(&dir, 12);
     let record = dir.join("rec");
     let (_, live, stderr) = groundcal(&[
         "calibrate",
@@ -545,12 +559,7 @@ fn a_session_past_the_frames_it_keeps_says_so_and_its_replay_fits_about_the_patt
         "{}",
         live["depth_pattern"]["note"]
     );
-    let replayed = std::process::Command::new(env!("CARGO_BIN_EXE_groundcal"))
-        .args(["replay", record.to_str().unwrap(), "--json"])
-        .env("GROUNDCAL_LOG", "info")
-        .output()
-        .expect("replay runs");
-    let log = String::from_utf8_lossy(&replayed.stderr);
+    let (_, _, log) = logged(&["replay", record.to_str().unwrap(), "--json"]);
     // A log written to a pipe (or the journal) carries no colour codes.
     assert!(!log.contains('\x1b'), "{log}");
     assert!(
@@ -570,31 +579,11 @@ fn a_session_past_the_frames_it_keeps_says_so_and_its_replay_fits_about_the_patt
 #[test]
 fn with_more_frames_a_pose_what_the_first_estimate_left_is_fitted_about_too() {
     let dir = temp_dir("depth-pattern-four-frames");
-    let config = common::sim_config_unmeasured(
-        &dir,
-        &[
-            (
-                common::SIM_NO_PATTERN_LINE,
-                "depth_distortion = { shape = \"measured\" }",
-            ),
-            (
-                "depth_noise = \"white\"",
-                "depth_noise = { white_raw = 0.38, short_raw = 0, medium_raw = 0.25, long_raw = 0, gain_per_m = 0, held = \"frame\" }",
-            ),
-            ("frames_per_pose = 2", "frames_per_pose = 4"),
-        ],
-    );
-    common::on_schedule(&config, "designed-52");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_groundcal"))
-        .args(["calibrate", "--config", config.to_str().unwrap(), "--json"])
-        .env("GROUNDCAL_LOG", "info")
-        .output()
-        .expect("calibrate runs");
-    let log = String::from_utf8_lossy(&out.stderr);
-    let result: Value =
-        serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {log}"));
+    let config = measured_on_designed_52(&dir, 4);
+    let (code, out, log) = logged(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    let result: Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {log}"));
     assert!(log.contains("fit=3"), "a third fit: {log}");
-    assert_eq!(out.status.code(), Some(0), "{}", result["reasons"]);
+    assert_eq!(code, Some(0), "{}", result["reasons"]);
     assert_eq!(result["depth_pattern"]["corrected"], true);
     let ((angle, _), (position, _)) = errors(&result);
     assert!(
