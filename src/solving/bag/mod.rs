@@ -174,9 +174,19 @@ fn raw_units_note(result: &ResultJson, camera: session::CameraDisparity) -> Opti
         .iter()
         .chain(result.depth_pattern.as_ref().map(|p| &p.note))
         .any(|words| words.contains("raw unit"));
-    let (_, inverse_depth_per_raw) =
-        crate::calib::depth::DepthModel::default().inverse_depth_affine();
-    let per_raw = inverse_depth_per_raw.abs();
+    // The raw units the words were written in: the pattern's own, else
+    // those the camera's frames are read in (the default depth model's).
+    let raw_per_inverse_depth = result
+        .depth_pattern
+        .as_ref()
+        .map(|p| p.raw_per_inverse_depth)
+        .filter(|k| *k != 0.0)
+        .unwrap_or_else(|| {
+            1.0 / crate::calib::depth::DepthModel::default()
+                .inverse_depth_affine()
+                .1
+        });
+    let per_raw = 1.0 / raw_per_inverse_depth.abs();
     named.then(|| {
         format!(
             "the raw units in these words are a Kinect v1's of the same inverse depth: one is {:.4} px of this camera's disparity, {:.1} mm at 2 m",
