@@ -261,7 +261,7 @@ pub fn estimate_shape_seen_from(
         if lone.is_empty() {
             break;
         }
-        kept.leave_out(&lone);
+        kept.leave_out(poses, &lone);
         fitted = alternate(poses, &kept, Some(&fitted.shape));
         noise = estimate_noise(poses, &kept, &fitted, within);
     }
@@ -423,8 +423,8 @@ pub(super) struct Kept {
     /// Per cell: whether it enters the estimate (enough readings kept,
     /// from two poses at least).
     pub(super) seen: Vec<bool>,
-    /// Per pose: the inverse of Σφφᵀ and Σr·φ over its readings less
-    /// those of the sums left out.
+    /// Per pose: the inverse of Σφφᵀ and Σr·φ over the readings of the
+    /// sums it takes.
     pub(super) inverse_moments: Vec<Matrix3<f64>>,
     pub(super) rhs: Vec<Vector3<f64>>,
     /// Per pose: the cells whose sums are taken (the loops' work list).
@@ -467,25 +467,6 @@ impl Kept {
         let cells = poses[0].cells.len();
         let mut readings = vec![0.0; cells];
         let mut poses_seen = vec![0usize; cells];
-        // A reading's spread about its cell's centre, per axis (pixels²).
-        let spread = ((CELL_PX * CELL_PX) as f64 - 1.0) / 12.0;
-        // Each pose's moments less those of its sums left out (their
-        // readings' spread about the cell's centre taken as uniform).
-        let (inverse_moments, rhs): (Vec<Matrix3<f64>>, Vec<Vector3<f64>>) = poses
-            .par_iter()
-            .zip(out.par_chunks(cells))
-            .map(|(pose, out)| {
-                let (mut moments, mut sums) = (pose.moments, pose.rhs);
-                for (cell, _) in pose.cells.iter().zip(out).filter(|(c, o)| **o && c.n > 0.0) {
-                    let centre = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
-                    moments -= (centre * centre.transpose()
-                        + Matrix3::from_diagonal(&Vector3::new(0.0, spread, spread)))
-                        * cell.n;
-                    sums -= centre * cell.r;
-                }
-                (moments.try_inverse().unwrap_or_else(Matrix3::zeros), sums)
-            })
-            .unzip();
         for (pose, out) in poses.iter().zip(out.chunks(cells)) {
             for (k, (cell, out)) in pose.cells.iter().zip(out).enumerate() {
                 if cell.n > 0.0 && !out {
@@ -499,36 +480,66 @@ impl Kept {
                 among.is_none_or(|a| a[k]) && readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2
             })
             .collect();
-        let taken = poses
-            .par_iter()
-            .enumerate()
-            .map(|(i, pose)| {
-                (0..cells)
-                    .filter(|&k| pose.cells[k].n > 0.0 && seen[k] && !out[i * cells + k])
-                    .map(|k| k as u32)
-                    .collect()
-            })
-            .collect();
-        Self {
+        let mut kept = Self {
             columns: poses[0].columns,
             out,
             readings,
             seen,
-            inverse_moments,
-            rhs,
-            taken,
+            inverse_moments: Vec::new(),
+            rhs: Vec::new(),
+            taken: Vec::new(),
+        };
+        kept.take_what_is_seen(poses);
+        kept
+    }
+
+    /// Each pose's work list, and its moments over exactly those sums: its
+    /// readings less those of every sum not taken (left out, or of a cell
+    /// not seen), their spread about the cell's centre taken as uniform. A
+    /// sum the pattern's estimate does not hold must not pull the pose's
+    /// plane either: its share of the pattern, unsubtracted, would tilt
+    /// the plane, the same way at every pose that sees it.
+    fn take_what_is_seen(&mut self, poses: &[&GroundResiduals]) {
+        let cells = self.seen.len();
+        let spread = ((CELL_PX * CELL_PX) as f64 - 1.0) / 12.0;
+        let (seen, out) = (&self.seen, &self.out);
+        let per_pose: Vec<(Vec<u32>, Matrix3<f64>, Vector3<f64>)> = poses
+            .par_iter()
+            .zip(out.par_chunks(cells))
+            .map(|(pose, out)| {
+                let (mut moments, mut sums) = (pose.moments, pose.rhs);
+                let mut taken = Vec::new();
+                for (k, cell) in pose.cells.iter().enumerate().filter(|(_, c)| c.n > 0.0) {
+                    if seen[k] && !out[k] {
+                        taken.push(k as u32);
+                        continue;
+                    }
+                    let centre = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
+                    moments -= (centre * centre.transpose()
+                        + Matrix3::from_diagonal(&Vector3::new(0.0, spread, spread)))
+                        * cell.n;
+                    sums -= centre * cell.r;
+                }
+                let inverse = moments.try_inverse().unwrap_or_else(Matrix3::zeros);
+                (taken, inverse, sums)
+            })
+            .collect();
+        self.taken = Vec::with_capacity(per_pose.len());
+        self.inverse_moments = Vec::with_capacity(per_pose.len());
+        self.rhs = Vec::with_capacity(per_pose.len());
+        for (taken, inverse, rhs) in per_pose {
+            self.taken.push(taken);
+            self.inverse_moments.push(inverse);
+            self.rhs.push(rhs);
         }
     }
 
     /// Leaves these cells out of the estimate altogether.
-    fn leave_out(&mut self, cells: &[usize]) {
+    fn leave_out(&mut self, poses: &[&GroundResiduals], cells: &[usize]) {
         for &k in cells {
             self.seen[k] = false;
         }
-        let seen = &self.seen;
-        for taken in &mut self.taken {
-            taken.retain(|&k| seen[k as usize]);
-        }
+        self.take_what_is_seen(poses);
     }
 
     /// Whether pose i's sum of cell k enters the estimate.
