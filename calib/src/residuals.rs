@@ -498,5 +498,5 @@ fn guard_test(domain: &ValueDomain, guard: Option<EdgeGuard>, per_unit: f64) -> 
 /// fit's `band` (both in the domain's units).
 fn fit_region(domain: &ValueDomain, band: f64) -> (f32, f32) {
     let band = band as f32;
-    (domain.trusted.0 + band, domain.trusted.1 - band)
+    (domain.plane_within.0 + band, domain.plane_within.1 - band)
 }

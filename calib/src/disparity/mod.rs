@@ -113,6 +113,7 @@ impl InverseDepthConverter {
                 offset: *a,
                 scale: *b,
                 trusted: (f32::from(*lo), f32::from(*hi)),
+                plane_within: (f32::from(*lo), f32::from(*hi)),
             },
             Conversion::Table(table) => {
                 let finite = table.iter().filter(|w| w.is_finite());
@@ -122,6 +123,7 @@ impl InverseDepthConverter {
                     offset: 0.0,
                     scale: 1.0,
                     trusted: (lo, hi),
+                    plane_within: (lo, hi),
                 }
             }
         };
@@ -141,17 +143,23 @@ impl InverseDepthConverter {
         if offsets.len() != self.width * self.height {
             return self;
         }
-        if let Conversion::Affine { a, b, lo, hi } = self.conversion {
-            let (w_lo, w_hi) = (a + b * f64::from(lo), a + b * f64::from(hi));
-            // Wide enough for the corrected values (a pattern is a few raw
-            // units at most; the range's ends stay where the depths are).
-            let slack = offsets.iter().fold(0f32, |m, o| m.max(o.abs()));
-            self.domain = ValueDomain {
-                offset: 0.0,
-                scale: 1.0,
-                trusted: (w_lo.min(w_hi) as f32 - slack, w_lo.max(w_hi) as f32 + slack),
-            };
-        }
+        // The depth range's ends in inverse depth, as read.
+        let (w_lo, w_hi) = match self.conversion {
+            Conversion::Affine { a, b, lo, hi } => {
+                let (w_lo, w_hi) = (a + b * f64::from(lo), a + b * f64::from(hi));
+                (w_lo.min(w_hi) as f32, w_lo.max(w_hi) as f32)
+            }
+            Conversion::Table(_) => self.domain.trusted,
+        };
+        // Corrected values lie up to the largest offset beyond the range's
+        // ends; a plane must lie as far within them (ValueDomain::plane_within).
+        let slack = offsets.iter().fold(0f32, |m, o| m.max(o.abs()));
+        self.domain = ValueDomain {
+            offset: 0.0,
+            scale: 1.0,
+            trusted: (w_lo - slack, w_hi + slack),
+            plane_within: (w_lo + slack, w_hi - slack),
+        };
         self.correction = Some(offsets);
         self
     }
@@ -618,6 +626,57 @@ mod tests {
         }
     }
 
+    /// With a pattern taken out, the corrected values reach beyond the
+    /// range's ends by its largest offset, and a plane must lie as far
+    /// within them: readings are cut off by the range on their own value,
+    /// pattern included (a plane as near the end as without a correction
+    /// lost the readings the pattern pushed out, a bias at the same place
+    /// on the ground at every pose: the ground's test fired at 12σ on flat
+    /// ground).
+    #[test]
+    fn a_corrected_plane_keeps_the_patterns_reach_from_the_ranges_ends() {
+        for encoding in [
+            DepthEncoding::Raw11(DepthModel::inverse_linear_default()),
+            DepthEncoding::Metric {
+                metres_per_unit: 0.001,
+            },
+        ] {
+            let i = Intrinsics {
+                width: 4,
+                height: 1,
+                ..intrinsics()
+            };
+            let plain = InverseDepthConverter::new(encoding, &i, DepthRange::default());
+            let (lo, hi) = plain.domain().trusted;
+            let (lo, hi) = match encoding {
+                DepthEncoding::Raw11(model) => {
+                    let (a, b) = model.inverse_depth_affine();
+                    let ends = (a + b * f64::from(lo), a + b * f64::from(hi));
+                    (ends.0.min(ends.1) as f32, ends.0.max(ends.1) as f32)
+                }
+                DepthEncoding::Metric { .. } => (lo, hi),
+            };
+            let offsets: std::sync::Arc<[f32]> = vec![0.002, -0.009, 0.0, 0.004].into();
+            let corrected = plain.with_correction(offsets).domain();
+            assert!(
+                (corrected.plane_within.0 - (lo + 0.009)).abs() < 1e-6,
+                "{corrected:?}"
+            );
+            assert!(
+                (corrected.plane_within.1 - (hi - 0.009)).abs() < 1e-6,
+                "{corrected:?}"
+            );
+            assert!(
+                (corrected.trusted.0 - (lo - 0.009)).abs() < 1e-6,
+                "{corrected:?}"
+            );
+            assert!(
+                (corrected.trusted.1 - (hi + 0.009)).abs() < 1e-6,
+                "{corrected:?}"
+            );
+        }
+    }
+
     #[test]
     fn moments_solve_a_plane_exactly() {
         let i = Intrinsics {
@@ -648,6 +707,7 @@ mod tests {
             offset: 0.0,
             scale: 1.0,
             trusted: (0.01, 10.0),
+            plane_within: (0.01, 10.0),
         };
         let start = PixelPlane {
             c0: 0.81,

@@ -89,6 +89,14 @@ pub struct ValueDomain {
     pub scale: f64,
     /// Trusted values, lowest and highest (the trusted depth range).
     pub trusted: (f32, f32),
+    /// Where a plane must lie for the fit to read near it: the trusted
+    /// values, less the largest correction taken out of the frames. A
+    /// reading is cut off by the range on its own value, pattern included,
+    /// so a plane nearer the range's end than the pattern's peaks would
+    /// keep the readings the pattern pulls inward and lose those it
+    /// pushes out: a bias where the range ends, at the same place on the
+    /// ground whatever the pose.
+    pub plane_within: (f32, f32),
 }
 
 impl ValueDomain {
@@ -433,8 +441,8 @@ impl PixelGrid {
         band: f64,
     ) -> (usize, usize) {
         let (lo, hi) = (
-            f64::from(domain.trusted.0) + band,
-            f64::from(domain.trusted.1) - band,
+            f64::from(domain.plane_within.0) + band,
+            f64::from(domain.plane_within.1) - band,
         );
         let base = plane.c0 + plane.cv * dv;
         let width = self.du.len();
