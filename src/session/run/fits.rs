@@ -178,42 +178,53 @@ pub(super) fn solve_visited(
         plan.tilt_deg,
     );
     // A pattern the fit's band cut: the kept frames fitted again about it,
-    // as `replay` fits a recording's.
-    let again = first.fit_about_the_pattern(|taken_out| {
-        let observer = (*visited.processor)
-            .clone()
-            .with_depth_correction(taken_out);
-        let mut poses = visited.poses.clone();
-        let refits: Vec<(usize, Result<Observation, String>)> = visited
-            .kept
-            .par_iter()
-            .map(|(at, body, kept)| {
-                let fit = match kept.frames() {
-                    Some(frames) => {
-                        let frames: Vec<&[u16]> = frames.iter().map(Vec::as_slice).collect();
-                        observer
-                            .observe(poses[*at].index, body, &frames, &mut FitBuffers::default())
-                            .map_err(|e| format!("no ground found: {e}"))
-                    }
-                    None => Err("its frames could not be restored for the second fit".into()),
-                };
-                (*at, fit)
-            })
-            .collect();
-        for (at, fit) in refits {
-            poses[at].fit = fit;
-        }
-        let (observations, failed) = VisitedPose::fits(&poses);
-        let result = ResultJson::from_poses_taken_out(
-            &observations,
-            &failed,
-            visited.of,
-            &plan.calibration,
-            plan.tilt_deg,
-            Some(taken_out),
-        );
-        Ok::<_, std::convert::Infallible>((result, poses))
-    });
+    // as `replay` fits a recording's. Without kept frames there is nothing
+    // to fit again: the first fit's residuals judged as if the pattern had
+    // been taken out of them made a "pattern" of twice its size.
+    let again = if visited.kept.is_empty() {
+        Ok(None)
+    } else {
+        first.fit_about_the_pattern(|taken_out| {
+            let observer = (*visited.processor)
+                .clone()
+                .with_depth_correction(taken_out);
+            let mut poses = visited.poses.clone();
+            let refits: Vec<(usize, Result<Observation, String>)> = visited
+                .kept
+                .par_iter()
+                .map(|(at, body, kept)| {
+                    let fit = match kept.frames() {
+                        Some(frames) => {
+                            let frames: Vec<&[u16]> = frames.iter().map(Vec::as_slice).collect();
+                            observer
+                                .observe(
+                                    poses[*at].index,
+                                    body,
+                                    &frames,
+                                    &mut FitBuffers::default(),
+                                )
+                                .map_err(|e| format!("no ground found: {e}"))
+                        }
+                        None => Err("its frames could not be restored for the second fit".into()),
+                    };
+                    (*at, fit)
+                })
+                .collect();
+            for (at, fit) in refits {
+                poses[at].fit = fit;
+            }
+            let (observations, failed) = VisitedPose::fits(&poses);
+            let result = ResultJson::from_poses_taken_out(
+                &observations,
+                &failed,
+                visited.of,
+                &plan.calibration,
+                plan.tilt_deg,
+                Some(taken_out),
+            );
+            Ok::<_, std::convert::Infallible>((result, poses))
+        })
+    };
     let mut result = first.result;
     if let Ok(Some((second, poses))) = again {
         (result, visited.poses) = (second, poses);
