@@ -352,18 +352,36 @@ mod tests {
         bytes
     }
 
-    fn scratch(name: &str, bytes: &[u8]) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("groundcal-recording-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join(name);
-        std::fs::write(&path, bytes).unwrap();
-        path
+    /// A test's own directory for its files, removed when dropped (the
+    /// files were left in /tmp after every run).
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(test: &str) -> Self {
+            let dir = std::env::temp_dir()
+                .join(format!("groundcal-recording-{test}-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            Self(dir)
+        }
+
+        fn file(&self, name: &str, bytes: &[u8]) -> PathBuf {
+            let path = self.0.join(name);
+            std::fs::write(&path, bytes).unwrap();
+            path
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
     }
 
     #[test]
     fn a_dump_read_straight_into_its_pixels_is_the_parsers_and_the_files_digest() {
         let bytes = dump(40, 30);
-        let path = scratch("plain.pgm", &bytes);
+        let scratch = Scratch::new("plain");
+        let path = scratch.file("plain.pgm", &bytes);
         let (mut pixels, mut digest) = (vec![7u16; 3], blake3::Hasher::new());
         assert!(read_dump_pixels(
             &path,
@@ -389,6 +407,7 @@ mod tests {
 
     #[test]
     fn anything_but_a_plain_dump_of_the_sessions_size_is_left_to_the_parser() {
+        let scratch = Scratch::new("not-plain");
         let good = dump(40, 30);
         let mut trailing = good.clone();
         trailing.push(0);
@@ -403,7 +422,7 @@ mod tests {
             ("empty", b""),
         ];
         for (name, bytes) in cases {
-            let path = scratch(&format!("{name}.pgm"), bytes);
+            let path = scratch.file(&format!("{name}.pgm"), bytes);
             let (mut pixels, mut digest) = (Vec::new(), blake3::Hasher::new());
             assert!(
                 !read_dump_pixels(&path, 40, 30, &mut pixels, Some(&mut digest)),
@@ -415,7 +434,7 @@ mod tests {
                 "{name}"
             );
         }
-        let path = scratch("other-size.pgm", &good);
+        let path = scratch.file("other-size.pgm", &good);
         let (mut pixels, mut digest) = (Vec::new(), blake3::Hasher::new());
         assert!(!read_dump_pixels(
             &path,
