@@ -425,22 +425,32 @@ mod tests {
         }
         let refs: Vec<&GroundResiduals> = poses.iter().collect();
         let estimate = estimate_shape(&refs).expect("an estimate");
-        let mut truth: Vec<f64> = (0..estimate.shape.len())
-            .map(|k| {
-                let (du, dv) = estimate.cell_offset(k);
-                bowl(du, dv)
-            })
-            .collect();
-        remove_plane_part(&mut truth, &estimate.readings, &estimate.seen, refs[0]);
-        let worst = (0..truth.len())
-            .filter(|&k| estimate.seen[k])
-            .map(|k| (truth[k] - estimate.shape[k]).abs())
-            .fold(0.0, f64::max);
         assert!(
             !estimate.seen[14 * columns + 28],
             "a cell one pose saw is not seen"
         );
+        let worst = worst_off(&estimate, &refs, bowl);
         assert!(worst < 2e-5, "the shape {worst} off (1/m)");
+    }
+
+    /// The estimate's largest distance from `pattern` without its plane
+    /// part, over the cells seen (1/m).
+    fn worst_off(
+        estimate: &ShapeEstimate,
+        poses: &[&GroundResiduals],
+        pattern: impl Fn(f64, f64) -> f64,
+    ) -> f64 {
+        let mut truth: Vec<f64> = (0..estimate.shape.len())
+            .map(|k| {
+                let (du, dv) = estimate.cell_offset(k);
+                pattern(du, dv)
+            })
+            .collect();
+        remove_plane_part(&mut truth, &estimate.readings, &estimate.seen, poses[0]);
+        (0..truth.len())
+            .filter(|&k| estimate.seen[k])
+            .map(|k| (truth[k] - estimate.shape[k]).abs())
+            .fold(0.0, f64::max)
     }
 
     #[test]
@@ -450,17 +460,7 @@ mod tests {
         let refs: Vec<&GroundResiduals> = poses.iter().collect();
         let estimate = estimate_shape(&refs).expect("an estimate");
         // The truth without its plane part over the cells seen.
-        let mut truth: Vec<f64> = (0..estimate.shape.len())
-            .map(|k| {
-                let (du, dv) = estimate.cell_offset(k);
-                bowl(du, dv)
-            })
-            .collect();
-        remove_plane_part(&mut truth, &estimate.readings, &estimate.seen, refs[0]);
-        let worst = (0..truth.len())
-            .filter(|&k| estimate.seen[k])
-            .map(|k| (truth[k] - estimate.shape[k]).abs())
-            .fold(0.0, f64::max);
+        let worst = worst_off(&estimate, &refs, bowl);
         // Within the bowl's own variation inside a cell (about 1 %).
         assert!(
             worst < 2e-5,
