@@ -66,10 +66,10 @@ pub(super) fn fit_again_about(
 /// saw given their neighbours' values.
 pub(super) fn shape_cells(shape: &ShapeEstimate) -> Option<DepthCorrection> {
     let k_raw = shape.raw_per_inverse_depth;
-    let mut cells: Vec<Option<f64>> = (0..shape.shape.len())
-        .map(|k| shape.seen[k].then(|| shape.shape[k] * k_raw))
+    let cells: Vec<Option<f64>> = extended(&shape.shape, &shape.seen, shape.columns, shape.rows)
+        .into_iter()
+        .map(|v| Some(v * k_raw))
         .collect();
-    extend_to_unseen_cells(&mut cells, shape.columns, shape.rows);
     DepthCorrection::from_cells(shape.columns, shape.rows, CELL_PX, &cells)
 }
 
