@@ -54,6 +54,24 @@ enum Conversion {
     Table(Vec<f32>),
 }
 
+impl Conversion {
+    /// The trusted readings' lowest and highest inverse depth (1/m).
+    fn ends(&self) -> (f32, f32) {
+        match self {
+            Conversion::Affine { a, b, lo, hi } => {
+                let (w_lo, w_hi) = (a + b * f64::from(*lo), a + b * f64::from(*hi));
+                (w_lo.min(w_hi) as f32, w_lo.max(w_hi) as f32)
+            }
+            Conversion::Table(table) => {
+                let finite = table.iter().filter(|w| w.is_finite());
+                let lo = finite.clone().fold(f32::INFINITY, |m, &w| m.min(w));
+                let hi = finite.fold(f32::NEG_INFINITY, |m, &w| m.max(w));
+                (lo, hi)
+            }
+        }
+    }
+}
+
 /// Converts frames to [`InverseDepthImage`]s: the encoding, the trusted range
 /// and the image's size, fixed once per camera.
 #[derive(Debug, Clone)]
@@ -115,10 +133,8 @@ impl InverseDepthConverter {
                 trusted: (f32::from(*lo), f32::from(*hi)),
                 plane_within: (f32::from(*lo), f32::from(*hi)),
             },
-            Conversion::Table(table) => {
-                let finite = table.iter().filter(|w| w.is_finite());
-                let lo = finite.clone().fold(f32::INFINITY, |m, &w| m.min(w));
-                let hi = finite.fold(f32::NEG_INFINITY, |m, &w| m.max(w));
+            Conversion::Table(_) => {
+                let (lo, hi) = conversion.ends();
                 ValueDomain {
                     offset: 0.0,
                     scale: 1.0,
@@ -143,14 +159,9 @@ impl InverseDepthConverter {
         if offsets.len() != self.width * self.height {
             return self;
         }
-        // The depth range's ends in inverse depth, as read.
-        let (w_lo, w_hi) = match self.conversion {
-            Conversion::Affine { a, b, lo, hi } => {
-                let (w_lo, w_hi) = (a + b * f64::from(lo), a + b * f64::from(hi));
-                (w_lo.min(w_hi) as f32, w_lo.max(w_hi) as f32)
-            }
-            Conversion::Table(_) => self.domain.trusted,
-        };
+        // The depth range's ends in inverse depth, as read (from the
+        // conversion, not the domain: a second correction replaces the first).
+        let (w_lo, w_hi) = self.conversion.ends();
         // Corrected values lie up to the largest offset beyond the range's
         // ends; a plane must lie as far within them (ValueDomain::plane_within).
         let slack = offsets.iter().fold(0f32, |m, o| m.max(o.abs()));
@@ -657,7 +668,12 @@ mod tests {
                 DepthEncoding::Metric { .. } => (lo, hi),
             };
             let offsets: std::sync::Arc<[f32]> = vec![0.002, -0.009, 0.0, 0.004].into();
-            let corrected = plain.with_correction(offsets).domain();
+            // A second correction replaces the first, whatever its reach.
+            let first: std::sync::Arc<[f32]> = vec![0.05; 4].into();
+            let corrected = plain
+                .with_correction(first)
+                .with_correction(offsets)
+                .domain();
             assert!(
                 (corrected.plane_within.0 - (lo + 0.009)).abs() < 1e-6,
                 "{corrected:?}"
