@@ -72,27 +72,30 @@ pub(super) fn depth_dependence(
             weight[e.cell as usize] += w;
         }
     }
-    // residual ≈ −per_m·x with x = shape·(z − z̄).
-    let mut rows = Vec::with_capacity(entries.len());
+    // residual ≈ −per_m·x with x = shape·(z − z̄), weighted by w (made
+    // twice, for the fit and for its σ, rather than kept: 6 MB).
+    let rows = || {
+        entries.iter().filter_map(|e| {
+            let k = e.cell as usize;
+            let (Some(z), true) = (depth(e), weight[k] > 0.0) else {
+                return None;
+            };
+            let x = shape[k] * (z - sum[k] / weight[k]);
+            Some((e.pose, 1.0 / noise.of_mean(e.n), x, e.residual))
+        })
+    };
     let (mut xx, mut xe, mut ww) = (0.0, 0.0, 0.0);
-    for e in entries {
-        let k = e.cell as usize;
-        let (Some(z), true) = (depth(e), weight[k] > 0.0) else {
-            continue;
-        };
-        let x = shape[k] * (z - sum[k] / weight[k]);
-        let w = 1.0 / noise.of_mean(e.n);
+    for (_, w, x, residual) in rows() {
         xx += w * x * x;
-        xe += w * x * e.residual;
+        xe += w * x * residual;
         ww += w;
-        rows.push((e.pose, w, x, e.residual));
     }
     if xx <= 0.0 {
         return none;
     }
     let per_m = -xe / xx;
     let mut by_pose = vec![0.0; poses.len()];
-    for (pose, w, x, residual) in rows {
+    for (pose, w, x, residual) in rows() {
         by_pose[pose as usize] += w * x * (residual + per_m * x);
     }
     let meat: f64 = by_pose.iter().map(|s| s * s).sum();
@@ -181,50 +184,70 @@ pub(super) fn without_depth_dependence(
         .collect()
 }
 
-/// Whether the residuals left by pattern and planes stay with the ground:
-/// each sum's cell seen on the ground from its pose, binned by
-/// [`GROUND_BIN_M`], and the bins' means over the poses compared with those
-/// the poses make with random signs.
-pub(super) fn ground_fixed(
+/// Where each entry's cell meets the ground seen from its pose, in bins of
+/// [`GROUND_BIN_M`] numbered in the order first met (`None` where the
+/// cell's ray misses the ground), and the count of bins: what
+/// [`ground_fixed`] and [`shape_beside_relief`] bin by. It depends on the
+/// entries' poses and cells only, so it is made beside the other tests.
+pub(super) fn ground_bins(
     poses: &[&GroundResiduals],
     entries: &[Entry],
     ground_from_sensor: &[crate::geometry::Transform],
-) -> (FlipTest, Vec<Option<u32>>) {
+) -> (usize, Vec<Option<u32>>) {
     let first = poses[0];
     let k = first.intrinsics;
     let sensor_from_optical = crate::geometry::sensor_from_optical();
-    let mut bins: std::collections::HashMap<(i64, i64), u32> = std::collections::HashMap::new();
-    let mut binned = Vec::with_capacity(entries.len());
-    let mut bin_of = Vec::with_capacity(entries.len());
-    for e in entries {
-        let (du, dv) = cell_centre(e.cell as usize, first.columns, &k);
+    // Each cell's ray in the sensor's frame, once: the same at every pose.
+    let cells = entries
+        .iter()
+        .map(|e| e.cell as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let rays: Vec<Vector3<f64>> = (0..cells)
+        .map(|cell| {
+            let (du, dv) = cell_centre(cell, first.columns, &k);
+            sensor_from_optical * Vector3::new(du / k.fx, dv / k.fy, 1.0)
+        })
+        .collect();
+    let bin_key = |e: &Entry| {
         let pose = &ground_from_sensor[e.pose as usize];
-        let ray = pose.rotation * (sensor_from_optical * Vector3::new(du / k.fx, dv / k.fy, 1.0));
+        let ray = pose.rotation * rays[e.cell as usize];
         let origin = pose.translation.vector;
         if ray.y >= -1e-9 {
-            bin_of.push(None);
-            continue;
+            return None;
         }
         let t = -origin.y / ray.y;
         let (x, z) = (origin.x + t * ray.x, origin.z + t * ray.z);
-        let key = (
-            (x / GROUND_BIN_M).floor() as i64,
-            (z / GROUND_BIN_M).floor() as i64,
-        );
-        let next = bins.len() as u32;
-        let bin = *bins.entry(key).or_insert(next);
-        bin_of.push(Some(bin));
-        binned.push(Entry {
-            cell: bin,
-            about_plane: e.residual,
-            ..*e
-        });
-    }
-    let mut weights = vec![0.0; bins.len()];
-    let mut sums = vec![0.0; bins.len()];
-    for e in &binned {
-        weights[e.cell as usize] += e.n;
-        sums[e.cell as usize] += e.n * e.about_plane;
+        Some((
+            floor_to_i64(x / GROUND_BIN_M),
+            floor_to_i64(z / GROUND_BIN_M),
+        ))
+    };
+    number_in_order_met(entries.iter().map(bin_key))
+}
+
+/// Whether the residuals left by pattern and planes stay with the ground:
+/// the entries' means in the bins of the ground ([`ground_bins`]: `bins`
+/// of them, `bin_of` each entry's) over the poses, compared with those the
+/// poses make with random signs. `entries` are those binned, or the same
+/// less what a pattern changing with depth accounts for.
+pub(super) fn ground_fixed(
+    poses: usize,
+    entries: &[Entry],
+    bins: usize,
+    bin_of: &[Option<u32>],
+) -> FlipTest {
+    let binned = || {
+        entries
+            .iter()
+            .zip(bin_of)
+            .filter_map(|(e, bin)| bin.map(|bin| (bin, e)))
+    };
+    let mut weights = vec![0.0; bins];
+    let mut sums = vec![0.0; bins];
+    for (bin, e) in binned() {
+        weights[bin as usize] += e.n;
+        sums[bin as usize] += e.n * e.residual;
     }
     let mean = |sums: &[f64]| -> Vec<f64> {
         sums.iter()
@@ -232,8 +255,77 @@ pub(super) fn ground_fixed(
             .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
             .collect()
     };
-    let test = flip_test(&binned, poses.len(), &weights, &mean(&sums), mean);
-    (test, bin_of)
+    flip_test_over(
+        || binned().map(|(bin, e)| (bin, e.pose, e.n * e.residual)),
+        poses,
+        &weights,
+        &mean(&sums),
+        mean,
+    )
+}
+
+/// `x.floor() as i64`, without the library's floor (a call on a processor
+/// without SSE4.1, a tenth of the ground test's time).
+fn floor_to_i64(x: f64) -> i64 {
+    let truncated = x as i64;
+    if (truncated as f64) > x {
+        truncated.saturating_sub(1)
+    } else {
+        truncated
+    }
+}
+
+/// Numbers the keys in the order they are first met (the bins' numbers,
+/// and so the order of every sum over them, as a map filled in that order
+/// gives them): the count of bins and each key's number. Over a grid when
+/// the keys span up to a few million bins (a calibration's ground: a few
+/// thousand, in a fifth of a hash map's time), a map otherwise. The keys
+/// are made twice (for their span, then for their numbers) rather than
+/// kept.
+fn number_in_order_met<I>(keys: I) -> (usize, Vec<Option<u32>>)
+where
+    I: Iterator<Item = Option<(i64, i64)>> + Clone,
+{
+    const MOST_GRID_BINS: i64 = 1 << 22;
+    let mut span: Option<(i64, i64, i64, i64)> = None;
+    for (x, z) in keys.clone().flatten() {
+        span = Some(match span {
+            None => (x, x, z, z),
+            Some((x0, x1, z0, z1)) => (x0.min(x), x1.max(x), z0.min(z), z1.max(z)),
+        });
+    }
+    let mut count = 0u32;
+    let mut number = |slot: &mut u32| {
+        if *slot == u32::MAX {
+            *slot = count;
+            count += 1;
+        }
+        *slot
+    };
+    let numbers = match span {
+        None => keys.map(|_| None).collect(),
+        Some((x_low, x_high, z_low, z_high)) => {
+            let width = x_high.saturating_sub(x_low).saturating_add(1);
+            let depth = z_high.saturating_sub(z_low).saturating_add(1);
+            if width
+                .checked_mul(depth)
+                .is_some_and(|n| n <= MOST_GRID_BINS)
+            {
+                let mut grid = vec![u32::MAX; (width * depth) as usize];
+                keys.map(|key| {
+                    key.map(|(x, z)| {
+                        number(&mut grid[((z - z_low) * width + (x - x_low)) as usize])
+                    })
+                })
+                .collect()
+            } else {
+                let mut map = std::collections::HashMap::new();
+                keys.map(|key| key.map(|key| number(map.entry(key).or_insert(u32::MAX))))
+                    .collect()
+            }
+        }
+    };
+    (count as usize, numbers)
 }
 
 /// The shape estimated beside a relief of the ground: a mean per bin of
@@ -261,14 +353,9 @@ pub(super) fn shape_beside_relief(
             }
         }
     }
-    let per_cell = |values: &dyn Fn(&Entry, Option<u32>) -> f64| {
-        let mut sums = vec![0.0; weights.len()];
-        for (e, bin) in entries.iter().zip(bin_of) {
-            sums[e.cell as usize] += e.n * values(e, *bin);
-        }
-        sums
-    };
-    let alone = shape_of(&per_cell(&|e, _| e.about_plane));
+    let alone = shape_of(&per_cell(entries, bin_of, weights.len(), |e, _| {
+        e.about_plane
+    }));
     let mut shape = alone.clone();
     let mut relief = vec![0.0; bins];
     for _ in 0..RELIEF_TURNS {
@@ -285,16 +372,16 @@ pub(super) fn shape_beside_relief(
             .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
             .collect();
         let relief_of = |bin: Option<u32>| bin.map_or(0.0, |b| relief[b as usize]);
-        shape = shape_of(&per_cell(&|e, bin| e.about_plane - relief_of(bin)));
+        shape = shape_of(&per_cell(entries, bin_of, weights.len(), |e, bin| {
+            e.about_plane - relief_of(bin)
+        }));
     }
-    let beside: Vec<Entry> = entries
-        .iter()
-        .zip(bin_of)
-        .map(|(e, bin)| Entry {
-            about_plane: e.about_plane - bin.map_or(0.0, |b| relief[b as usize]),
-            ..*e
+    let beside = || {
+        entries.iter().zip(bin_of).map(|(e, bin)| {
+            let about_plane = e.about_plane - bin.map_or(0.0, |b| relief[b as usize]);
+            (e.cell, e.pose, e.n * about_plane)
         })
-        .collect();
+    };
     let size = |s: &[f64]| s.iter().zip(weights).map(|(v, w)| w * v * v).sum::<f64>();
     // The relief's size over the ground seen, weighted by readings.
     let (mut relief_sum, mut readings) = (0.0, 0.0);
@@ -305,8 +392,22 @@ pub(super) fn shape_beside_relief(
         }
     }
     ReliefTest {
-        shape_sigmas: flip_test(&beside, poses, weights, &shape, &shape_of).sigmas(),
+        shape_sigmas: flip_test_over(beside, poses, weights, &shape, &shape_of).sigmas(),
         shape_share: (size(&shape) / size(&alone).max(f64::MIN_POSITIVE)).sqrt(),
         relief_rms: (relief_sum / readings.max(f64::MIN_POSITIVE)).sqrt(),
     }
+}
+
+/// Per cell, `Σ n·value` of the entries (with each its bin).
+fn per_cell(
+    entries: &[Entry],
+    bin_of: &[Option<u32>],
+    cells: usize,
+    value: impl Fn(&Entry, Option<u32>) -> f64,
+) -> Vec<f64> {
+    let mut sums = vec![0.0; cells];
+    for (e, bin) in entries.iter().zip(bin_of) {
+        sums[e.cell as usize] += e.n * value(e, *bin);
+    }
+    sums
 }

@@ -39,7 +39,7 @@ mod found;
 mod plane_part;
 mod shape;
 
-use crate::cell_noise::{flip_test, CellNoise, Entry, FlipTest};
+use crate::cell_noise::{flip_test, flip_test_over, CellNoise, Entry, FlipTest};
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;
 use crate::outcome::{DepthPattern, Solution};
@@ -446,7 +446,7 @@ mod tests {
                 pattern(du, dv)
             })
             .collect();
-        remove_plane_part(&mut truth, &estimate.readings, &estimate.seen, poses[0]);
+        PlanePartRemover::new(&estimate.readings, &estimate.seen, poses[0]).remove(&mut truth);
         (0..truth.len())
             .filter(|&k| estimate.seen[k])
             .map(|k| (truth[k] - estimate.shape[k]).abs())
@@ -809,7 +809,7 @@ mod bend_on_frames {
             })
             .collect();
         let whole = shape.clone();
-        remove_plane_part(&mut shape, &readings, &seen, &residuals);
+        PlanePartRemover::new(&readings, &seen, &residuals).remove(&mut shape);
         let (mut moments, mut sums) = (Matrix3::zeros(), Vector3::zeros());
         for k in (0..cells).filter(|&k| seen[k]) {
             let (u, v) = centre(k);

@@ -257,10 +257,9 @@ pub fn estimate_shape_seen_from(
         weighted_rms(&fitted.shape, &kept.readings, &kept.seen) * first.raw_per_inverse_depth.abs();
     let mut noise = estimate_noise(poses, &kept, &fitted, within);
     for _ in 0..5 {
-        let next = Kept::within(poses, &fitted, &noise, &seen_at_first);
-        if next.out == kept.out {
+        let Some(next) = kept.within(poses, &fitted, &noise, &seen_at_first) else {
             break;
-        }
+        };
         kept = next;
         fitted = alternate(poses, &kept, Some(&fitted.shape));
         noise = estimate_noise(poses, &kept, &fitted, within);
@@ -300,40 +299,51 @@ pub fn estimate_shape_seen_from(
     let weights: Vec<f64> = (0..cells)
         .map(|k| if seen[k] { kept.readings[k] } else { 0.0 })
         .collect();
+    let plane_part = PlanePartRemover::new(&kept.readings, &seen, first);
     let shape_of = |per_cell: &[f64]| -> Vec<f64> {
         let mut shape: Vec<f64> = per_cell
             .iter()
             .zip(&weights)
             .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
             .collect();
-        remove_plane_part(&mut shape, &kept.readings, &seen, first);
+        plane_part.remove(&mut shape);
         shape
     };
     let mut plain = vec![0.0; cells];
     for e in &sums {
         plain[e.cell as usize] += e.n * e.about_plane;
     }
-    let flips = flip_test(&sums, poses.len(), &weights, &shape_of(&plain), shape_of);
-    let depth = depth_dependence(poses, &sums, shape, &noise);
+    // The test that there is a shape, the pattern's change with depth and
+    // where the entries lie on the ground, side by side: each reads the
+    // entries only.
+    let ground_from_sensor = ground_from_sensor.filter(|g| g.len() == poses.len());
+    let (flips, (depth, ground_bins)) = rayon::join(
+        || flip_test(&sums, poses.len(), &weights, &shape_of(&plain), shape_of),
+        || {
+            rayon::join(
+                || depth_dependence(poses, &sums, shape, &noise),
+                || ground_from_sensor.map(|g| ground_bins(poses, &sums, g)),
+            )
+        },
+    );
     // Residuals that stay with the ground are looked for beyond what a
     // pattern changing with depth would leave: each alternative is asked
     // what the other does not explain.
-    let ground_tests = ground_from_sensor
-        .filter(|g| g.len() == poses.len())
-        .map(|g| {
-            // Borrowed when nothing is taken out (a copy was 7 MB of the
-            // peak on a 52-pose calibration).
-            let beyond_depth = if depth.significant() {
-                std::borrow::Cow::Owned(without_depth_dependence(poses, &sums, shape))
-            } else {
-                std::borrow::Cow::Borrowed(&sums[..])
-            };
-            let (test, bin_of) = ground_fixed(poses, &beyond_depth, g);
-            // Only asked when the ground's test finds something.
-            let beside = (test.sigmas() > ALTERNATIVE_SIGMAS)
-                .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), &weights, shape_of));
-            (test, beside)
-        });
+    let ground_tests = ground_bins.map(|(bins, bin_of)| {
+        // Borrowed when nothing is taken out (a copy was 7 MB of the peak
+        // on a 52-pose calibration). The entries less the change with
+        // depth are the same entries, in order: their bins are the same.
+        let beyond_depth = if depth.significant() {
+            std::borrow::Cow::Owned(without_depth_dependence(poses, &sums, shape))
+        } else {
+            std::borrow::Cow::Borrowed(&sums[..])
+        };
+        let test = ground_fixed(poses.len(), &beyond_depth, bins, &bin_of);
+        // Only asked when the ground's test finds something.
+        let beside = (test.sigmas() > ALTERNATIVE_SIGMAS)
+            .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), &weights, shape_of));
+        (test, beside)
+    });
     let fixed_in_the_ground = ground_tests.as_ref().map(|(test, _)| *test);
     let shape_beside_relief = ground_tests.and_then(|(_, beside)| beside);
     let kept_readings: f64 = (0..cells)
@@ -469,13 +479,16 @@ impl Kept {
         Self::from_out(poses, vec![false; poses.len() * cells], None)
     }
 
-    /// The sums within [`ENTRY_SIGMAS`] of `fitted`, among the cells first seen.
+    /// The sums within [`ENTRY_SIGMAS`] of `fitted`, among the cells first
+    /// seen; none when they are the sums these keep (the usual end, which
+    /// then costs no pass over the poses' moments).
     fn within(
+        &self,
         poses: &[&GroundResiduals],
         fitted: &Fitted,
         noise: &CellNoise,
         first_seen: &[bool],
-    ) -> Self {
+    ) -> Option<Self> {
         let cells = first_seen.len();
         let mut out = vec![false; poses.len() * cells];
         out.par_chunks_mut(cells)
@@ -491,7 +504,10 @@ impl Kept {
                     }
                 }
             });
-        Self::from_out(poses, out, Some(first_seen))
+        if out == self.out {
+            return None;
+        }
+        Some(Self::from_out(poses, out, Some(first_seen)))
     }
 
     fn from_out(poses: &[&GroundResiduals], out: Vec<bool>, among: Option<&[bool]>) -> Self {
@@ -572,11 +588,6 @@ impl Kept {
         }
         self.take_what_is_seen(poses);
     }
-
-    /// Whether pose i's sum of cell k enters the estimate.
-    fn takes(&self, i: usize, k: usize) -> bool {
-        self.seen[k] && !self.out[i * self.seen.len() + k]
-    }
 }
 
 /// The pattern over the cells seen and each pose's plane given it.
@@ -609,6 +620,7 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
         _ => vec![0.0; cells],
     };
     let mut planes = vec![Vector3::zeros(); poses.len()];
+    let plane_part = PlanePartRemover::new(&kept.readings, &kept.seen, grid);
     let mut iterations = 0;
     for _ in 0..2000 {
         iterations += 1;
@@ -648,7 +660,7 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
             }
         }
         // No plane part: that is the planes' (and the geometry's) to say.
-        remove_plane_part(&mut next, &kept.readings, &kept.seen, grid);
+        plane_part.remove(&mut next);
         let change = next
             .iter()
             .zip(&shape)
@@ -688,24 +700,35 @@ pub(super) fn reading_variance(poses: &[&GroundResiduals]) -> f64 {
 /// The sums kept, each as its cell's mean residual about pattern and plane
 /// and about the plane alone.
 pub(super) fn entries(poses: &[&GroundResiduals], kept: &Kept, fitted: &Fitted) -> Vec<Entry> {
-    let mut entries = Vec::new();
-    for (i, pose) in poses.iter().enumerate() {
+    let mut entries = Vec::with_capacity(kept.taken.iter().map(Vec::len).sum());
+    entries.extend(entries_of(poses, kept, fitted));
+    entries
+}
+
+/// [`entries`] as they are made, in the same order: pose by pose, the
+/// cells it takes (those with readings, seen and not left out) in order.
+fn entries_of<'a>(
+    poses: &'a [&GroundResiduals],
+    kept: &'a Kept,
+    fitted: &'a Fitted,
+) -> impl Iterator<Item = Entry> + 'a {
+    poses.iter().enumerate().flat_map(move |(i, pose)| {
         let c = fitted.planes[i];
-        for (k, cell) in pose.cells.iter().enumerate() {
-            if cell.n > 0.0 && kept.takes(i, k) {
+        kept.taken[i]
+            .iter()
+            .map(move |&k| (k as usize, &pose.cells[k as usize]))
+            .map(move |(k, cell)| {
                 let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
                 let about_plane = (cell.r - plane) / cell.n;
-                entries.push(Entry {
+                Entry {
                     pose: i as u32,
                     cell: k as u32,
                     n: cell.n,
                     residual: about_plane - fitted.shape[k],
                     about_plane,
-                });
-            }
-        }
-    }
-    entries
+                }
+            })
+    })
 }
 
 /// The noise of a cell's mean, from the sums kept about pattern and plane.
@@ -715,9 +738,12 @@ pub(super) fn estimate_noise(
     fitted: &Fitted,
     within: f64,
 ) -> CellNoise {
-    let entries = entries(poses, kept, fitted);
     let observed = kept.seen.iter().filter(|s| **s).count() as f64;
-    CellNoise::estimate(within, &entries, observed + 3.0 * poses.len() as f64)
+    CellNoise::estimate_from(
+        within,
+        entries_of(poses, kept, fitted).map(|e| (e.n, e.residual)),
+        observed + 3.0 * poses.len() as f64,
+    )
 }
 
 /// Each cell's shape variance under `noise`: one over the sum of its sums'
@@ -757,32 +783,60 @@ pub(super) fn weighted_rms(values: &[f64], readings: &[f64], seen: &[bool]) -> f
     }
 }
 
-/// Subtracts the plane `A + B·u' + C·v'` that fits the cells seen, weighted
-/// by their readings.
-pub(super) fn remove_plane_part(
-    shape: &mut [f64],
-    readings: &[f64],
-    seen: &[bool],
-    grid: &GroundResiduals,
-) {
-    let centre = |k: usize| {
-        let (du, dv) = cell_centre(k, grid.columns, &grid.intrinsics);
-        Vector3::new(1.0, du, dv)
-    };
-    let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
-    for k in 0..shape.len() {
-        if seen[k] {
-            let phi = centre(k);
-            normal += phi * phi.transpose() * readings[k];
-            rhs += phi * (shape[k] * readings[k]);
+/// Subtracts from a shape the plane `A + B·u' + C·v'` that fits the cells
+/// seen, weighted by their readings. Made once for shapes over the same
+/// cells and readings: the plane's normal equations are the same for all
+/// (the flip tests' 40 draws and the pattern's steps made them for every
+/// shape, a quarter of a millisecond each).
+pub(super) struct PlanePartRemover<'a> {
+    seen: &'a [bool],
+    /// `(1, u', v')` of each cell.
+    centres: Vec<Vector3<f64>>,
+    readings: &'a [f64],
+    /// The normal equations' inverse; none when the cells seen cannot
+    /// carry a plane (nothing is removed then).
+    inverse: Option<Matrix3<f64>>,
+}
+
+impl<'a> PlanePartRemover<'a> {
+    pub(super) fn new(readings: &'a [f64], seen: &'a [bool], grid: &GroundResiduals) -> Self {
+        let centres: Vec<Vector3<f64>> = (0..seen.len())
+            .map(|k| {
+                let (du, dv) = cell_centre(k, grid.columns, &grid.intrinsics);
+                Vector3::new(1.0, du, dv)
+            })
+            .collect();
+        let mut normal = Matrix3::zeros();
+        for k in 0..seen.len() {
+            if seen[k] {
+                let phi = centres[k];
+                normal += phi * phi.transpose() * readings[k];
+            }
+        }
+        Self {
+            seen,
+            centres,
+            readings,
+            inverse: normal.try_inverse(),
         }
     }
-    let Some(plane) = normal.try_inverse().map(|h| h * rhs) else {
-        return;
-    };
-    for k in 0..shape.len() {
-        if seen[k] {
-            shape[k] -= plane.dot(&centre(k));
+
+    pub(super) fn remove(&self, shape: &mut [f64]) {
+        let Some(inverse) = self.inverse else {
+            return;
+        };
+        let cells = || self.seen.iter().zip(&self.centres);
+        let mut rhs = Vector3::zeros();
+        for ((seen, centre), (value, readings)) in cells().zip(shape.iter().zip(self.readings)) {
+            if *seen {
+                rhs += centre * (value * readings);
+            }
+        }
+        let plane = inverse * rhs;
+        for ((seen, centre), value) in cells().zip(shape.iter_mut()) {
+            if *seen {
+                *value -= plane.dot(centre);
+            }
         }
     }
 }
