@@ -301,9 +301,77 @@ fn pattern_flip_test(c: &mut Criterion) {
     );
 }
 
+/// The depth pattern's estimate (`distortion::estimate_shape_seen_from`,
+/// issue 41) as `replay` of the 156-frame recording makes it
+/// (`scripts/make-perf-recording`): 52 poses, pose i the sample's pose
+/// i mod 12 with its two frames, each pose's residuals from its own ground
+/// fit, and the sensor over the ground where each pose's plane puts it
+/// (the ground's test and the shape beside its relief included). Every
+/// pass over the poses' cells, the flip tests and the alternatives; not
+/// the fits.
+fn pattern_estimate(c: &mut Criterion) {
+    use groundcal_calib::distortion::estimate_shape_seen_from;
+    use groundcal_calib::geometry::Transform;
+    use nalgebra::{Matrix3, Rotation3, Translation3};
+    let (_, camera) = sample_frame();
+    let prior = GroundPrior::up_only(
+        sensor_from_optical() * Vector3::new(0.0, -1.0, 0.0),
+        60f64.to_radians(),
+    );
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/sample-12/kinect");
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .expect("the shared sample recording is beside the project")
+        .map(|entry| entry.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with("d-") && name.ends_with(".pgm"))
+        .collect();
+    names.sort();
+    let mut buffers = FitBuffers::default();
+    let sample_poses: Vec<(GroundResiduals, Transform)> = names
+        .chunks(2)
+        .map(|pair| {
+            let pixels: Vec<Vec<u16>> = pair.iter().map(|name| sample_pixels(name)).collect();
+            let frames: Vec<&[u16]> = pixels.iter().map(Vec::as_slice).collect();
+            let fit = fit_ground(
+                &frames,
+                &camera,
+                &prior,
+                &PlaneFitSettings::default(),
+                &mut buffers,
+            )
+            .unwrap();
+            let residuals =
+                GroundResiduals::of_fitted(&frames, &camera, &fit, &mut buffers).unwrap();
+            // The ground frame's y up along the plane's normal, the sensor
+            // at the plane's distance above it.
+            let up = fit.plane.normal.normalize();
+            let across = up.cross(&Vector3::new(0.0, 0.0, 1.0)).normalize();
+            let along = across.cross(&up);
+            let rotation = Rotation3::from_matrix_unchecked(Matrix3::from_rows(&[
+                across.transpose(),
+                up.transpose(),
+                along.transpose(),
+            ]));
+            let ground_from_sensor =
+                Transform::from_parts(Translation3::new(0.0, fit.plane.d.abs(), 0.0), rotation);
+            (residuals, ground_from_sensor)
+        })
+        .collect();
+    let poses: Vec<&GroundResiduals> = (0..52).map(|i| &sample_poses[i % 12].0).collect();
+    let ground_from_sensor: Vec<Transform> = (0..52).map(|i| sample_poses[i % 12].1).collect();
+    let estimate = estimate_shape_seen_from(&poses, Some(&ground_from_sensor)).unwrap();
+    assert!(
+        estimate.fixed_in_the_ground.is_some(),
+        "the ground's test ran"
+    );
+    c.bench_function(
+        "the depth pattern's estimate, 52 poses of the sample (156-frame replay's)",
+        |b| b.iter(|| estimate_shape_seen_from(black_box(&poses), Some(&ground_from_sensor))),
+    );
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(50).measurement_time(std::time::Duration::from_secs(5));
-    targets = ground_fit, solve_52, pattern_flip_test
+    targets = ground_fit, solve_52, pattern_flip_test, pattern_estimate
 }
 criterion_main!(benches);
