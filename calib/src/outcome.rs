@@ -342,6 +342,13 @@ pub struct DepthPattern {
     /// would, and only the spread of the body's heights tells the two
     /// apart, so this cost is mostly the schedule's.
     pub angle_sigma_known_plane_part: Option<[f64; 3]>,
+    /// When the plane part was taken: how many times each angle's σ grows
+    /// with it by the poses' geometry alone (their planes exact, the noise
+    /// per pose the solve found): the schedule's cost, which the gate
+    /// `pattern_angle_sigma_growth_max` judges. The measured σ beside
+    /// [`Self::angle_sigma_known_plane_part`] grow by more or less with the
+    /// noise met.
+    pub angle_sigma_growth_by_geometry: Option<[f64; 3]>,
     /// What was found, in words.
     pub note: Option<String>,
     /// The shape to take out of the frames before fitting their ground
@@ -376,6 +383,7 @@ impl DepthPattern {
             uncorrected_fixed: false,
             raw_per_inverse_depth: 0.0,
             angle_sigma_known_plane_part: None,
+            angle_sigma_growth_by_geometry: None,
             note: Some(note),
             fit_again_about: None,
         }

@@ -9,12 +9,14 @@
 //! the covariance it returns is `(JᵀWJ)⁻¹` for that noise. No second copy of
 //! the math, so the prediction and the solve cannot drift apart.
 
-use nalgebra::{Matrix4, Matrix6};
+use nalgebra::Matrix6;
 use serde::{Deserialize, Serialize};
 
 use super::geometry::PoseParams;
 use super::outcome::Observability;
-use super::solve::{predict, solve, DepthScaleSetting, Observation, SolveError, SolveSettings};
+use super::solve::{
+    exact_observation, solve, DepthScaleSetting, Observation, SolveError, SolveSettings,
+};
 
 /// The noise of one observation's ground, as the solve sees it: the
 /// measured plane against the one the mount and the body pose from the feet
@@ -160,15 +162,7 @@ fn exact_observations(body_poses: &[PoseParams], nominal: &PoseParams) -> Vec<Ob
     body_poses
         .iter()
         .enumerate()
-        .map(|(i, pose)| {
-            let ground_from_robot = pose.to_transform();
-            let plane = predict(nominal, &ground_from_robot);
-            let mut observation = Observation::new(i as u32 + 1, ground_from_robot, plane);
-            // A (zero) fit covariance: the noise level is the model's, not
-            // estimated from residuals that are exactly zero here.
-            observation.plane_covariance = Some(Matrix4::zeros());
-            observation
-        })
+        .map(|(i, pose)| exact_observation(i as u32 + 1, pose.to_transform(), nominal))
         .collect()
 }
 
@@ -295,6 +289,7 @@ pub fn design(
 mod tests {
     use super::*;
     use crate::geometry::Transform;
+    use crate::solve::predict;
     use nalgebra::Vector3;
 
     fn mount() -> PoseParams {

@@ -267,6 +267,7 @@ pub(super) fn pattern_of(
         uncorrected_fixed: false,
         raw_per_inverse_depth: k_raw,
         angle_sigma_known_plane_part: None,
+        angle_sigma_growth_by_geometry: None,
         fit_again_about: fit_again_about(shape, shape_taken, taken_out.is_some()),
         note: Some(match taken_out {
             Some(_) => format!(

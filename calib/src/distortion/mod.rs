@@ -254,7 +254,7 @@ pub fn solve_with_pattern_taken_out(
         noise: shaped.noise_per_pose,
     };
     let estimate = plane.estimate();
-    let (solution, plane_part, angle_sigma_known_part) = match estimate {
+    let (solution, plane_part, angle_sigma_known_part, growth_by_geometry) = match estimate {
         Some(found)
             if shape_taken
                 || taken_out.is_some()
@@ -262,10 +262,16 @@ pub fn solve_with_pattern_taken_out(
         {
             let mut solution = found.solution.clone();
             let known = [0, 1, 2].map(|k| solution.covariance[(k, k)].max(0.0).sqrt());
+            let by_geometry = angle_sigma_growth_by_geometry(
+                &corrected,
+                &solution,
+                settings,
+                shaped.noise_per_pose,
+            );
             // The mount's σ with the plane part's own uncertainty.
             solution.covariance +=
                 found.sensitivity * found.covariance * found.sensitivity.transpose();
-            (solution, Some(found), Some(known))
+            (solution, Some(found), Some(known), by_geometry)
         }
         other => (
             shaped,
@@ -273,6 +279,7 @@ pub fn solve_with_pattern_taken_out(
                 taken: false,
                 ..found
             }),
+            None,
             None,
         ),
     };
@@ -283,6 +290,7 @@ pub fn solve_with_pattern_taken_out(
     }
     solution.depth_pattern = Some(DepthPattern {
         angle_sigma_known_plane_part: angle_sigma_known_part,
+        angle_sigma_growth_by_geometry: growth_by_geometry,
         ..pattern
     });
     Ok(solution)

@@ -238,6 +238,21 @@ pub fn predict(robot_from_sensor: &PoseParams, ground_from_robot: &Transform) ->
     ground_in_sensor(&(ground_from_robot * robot_from_sensor.to_transform()))
 }
 
+/// The observation a sensor at `robot_from_sensor` makes at a body pose,
+/// exactly: the predicted plane, with a (zero) fit covariance, so that a
+/// solve of such observations takes its noise from its settings (a
+/// prediction's, or a schedule's cost judged apart from the noise met).
+pub fn exact_observation(
+    index: u32,
+    ground_from_robot: Transform,
+    robot_from_sensor: &PoseParams,
+) -> Observation {
+    let plane = predict(robot_from_sensor, &ground_from_robot);
+    let mut observation = Observation::new(index, ground_from_robot, plane);
+    observation.plane_covariance = Some(Matrix4::zeros());
+    observation
+}
+
 /// The least-squares problem of eq. 31, whitened, for the `levenberg-marquardt` crate.
 struct IdentificationProblem<'a> {
     observations: Vec<&'a Observation>,

@@ -54,6 +54,12 @@ pub struct DepthPatternJson {
     /// gate `pattern_angle_sigma_growth_max` judges it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angle_sigma_known_plane_part_deg: Option<[f64; 3]>,
+    /// When the plane part was taken: how many times it grows each angle's
+    /// σ by the poses' geometry alone, the schedule's cost that the gate
+    /// `pattern_angle_sigma_growth_max` judges (the measured σ grow by more
+    /// or less with the noise met).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angle_sigma_growth_by_geometry: Option<[f64; 3]>,
     /// A warp that stood out of the noise but was not corrected because it
     /// changed from pose to pose: its RMS at 2 m, millimetres (the gate
     /// `warp_max_mm` judges it).
@@ -159,6 +165,7 @@ impl DepthPatternJson {
             angle_sigma_known_plane_part_deg: p
                 .angle_sigma_known_plane_part
                 .map(|s| s.map(f64::to_degrees)),
+            angle_sigma_growth_by_geometry: p.angle_sigma_growth_by_geometry,
             uncorrected_mm_at_2m: p.uncorrected_shape_rms_raw.map(|raw| {
                 crate::calib::outcome::depth_error_m(raw, 2.0, p.raw_per_inverse_depth) * 1e3
             }),
@@ -228,6 +235,15 @@ impl DepthPatternJson {
         }) {
             return Err(format!(
                 "\"angle_sigma_known_plane_part_deg[{k}]\" is {v}, not a σ"
+            ));
+        }
+        if let Some((k, v)) = self.angle_sigma_growth_by_geometry.and_then(|growth| {
+            (0..3)
+                .map(|k| (k, growth[k]))
+                .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+        }) {
+            return Err(format!(
+                "\"angle_sigma_growth_by_geometry[{k}]\" is {v}, not a ratio of σ"
             ));
         }
         if !self.raw_per_inverse_depth.is_finite()

@@ -266,6 +266,7 @@ mod tests {
             plane_part_sigma_raw: None,
             plane_part_taken: false,
             angle_sigma_known_plane_part_deg: None,
+            angle_sigma_growth_by_geometry: None,
             uncorrected_mm_at_2m: None,
             uncorrected_fixed: false,
             uncorrected_raw: None,
