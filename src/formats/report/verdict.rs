@@ -92,7 +92,7 @@ pub(super) fn gate_row(check: &GateCheckJson) -> (Markup, String, String, Option
             "",
         ),
         "pattern_angle_sigma_growth_max" => (
-            html! { "largest growth of σ of α, β, γ from correcting the depth pattern" },
+            html! { "largest growth of σ of α, β, γ from correcting the depth pattern, by the poses' geometry" },
             format!("≤ {}×", num(l, 1)),
             format!("{}×", num(m, 1)),
             "of ",
