@@ -515,6 +515,13 @@ mod tests {
         );
         pattern.angle_sigma_known_plane_part_deg = Some([0.0017, 0.0006, -1.0]);
         assert!(pattern.validate().is_err());
+        pattern.angle_sigma_known_plane_part_deg = Some([0.0017, 0.0006, 0.0007]);
+        pattern.angle_sigma_growth_by_geometry = Some([1.4, f64::INFINITY, 5.1]);
+        let error = pattern.validate().unwrap_err();
+        assert!(
+            error.contains("\"angle_sigma_growth_by_geometry[1]\" is inf, not a ratio of σ"),
+            "{error}"
+        );
     }
 
     fn table2() -> ResultJson {

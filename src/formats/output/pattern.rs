@@ -228,23 +228,26 @@ impl DepthPatternJson {
                 ));
             }
         }
-        if let Some((k, v)) = self.angle_sigma_known_plane_part_deg.and_then(|sigma| {
-            (0..3)
-                .map(|k| (k, sigma[k]))
-                .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
-        }) {
-            return Err(format!(
-                "\"angle_sigma_known_plane_part_deg[{k}]\" is {v}, not a σ"
-            ));
-        }
-        if let Some((k, v)) = self.angle_sigma_growth_by_geometry.and_then(|growth| {
-            (0..3)
-                .map(|k| (k, growth[k]))
-                .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
-        }) {
-            return Err(format!(
-                "\"angle_sigma_growth_by_geometry[{k}]\" is {v}, not a ratio of σ"
-            ));
+        for (name, values, what) in [
+            (
+                "angle_sigma_known_plane_part_deg",
+                self.angle_sigma_known_plane_part_deg,
+                "a σ",
+            ),
+            (
+                "angle_sigma_growth_by_geometry",
+                self.angle_sigma_growth_by_geometry,
+                "a ratio of σ",
+            ),
+        ] {
+            if let Some((k, v)) = values.and_then(|values| {
+                values
+                    .into_iter()
+                    .enumerate()
+                    .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+            }) {
+                return Err(format!("\"{name}[{k}]\" is {v}, not {what}"));
+            }
         }
         if !self.raw_per_inverse_depth.is_finite()
             || (cells > 0 && self.raw_per_inverse_depth == 0.0)
