@@ -714,20 +714,19 @@ fn entries_of<'a>(
 ) -> impl Iterator<Item = Entry> + 'a {
     poses.iter().enumerate().flat_map(move |(i, pose)| {
         let c = fitted.planes[i];
-        kept.taken[i]
-            .iter()
-            .map(move |&k| (k as usize, &pose.cells[k as usize]))
-            .map(move |(k, cell)| {
-                let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
-                let about_plane = (cell.r - plane) / cell.n;
-                Entry {
-                    pose: i as u32,
-                    cell: k as u32,
-                    n: cell.n,
-                    residual: about_plane - fitted.shape[k],
-                    about_plane,
-                }
-            })
+        kept.taken[i].iter().map(move |&k| {
+            let k = k as usize;
+            let cell = &pose.cells[k];
+            let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
+            let about_plane = (cell.r - plane) / cell.n;
+            Entry {
+                pose: i as u32,
+                cell: k as u32,
+                n: cell.n,
+                residual: about_plane - fitted.shape[k],
+                about_plane,
+            }
+        })
     })
 }
 
