@@ -166,10 +166,10 @@ pub fn flip_test(
     shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
 ) -> FlipTest {
     flip_test_over(
-        || {
-            entries
-                .iter()
-                .map(|e| (e.cell, e.pose, e.n * e.about_plane))
+        entries.len(),
+        |k| {
+            let e = &entries[k];
+            Some((e.cell, e.pose, e.n * e.about_plane))
         },
         poses,
         weights,
@@ -178,13 +178,22 @@ pub fn flip_test(
     )
 }
 
-/// [`flip_test`] of entries made afresh for every flip, each as its cell,
-/// pose and `n·m`: a test of the entries binned another way, or less
-/// something, reads them as they are, where a copy of a calibration's
-/// entries was 6 MB at the peak. A sign times `n·m` is the sign times `n`
-/// times `m`, bit for bit (a sign is ±1).
-pub fn flip_test_over<I: Iterator<Item = (u32, u32, f64)>>(
-    entries: impl Fn() -> I + Sync,
+/// [`flip_test`] of `count` entries read in place, entry `k` as its key
+/// (a cell, or a bin of the ground: below `weights.len()`), its pose and
+/// its `n·m`, or `None` to leave it out: a test of the entries binned
+/// another way, or less something, where a copy of a calibration's
+/// entries was 6 MB at the peak.
+///
+/// Every flip's sums are made key by key, all flips at once: a key's
+/// entries (in their order, by a stable sort of their indices) are read
+/// once, each adding its value times every flip's sign of its pose, where
+/// a flip at a time read all the entries forty times (the estimate's
+/// benchmark: see docs/performance.md). Each flip's sum of a key adds the
+/// same products in the same order as one flip at a time would, so the
+/// sizes are the same, bit for bit (a sign is ±1, its product exact).
+pub fn flip_test_over(
+    count: usize,
+    entry: impl Fn(usize) -> Option<(u32, u32, f64)> + Sync,
     poses: usize,
     weights: &[f64],
     observed: &[f64],
@@ -192,31 +201,42 @@ pub fn flip_test_over<I: Iterator<Item = (u32, u32, f64)>>(
 ) -> FlipTest {
     use rayon::prelude::*;
     let size = |shape: &[f64]| -> f64 { shape.iter().zip(weights).map(|(s, w)| w * s * s).sum() };
-    // Every flip's signs drawn first, in the one order the seed gives, and
-    // the flips then made on every core: the same sizes, bit for bit, as
-    // one after the other (each sums its entries in their order).
+    // Every flip's signs drawn first, in the one order the seed gives;
+    // kept pose by pose, a pose's signs for every flip side by side.
     let mut state = 0x666c_6970_u64;
-    let signs: Vec<Vec<f64>> = (0..FLIPS)
-        .map(|_| {
-            (0..poses)
-                .map(|_| {
-                    if splitmix64(&mut state) >> 63 == 1 {
-                        1.0
-                    } else {
-                        -1.0
+    let mut signs = vec![[0.0; FLIPS]; poses];
+    for flip in 0..FLIPS {
+        for pose in signs.iter_mut() {
+            pose[flip] = if splitmix64(&mut state) >> 63 == 1 {
+                1.0
+            } else {
+                -1.0
+            };
+        }
+    }
+    let by_key = KeyOrder::of(count, weights.len(), |k| entry(k).map(|(key, _, _)| key));
+    // Each key's sums for every flip, made on every core, a range of keys
+    // each.
+    let mut sums = vec![[0.0; FLIPS]; weights.len()];
+    sums.par_chunks_mut(KEYS_A_TASK)
+        .enumerate()
+        .for_each(|(chunk, rows)| {
+            for (offset, row) in rows.iter_mut().enumerate() {
+                for &k in by_key.of_key(chunk * KEYS_A_TASK + offset) {
+                    if let Some((_, pose, value)) = entry(k as usize) {
+                        let signs = &signs[pose as usize];
+                        for (sum, sign) in row.iter_mut().zip(signs) {
+                            *sum += sign * value;
+                        }
                     }
-                })
-                .collect()
-        })
-        .collect();
-    let sizes: Vec<f64> = signs
-        .par_iter()
-        .map(|signs| {
-            let mut sums = vec![0.0; weights.len()];
-            for (cell, pose, value) in entries() {
-                sums[cell as usize] += signs[pose as usize] * value;
+                }
             }
-            size(&shape_of(&sums))
+        });
+    let sizes: Vec<f64> = (0..FLIPS)
+        .into_par_iter()
+        .map(|flip| {
+            let column: Vec<f64> = sums.iter().map(|row| row[flip]).collect();
+            size(&shape_of(&column))
         })
         .collect();
     let n = sizes.len() as f64;
@@ -226,6 +246,45 @@ pub fn flip_test_over<I: Iterator<Item = (u32, u32, f64)>>(
         observed: size(observed),
         null_mean: mean,
         null_sigma: sigma,
+    }
+}
+
+/// Keys whose flip sums a task makes (a few hundred: enough to spread over
+/// the cores, few enough that each task's rows stay in its cache).
+const KEYS_A_TASK: usize = 256;
+
+/// The entries' indices sorted by key, stably (a counting sort): key `k`'s
+/// entries are `of(k)`, in the order they were made.
+struct KeyOrder {
+    starts: Vec<u32>,
+    indices: Vec<u32>,
+}
+
+impl KeyOrder {
+    fn of(count: usize, keys: usize, key: impl Fn(usize) -> Option<u32>) -> Self {
+        let mut starts = vec![0u32; keys + 1];
+        for k in 0..count {
+            if let Some(key) = key(k) {
+                starts[key as usize + 1] += 1;
+            }
+        }
+        for k in 0..keys {
+            starts[k + 1] += starts[k];
+        }
+        let mut next = starts.clone();
+        let mut indices = vec![0u32; starts[keys] as usize];
+        for k in 0..count {
+            if let Some(key) = key(k) {
+                let at = &mut next[key as usize];
+                indices[*at as usize] = k as u32;
+                *at += 1;
+            }
+        }
+        Self { starts, indices }
+    }
+
+    fn of_key(&self, key: usize) -> &[u32] {
+        &self.indices[self.starts[key] as usize..self.starts[key + 1] as usize]
     }
 }
 

@@ -256,7 +256,14 @@ pub(super) fn ground_fixed(
             .collect()
     };
     flip_test_over(
-        || binned().map(|(bin, e)| (bin, e.pose, e.n * e.residual)),
+        entries.len(),
+        |k| {
+            bin_of
+                .get(k)
+                .copied()
+                .flatten()
+                .map(|bin| (bin, entries[k].pose, entries[k].n * entries[k].residual))
+        },
         poses,
         &weights,
         &mean(&sums),
@@ -366,11 +373,15 @@ pub(super) fn shape_beside_relief(
             e.about_plane - relief_of(bin)
         }));
     }
-    let beside = || {
-        entries.iter().zip(bin_of).map(|(e, bin)| {
-            let about_plane = e.about_plane - bin.map_or(0.0, |b| relief[b as usize]);
-            (e.cell, e.pose, e.n * about_plane)
-        })
+    let beside = |k: usize| {
+        let e = &entries[k];
+        let about_plane = e.about_plane
+            - bin_of
+                .get(k)
+                .copied()
+                .flatten()
+                .map_or(0.0, |b| relief[b as usize]);
+        Some((e.cell, e.pose, e.n * about_plane))
     };
     let size = |s: &[f64]| s.iter().zip(weights).map(|(v, w)| w * v * v).sum::<f64>();
     // The relief's size over the ground seen, weighted by readings.
@@ -382,7 +393,8 @@ pub(super) fn shape_beside_relief(
         }
     }
     ReliefTest {
-        shape_sigmas: flip_test_over(beside, poses, weights, &shape, &shape_of).sigmas(),
+        shape_sigmas: flip_test_over(entries.len(), beside, poses, weights, &shape, &shape_of)
+            .sigmas(),
         shape_share: (size(&shape) / size(&alone).max(f64::MIN_POSITIVE)).sqrt(),
         relief_rms: (relief_sum / readings.max(f64::MIN_POSITIVE)).sqrt(),
     }
