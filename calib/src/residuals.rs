@@ -104,19 +104,27 @@ struct Sums {
 /// in the cell, 0–7; `dv` the row's `v − cy`), written as independent
 /// lanes that the compiler turns into vector instructions. Every lane sums
 /// at most a few dozen readings, where f32 loses nothing that matters
-/// (residuals of a few hundredths; `dv²` below 2²⁴).
+/// (residuals of a few hundredths; `dv²` below 2²⁴). Lane k's `Σk` and
+/// `Σk²` are k and k² times its count, exactly (whole numbers far below
+/// 2²⁴), so they are not summed pixel by pixel ([`CellLanes::times_k`]).
 #[derive(Clone, Copy, Default)]
 struct CellLanes {
     n: [f32; CELL_PX],
     r: [f32; CELL_PX],
     rr: [f32; CELL_PX],
-    k: [f32; CELL_PX],
-    kk: [f32; CELL_PX],
     kr: [f32; CELL_PX],
     n_dv: [f32; CELL_PX],
     k_dv: [f32; CELL_PX],
     n_dv2: [f32; CELL_PX],
     r_dv: [f32; CELL_PX],
+}
+
+impl CellLanes {
+    /// Each lane's count times `k^power` (k the lane): what summing `kᵖ·n`
+    /// pixel by pixel gives, bit for bit.
+    fn times_k(&self, power: i32) -> [f32; CELL_PX] {
+        std::array::from_fn(|l| (l as f32).powi(power) * self.n[l])
+    }
 }
 
 impl Sums {
@@ -178,8 +186,6 @@ impl Sums {
                 lanes.n[l] += n;
                 lanes.r[l] += r;
                 lanes.rr[l] += r * r;
-                lanes.k[l] += k * n;
-                lanes.kk[l] += k * k * n;
                 lanes.kr[l] += k * r;
                 lanes.n_dv[l] += n * dv1;
                 lanes.k_dv[l] += k * n * dv1;
@@ -202,7 +208,8 @@ impl Sums {
                 continue;
             }
             let (sr, srr) = (sum(lanes.r) * scale, sum(lanes.rr) * scale * scale);
-            let (sk, skk, skr) = (sum(lanes.k), sum(lanes.kk), sum(lanes.kr) * scale);
+            let (sk, skk) = (sum(lanes.times_k(1)), sum(lanes.times_k(2)));
+            let skr = sum(lanes.kr) * scale;
             let (n_dv, k_dv, n_dv2) = (sum(lanes.n_dv), sum(lanes.k_dv), sum(lanes.n_dv2));
             let r_dv = sum(lanes.r_dv) * scale;
             *lanes = CellLanes::default();
