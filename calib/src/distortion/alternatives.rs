@@ -57,13 +57,17 @@ pub(super) fn depth_dependence(
     let Some(first) = poses.first() else {
         return none;
     };
+    // Each cell's centre once (three passes read every entry's).
+    let cells = shape.len();
+    let centres: Vec<(f64, f64)> = (0..cells)
+        .map(|k| cell_centre(k, first.columns, &first.intrinsics))
+        .collect();
     let depth = |e: &Entry| {
-        let (du, dv) = cell_centre(e.cell as usize, first.columns, &first.intrinsics);
+        let (du, dv) = centres[e.cell as usize];
         let q = poses[e.pose as usize].plane.at(du, dv);
         (q > 0.0).then(|| 1.0 / q)
     };
     // Each cell's mean depth over the poses that saw it.
-    let cells = shape.len();
     let (mut sum, mut weight) = (vec![0.0; cells], vec![0.0; cells]);
     for e in entries {
         if let Some(z) = depth(e) {
@@ -273,56 +277,128 @@ pub(super) fn ground_fixed(
 
 /// Numbers the keys in the order they are first met (the bins' numbers,
 /// and so the order of every sum over them, as a map filled in that order
-/// gives them): the count of bins and each key's number. Over a grid when
-/// the keys span up to a few million bins (a calibration's ground: a few
-/// thousand), a map otherwise: with std's map the estimate's benchmark
-/// took 28.3–31.1 ms, with the grid 26.0–27.5 (three runs of each in
-/// turn). The keys are made twice (for their span, then for their
-/// numbers) rather than kept.
-fn number_in_order_met<I>(keys: I) -> (usize, Vec<Option<u32>>)
-where
-    I: Iterator<Item = Option<(i64, i64)>> + Clone,
-{
-    const MOST_GRID_BINS: i64 = 1 << 22;
-    let mut span: Option<(i64, i64, i64, i64)> = None;
-    for (x, z) in keys.clone().flatten() {
-        span = Some(match span {
-            None => (x, x, z, z),
-            Some((x0, x1, z0, z1)) => (x0.min(x), x1.max(x), z0.min(z), z1.max(z)),
-        });
+/// gives them): the count of bins and each key's number. Over a grid that
+/// grows to the keys' span while they are read, up to a few million bins
+/// (a calibration's ground: a few thousand), a map beyond: with std's map
+/// the estimate's benchmark took 28.3–31.1 ms, with a grid 26.0–27.5
+/// (three runs of each in turn). One pass: each key is made once.
+fn number_in_order_met(
+    keys: impl Iterator<Item = Option<(i64, i64)>>,
+) -> (usize, Vec<Option<u32>>) {
+    let mut numbers = BinNumbers::default();
+    let numbered = keys.map(|key| key.map(|key| numbers.of(key))).collect();
+    (numbers.count as usize, numbered)
+}
+
+/// The bins' numbers so far: over a grid while the keys' span is small,
+/// then over a map.
+#[derive(Default)]
+struct BinNumbers {
+    count: u32,
+    grid: Option<BinGrid>,
+    map: Option<std::collections::HashMap<(i64, i64), u32>>,
+}
+
+/// Numbers (`u32::MAX`: none yet) over the keys `x0 ..x0 + width`,
+/// `z0 .. z0 + depth`.
+struct BinGrid {
+    x0: i64,
+    z0: i64,
+    width: i64,
+    depth: i64,
+    slots: Vec<u32>,
+}
+
+/// The most bins a grid holds (16 MB of numbers).
+const MOST_GRID_BINS: i64 = 1 << 22;
+
+impl BinGrid {
+    fn at(&self, (x, z): (i64, i64)) -> Option<usize> {
+        let (dx, dz) = (x.checked_sub(self.x0)?, z.checked_sub(self.z0)?);
+        ((0..self.width).contains(&dx) && (0..self.depth).contains(&dz))
+            .then(|| (dz * self.width + dx) as usize)
     }
-    let mut count = 0u32;
-    let mut number = |slot: &mut u32| {
+
+    /// The grid over its span and `key`'s, with as much again as that span
+    /// on each side (so that it grows a few times, not at every key), or
+    /// `None` when that is more than [`MOST_GRID_BINS`].
+    fn grown_to(&self, (x, z): (i64, i64)) -> Option<BinGrid> {
+        let (x_low, x_high) = (self.x0.min(x), (self.x0 + self.width - 1).max(x));
+        let (z_low, z_high) = (self.z0.min(z), (self.z0 + self.depth - 1).max(z));
+        let span_x = x_high.checked_sub(x_low)?.checked_add(1)?;
+        let span_z = z_high.checked_sub(z_low)?.checked_add(1)?;
+        let (x0, z0) = (x_low.checked_sub(span_x)?, z_low.checked_sub(span_z)?);
+        let (width, depth) = (span_x.checked_mul(3)?, span_z.checked_mul(3)?);
+        if width.checked_mul(depth).is_none_or(|n| n > MOST_GRID_BINS) {
+            return None;
+        }
+        let mut grown = BinGrid {
+            x0,
+            z0,
+            width,
+            depth,
+            slots: vec![u32::MAX; (width * depth) as usize],
+        };
+        for row in 0..self.depth {
+            let from = (row * self.width) as usize;
+            let to = grown.at((self.x0, self.z0 + row))?;
+            grown.slots[to..to + self.width as usize]
+                .copy_from_slice(&self.slots[from..from + self.width as usize]);
+        }
+        Some(grown)
+    }
+
+    /// Every key numbered, with its number.
+    fn numbered(&self) -> impl Iterator<Item = ((i64, i64), u32)> + '_ {
+        self.slots
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n != u32::MAX)
+            .map(|(k, n)| {
+                let k = k as i64;
+                ((self.x0 + k % self.width, self.z0 + k / self.width), *n)
+            })
+    }
+}
+
+impl BinNumbers {
+    /// `key`'s number: its own, or the next when it is met first.
+    fn of(&mut self, key: (i64, i64)) -> u32 {
+        if let Some(map) = &mut self.map {
+            let next = self.count;
+            let number = *map.entry(key).or_insert(next);
+            self.count += u32::from(number == next);
+            return number;
+        }
+        let grid = self.grid.get_or_insert_with(|| BinGrid {
+            x0: key.0,
+            z0: key.1,
+            width: 1,
+            depth: 1,
+            slots: vec![u32::MAX],
+        });
+        let at = match grid.at(key) {
+            Some(at) => at,
+            None => match grid.grown_to(key) {
+                Some(grown) => {
+                    *grid = grown;
+                    // The grown grid spans the key: `grown_to` made it so.
+                    grid.at(key).unwrap_or_default()
+                }
+                None => {
+                    self.map = Some(grid.numbered().collect());
+                    self.grid = None;
+                    return self.of(key);
+                }
+            },
+        };
+        let slot = &mut grid.slots[at];
         if *slot == u32::MAX {
-            *slot = count;
-            count += 1;
+            *slot = self.count;
+            self.count += 1;
         }
         *slot
-    };
-    let numbers = match span {
-        None => keys.map(|_| None).collect(),
-        Some((x_low, x_high, z_low, z_high)) => {
-            let width = x_high.saturating_sub(x_low).saturating_add(1);
-            let depth = z_high.saturating_sub(z_low).saturating_add(1);
-            if width
-                .checked_mul(depth)
-                .is_some_and(|n| n <= MOST_GRID_BINS)
-            {
-                let mut grid = vec![u32::MAX; (width * depth) as usize];
-                keys.map(|key| {
-                    key.map(|(x, z)| {
-                        number(&mut grid[((z - z_low) * width + (x - x_low)) as usize])
-                    })
-                })
-                .collect()
-            } else {
-                let mut map = std::collections::HashMap::new();
-                keys.map(|key| key.map(|key| number(map.entry(key).or_insert(u32::MAX))))
-                    .collect()
-            }
-        }
-    };
-    (count as usize, numbers)
+    }
 }
 
 /// The shape estimated beside a relief of the ground: a mean per bin of
@@ -412,4 +488,58 @@ fn per_cell(
         sums[e.cell as usize] += e.n * value(e, *bin);
     }
     sums
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The grid that grows numbers the keys as a map filled in order does,
+    /// near and far, across its growth and past its size into a map.
+    #[test]
+    fn bins_are_numbered_in_the_order_first_met() {
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as i64
+        };
+        let mut keys: Vec<Option<(i64, i64)>> = (0..5000)
+            .map(|k| (k % 17 != 0).then(|| (next() % 60 - 30, next() % 40 - 20)))
+            .collect();
+        // Far keys, and keys at the ends of i64, turn the grid into a map.
+        keys.splice(
+            2500..2500,
+            [
+                Some((4000, -3000)),
+                Some((i64::MIN, i64::MAX)),
+                Some((5, 5)),
+            ],
+        );
+        keys.extend((0..100).map(|k| Some((k % 7, -k % 5))));
+        let mut map = std::collections::HashMap::new();
+        let expected: Vec<Option<u32>> = keys
+            .iter()
+            .map(|key| {
+                key.map(|key| {
+                    let next = map.len() as u32;
+                    *map.entry(key).or_insert(next)
+                })
+            })
+            .collect();
+        let (count, numbers) = number_in_order_met(keys.iter().copied());
+        assert_eq!((count, &numbers), (map.len(), &expected));
+        let near = &keys[..2500];
+        let (count, numbers) = number_in_order_met(near.iter().copied());
+        assert_eq!(numbers, expected[..2500]);
+        assert_eq!(
+            count,
+            expected[..2500]
+                .iter()
+                .flatten()
+                .max()
+                .map_or(0, |n| *n as usize + 1)
+        );
+    }
 }
