@@ -379,4 +379,58 @@ mod tests {
         let fixed = run(true, &mut rng);
         assert!(fixed.sigmas() > 8.0, "{fixed:?}");
     }
+
+    /// The flips made key by key, all at once, give the sizes one flip at
+    /// a time gives, bit for bit: keys met in any order, several entries
+    /// of a pose on one key (a bin of the ground), entries left out.
+    #[test]
+    fn all_flips_at_once_are_the_flips_one_at_a_time() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (poses, keys) = (23usize, 301usize);
+        let entries: Vec<(u32, u32, f64)> = (0..poses)
+            .flat_map(|pose| (0..500).map(move |k| (pose, k)))
+            .map(|(pose, _)| (rng.gen_range(0..keys) as u32, pose as u32, normal(&mut rng)))
+            .collect();
+        let left_out = |k: usize| k.is_multiple_of(11);
+        let entry = |k: usize| (!left_out(k)).then_some(entries[k]);
+        let weights: Vec<f64> = (0..keys).map(|k| 1.0 + k as f64 % 7.0).collect();
+        let shape_of = |sums: &[f64]| -> Vec<f64> {
+            let mean = sums.iter().sum::<f64>() / sums.len() as f64;
+            sums.iter()
+                .zip(&weights)
+                .map(|(s, w)| (s - mean) / w)
+                .collect()
+        };
+        let observed = shape_of(&vec![0.5; keys]);
+        let found = flip_test_over(entries.len(), entry, poses, &weights, &observed, shape_of);
+        // One flip at a time, over the entries in their order.
+        let mut state = 0x666c_6970_u64;
+        let sizes: Vec<f64> = (0..FLIPS)
+            .map(|_| {
+                let signs: Vec<f64> = (0..poses)
+                    .map(|_| {
+                        if splitmix64(&mut state) >> 63 == 1 {
+                            1.0
+                        } else {
+                            -1.0
+                        }
+                    })
+                    .collect();
+                let mut sums = vec![0.0; keys];
+                for (key, pose, value) in (0..entries.len()).filter_map(entry) {
+                    sums[key as usize] += signs[pose as usize] * value;
+                }
+                shape_of(&sums)
+                    .iter()
+                    .zip(&weights)
+                    .map(|(s, w)| w * s * s)
+                    .sum()
+            })
+            .collect();
+        let mean = sizes.iter().sum::<f64>() / FLIPS as f64;
+        let sigma =
+            (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (FLIPS as f64 - 1.0)).sqrt();
+        assert_eq!(found.null_mean.to_bits(), mean.to_bits());
+        assert_eq!(found.null_sigma.to_bits(), sigma.to_bits());
+    }
 }
