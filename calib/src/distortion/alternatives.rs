@@ -69,9 +69,10 @@ pub(super) fn depth_dependence(
     };
     // Each cell's mean depth over the poses that saw it.
     let (mut sum, mut weight) = (vec![0.0; cells], vec![0.0; cells]);
+    let weights = noise.weights();
     for e in entries {
         if let Some(z) = depth(e) {
-            let w = 1.0 / noise.of_mean(e.n);
+            let w = weights.of(e.n);
             sum[e.cell as usize] += w * z;
             weight[e.cell as usize] += w;
         }
@@ -85,7 +86,7 @@ pub(super) fn depth_dependence(
                 return None;
             };
             let x = shape[k] * (z - sum[k] / weight[k]);
-            Some((e.pose, 1.0 / noise.of_mean(e.n), x, e.residual))
+            Some((e.pose, weights.of(e.n), x, e.residual))
         })
     };
     let (mut xx, mut xe, mut ww) = (0.0, 0.0, 0.0);

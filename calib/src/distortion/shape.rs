@@ -753,11 +753,11 @@ pub(super) fn cell_variances(
     noise: &CellNoise,
 ) -> Vec<f64> {
     let cells = kept.seen.len();
+    let weights = noise.weights();
     let mut information = vec![0.0; cells];
     for (i, pose) in poses.iter().enumerate() {
         for &k in &kept.taken[i] {
-            let n = pose.cells[k as usize].n;
-            information[k as usize] += 1.0 / noise.of_mean(n);
+            information[k as usize] += weights.of(pose.cells[k as usize].n);
         }
     }
     information
