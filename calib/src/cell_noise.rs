@@ -220,13 +220,14 @@ pub fn flip_test(
 /// another way, or less something, where a copy of a calibration's
 /// entries was 6 MB at the peak.
 ///
-/// Every flip's sums are made key by key, all flips at once: a key's
-/// entries (in their order, by a stable sort of their indices) are read
-/// once, each adding its value times every flip's sign of its pose, where
-/// a flip at a time read all the entries forty times (the estimate's
-/// benchmark: see docs/performance.md). Each flip's sum of a key adds the
-/// same products in the same order as one flip at a time would, so the
-/// sizes are the same, bit for bit (a sign is ±1, its product exact).
+/// The flips are made [`FLIP_BLOCK`] at a time: each entry, read once a
+/// block, adds its value times each of the block's signs of its pose to
+/// its key's sums, where a flip at a time read all the entries forty times
+/// (docs/performance.md). Each flip's sum of a key adds the same products
+/// in the same order as one flip at a time would, so the sizes are the
+/// same, bit for bit (a sign is ±1, its product exact). Every flip at
+/// once, key by key, was slower (an index of the entries by key, and
+/// forty sums a key: 3 MB more at the peak).
 pub fn flip_test_over(
     count: usize,
     entry: impl Fn(usize) -> Option<(u32, u32, f64)> + Sync,
@@ -250,25 +251,24 @@ pub fn flip_test_over(
             };
         }
     }
-    let by_key = KeyOrder::of(count, weights.len(), |k| entry(k).map(|(key, _, _)| key));
-    // Each key's sums for every flip, made on every core, a range of keys
-    // each.
-    let mut sums = vec![[0.0; FLIPS]; weights.len()];
-    sums.par_chunks_mut(KEYS_A_TASK)
-        .enumerate()
-        .for_each(|(chunk, rows)| {
-            let keys = FlipKeys {
-                first: chunk * KEYS_A_TASK,
-                by_key: &by_key,
-                signs: &signs,
-            };
-            keys.sum_into(rows, &entry);
-        });
-    let sizes: Vec<f64> = (0..FLIPS)
+    // A block of flips at a time, on every core: each block reads the
+    // entries once, in their order, adding each to its key's sums of the
+    // block's flips (one cache line).
+    let sizes: Vec<f64> = (0..FLIPS / FLIP_BLOCK)
         .into_par_iter()
-        .map(|flip| {
-            let column: Vec<f64> = sums.iter().map(|row| row[flip]).collect();
-            size(&shape_of(&column))
+        .flat_map_iter(|block| {
+            let signs: Vec<[f64; FLIP_BLOCK]> = signs
+                .iter()
+                .map(|pose| std::array::from_fn(|j| pose[block * FLIP_BLOCK + j]))
+                .collect();
+            let mut sums = vec![[0.0; FLIP_BLOCK]; weights.len()];
+            add_flipped(&mut sums, &signs, count, &entry);
+            (0..FLIP_BLOCK)
+                .map(|j| {
+                    let column: Vec<f64> = sums.iter().map(|row| row[j]).collect();
+                    size(&shape_of(&column))
+                })
+                .collect::<Vec<f64>>()
         })
         .collect();
     let n = sizes.len() as f64;
@@ -281,97 +281,64 @@ pub fn flip_test_over(
     }
 }
 
-/// A range of keys' flip sums, from the first key on.
-struct FlipKeys<'a> {
-    first: usize,
-    by_key: &'a KeyOrder,
-    signs: &'a [[f64; FLIPS]],
-}
+/// Flips made together: one cache line of sums a key.
+const FLIP_BLOCK: usize = 8;
+const _: () = assert!(FLIPS.is_multiple_of(FLIP_BLOCK), "whole blocks of flips");
 
-impl FlipKeys<'_> {
-    /// Adds every entry of each key of `rows` times every flip's sign of
-    /// its pose. Where the processor has AVX2, the same loop four lanes at
-    /// a time: the same products and sums (a multiply, then an add), bit
-    /// for bit.
-    fn sum_into<E>(&self, rows: &mut [[f64; FLIPS]], entry: &E)
-    where
-        E: Fn(usize) -> Option<(u32, u32, f64)>,
-    {
-        #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the processor has AVX2, checked just above.
-            #[allow(unsafe_code)]
-            unsafe {
-                self.sum_into_avx2(rows, entry)
-            };
-            return;
-        }
-        self.sum_into_lanes(rows, entry);
-    }
-
+/// Adds each of `count` entries, in order, times each flip's sign of its
+/// pose to its key's `sums`. Where the processor has AVX2, the same loop
+/// four lanes at a time: the same products and sums (a multiply, then an
+/// add), bit for bit.
+fn add_flipped<E>(
+    sums: &mut [[f64; FLIP_BLOCK]],
+    signs: &[[f64; FLIP_BLOCK]],
+    count: usize,
+    entry: &E,
+) where
+    E: Fn(usize) -> Option<(u32, u32, f64)>,
+{
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn sum_into_avx2<E>(&self, rows: &mut [[f64; FLIPS]], entry: &E)
-    where
-        E: Fn(usize) -> Option<(u32, u32, f64)>,
-    {
-        self.sum_into_lanes(rows, entry);
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2, checked just above.
+        #[allow(unsafe_code)]
+        unsafe {
+            add_flipped_avx2(sums, signs, count, entry)
+        };
+        return;
     }
-
-    #[inline(always)]
-    fn sum_into_lanes<E>(&self, rows: &mut [[f64; FLIPS]], entry: &E)
-    where
-        E: Fn(usize) -> Option<(u32, u32, f64)>,
-    {
-        for (offset, row) in rows.iter_mut().enumerate() {
-            for &k in self.by_key.of_key(self.first + offset) {
-                if let Some((_, pose, value)) = entry(k as usize) {
-                    let signs = &self.signs[pose as usize];
-                    for (sum, sign) in row.iter_mut().zip(signs) {
-                        *sum += sign * value;
-                    }
-                }
-            }
-        }
-    }
+    add_flipped_lanes(sums, signs, count, entry);
 }
 
-/// Keys whose flip sums a task makes (a few hundred: enough to spread over
-/// the cores, few enough that each task's rows stay in its cache).
-const KEYS_A_TASK: usize = 256;
-
-/// The entries' indices sorted by key, stably (a counting sort): key `k`'s
-/// entries are `of(k)`, in the order they were made.
-struct KeyOrder {
-    starts: Vec<u32>,
-    indices: Vec<u32>,
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn add_flipped_avx2<E>(
+    sums: &mut [[f64; FLIP_BLOCK]],
+    signs: &[[f64; FLIP_BLOCK]],
+    count: usize,
+    entry: &E,
+) where
+    E: Fn(usize) -> Option<(u32, u32, f64)>,
+{
+    add_flipped_lanes(sums, signs, count, entry);
 }
 
-impl KeyOrder {
-    fn of(count: usize, keys: usize, key: impl Fn(usize) -> Option<u32>) -> Self {
-        let mut starts = vec![0u32; keys + 1];
-        for k in 0..count {
-            if let Some(key) = key(k) {
-                starts[key as usize + 1] += 1;
+#[inline(always)]
+fn add_flipped_lanes<E>(
+    sums: &mut [[f64; FLIP_BLOCK]],
+    signs: &[[f64; FLIP_BLOCK]],
+    count: usize,
+    entry: &E,
+) where
+    E: Fn(usize) -> Option<(u32, u32, f64)>,
+{
+    for k in 0..count {
+        if let Some((key, pose, value)) = entry(k) {
+            let row = &mut sums[key as usize];
+            let signs = &signs[pose as usize];
+            for (sum, sign) in row.iter_mut().zip(signs) {
+                *sum += sign * value;
             }
         }
-        for k in 0..keys {
-            starts[k + 1] += starts[k];
-        }
-        let mut next = starts.clone();
-        let mut indices = vec![0u32; starts[keys] as usize];
-        for k in 0..count {
-            if let Some(key) = key(k) {
-                let at = &mut next[key as usize];
-                indices[*at as usize] = k as u32;
-                *at += 1;
-            }
-        }
-        Self { starts, indices }
-    }
-
-    fn of_key(&self, key: usize) -> &[u32] {
-        &self.indices[self.starts[key] as usize..self.starts[key + 1] as usize]
     }
 }
 
