@@ -198,7 +198,7 @@ pub(super) fn ground_bins(
     poses: &[&GroundResiduals],
     entries: &[Entry],
     ground_from_sensor: &[crate::geometry::Transform],
-) -> (usize, Vec<Option<u32>>) {
+) -> (usize, Vec<Bin>) {
     let first = poses[0];
     let k = first.intrinsics;
     let sensor_from_optical = crate::geometry::sensor_from_optical();
@@ -240,13 +240,13 @@ pub(super) fn ground_fixed(
     poses: usize,
     entries: &[Entry],
     bins: usize,
-    bin_of: &[Option<u32>],
+    bin_of: &[Bin],
 ) -> FlipTest {
     let binned = || {
         entries
             .iter()
             .zip(bin_of)
-            .filter_map(|(e, bin)| bin.map(|bin| (bin, e)))
+            .filter_map(|(e, bin)| bin.number().map(|bin| (bin, e)))
     };
     let mut weights = vec![0.0; bins];
     let mut sums = vec![0.0; bins];
@@ -265,8 +265,7 @@ pub(super) fn ground_fixed(
         |k| {
             bin_of
                 .get(k)
-                .copied()
-                .flatten()
+                .and_then(|bin| bin.number())
                 .map(|bin| (bin, entries[k].pose, entries[k].n * entries[k].residual))
         },
         poses,
@@ -276,6 +275,26 @@ pub(super) fn ground_fixed(
     )
 }
 
+/// An entry's bin of the ground, or none (its cell's ray misses the
+/// ground): four bytes, where an `Option<u32>` takes eight (a calibration's
+/// entries' bins were 1.5 MB at the estimate's peak).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Bin(Option<std::num::NonZeroU32>);
+
+impl Bin {
+    pub(super) const NONE: Bin = Bin(None);
+
+    /// Bin `number` (below `u32::MAX`: there are fewer bins than entries).
+    fn numbered(number: u32) -> Bin {
+        Bin(std::num::NonZeroU32::new(number.saturating_add(1)))
+    }
+
+    /// The bin's number, if the entry has one.
+    pub(super) fn number(self) -> Option<u32> {
+        self.0.map(|n| n.get() - 1)
+    }
+}
+
 /// Numbers the keys in the order they are first met (the bins' numbers,
 /// and so the order of every sum over them, as a map filled in that order
 /// gives them): the count of bins and each key's number. Over a grid that
@@ -283,11 +302,11 @@ pub(super) fn ground_fixed(
 /// (a calibration's ground: a few thousand), a map beyond: with std's map
 /// the estimate's benchmark took 28.3–31.1 ms, with a grid 26.0–27.5
 /// (three runs of each in turn). One pass: each key is made once.
-fn number_in_order_met(
-    keys: impl Iterator<Item = Option<(i64, i64)>>,
-) -> (usize, Vec<Option<u32>>) {
+fn number_in_order_met(keys: impl Iterator<Item = Option<(i64, i64)>>) -> (usize, Vec<Bin>) {
     let mut numbers = BinNumbers::default();
-    let numbered = keys.map(|key| key.map(|key| numbers.of(key))).collect();
+    let numbered = keys
+        .map(|key| key.map_or(Bin::NONE, |key| Bin::numbered(numbers.of(key))))
+        .collect();
     (numbers.count as usize, numbered)
 }
 
@@ -411,16 +430,20 @@ impl BinNumbers {
 /// (it would take in those poses' cells whole).
 pub(super) fn shape_beside_relief(
     entries: &[Entry],
-    bin_of: &[Option<u32>],
+    bin_of: &[Bin],
     poses: usize,
     weights: &[f64],
     shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
 ) -> ReliefTest {
-    let bins = bin_of.iter().flatten().max().map_or(0, |b| *b as usize + 1);
+    let bins = bin_of
+        .iter()
+        .filter_map(|b| b.number())
+        .max()
+        .map_or(0, |b| b as usize + 1);
     let mut seen_by = vec![(0u32, u32::MAX); bins];
     for (e, bin) in entries.iter().zip(bin_of) {
-        if let Some(b) = bin {
-            let (count, last) = &mut seen_by[*b as usize];
+        if let Some(b) = bin.number() {
+            let (count, last) = &mut seen_by[b as usize];
             if *last != e.pose {
                 *count += 1;
                 *last = e.pose;
@@ -435,7 +458,7 @@ pub(super) fn shape_beside_relief(
     for _ in 0..RELIEF_TURNS {
         let mut sums = vec![(0.0, 0.0); bins];
         for (e, bin) in entries.iter().zip(bin_of) {
-            if let Some(b) = bin.filter(|b| seen_by[*b as usize].0 >= 3) {
+            if let Some(b) = bin.number().filter(|b| seen_by[*b as usize].0 >= 3) {
                 let (s, w) = &mut sums[b as usize];
                 *s += e.n * (e.about_plane - shape[e.cell as usize]);
                 *w += e.n;
@@ -455,8 +478,7 @@ pub(super) fn shape_beside_relief(
         let about_plane = e.about_plane
             - bin_of
                 .get(k)
-                .copied()
-                .flatten()
+                .and_then(|bin| bin.number())
                 .map_or(0.0, |b| relief[b as usize]);
         Some((e.cell, e.pose, e.n * about_plane))
     };
@@ -464,8 +486,8 @@ pub(super) fn shape_beside_relief(
     // The relief's size over the ground seen, weighted by readings.
     let (mut relief_sum, mut readings) = (0.0, 0.0);
     for (e, bin) in entries.iter().zip(bin_of) {
-        if let Some(b) = bin {
-            relief_sum += e.n * relief[*b as usize].powi(2);
+        if let Some(b) = bin.number() {
+            relief_sum += e.n * relief[b as usize].powi(2);
             readings += e.n;
         }
     }
@@ -480,13 +502,13 @@ pub(super) fn shape_beside_relief(
 /// Per cell, `Σ n·value` of the entries (with each its bin).
 fn per_cell(
     entries: &[Entry],
-    bin_of: &[Option<u32>],
+    bin_of: &[Bin],
     cells: usize,
     value: impl Fn(&Entry, Option<u32>) -> f64,
 ) -> Vec<f64> {
     let mut sums = vec![0.0; cells];
     for (e, bin) in entries.iter().zip(bin_of) {
-        sums[e.cell as usize] += e.n * value(e, *bin);
+        sums[e.cell as usize] += e.n * value(e, bin.number());
     }
     sums
 }
@@ -529,10 +551,13 @@ mod tests {
                 })
             })
             .collect();
-        let (count, numbers) = number_in_order_met(keys.iter().copied());
+        let numbers_of = |keys: &[Option<(i64, i64)>]| {
+            let (count, bins) = number_in_order_met(keys.iter().copied());
+            (count, bins.into_iter().map(Bin::number).collect::<Vec<_>>())
+        };
+        let (count, numbers) = numbers_of(&keys);
         assert_eq!((count, &numbers), (map.len(), &expected));
-        let near = &keys[..2500];
-        let (count, numbers) = number_in_order_met(near.iter().copied());
+        let (count, numbers) = numbers_of(&keys[..2500]);
         assert_eq!(numbers, expected[..2500]);
         assert_eq!(
             count,
