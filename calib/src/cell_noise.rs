@@ -434,11 +434,11 @@ mod tests {
         assert!(fixed.sigmas() > 8.0, "{fixed:?}");
     }
 
-    /// The flips made key by key, all at once, give the sizes one flip at
-    /// a time gives, bit for bit: keys met in any order, several entries
-    /// of a pose on one key (a bin of the ground), entries left out.
+    /// The flips made a block at a time give the sizes one flip at a
+    /// time gives, bit for bit: keys met in any order, several entries of
+    /// a pose on one key (a bin of the ground), entries left out.
     #[test]
-    fn all_flips_at_once_are_the_flips_one_at_a_time() {
+    fn flips_made_in_blocks_are_the_flips_one_at_a_time() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let (poses, keys) = (23usize, 301usize);
         let entries: Vec<(u32, u32, f64)> = (0..poses)
