@@ -357,3 +357,27 @@ fn lossy_network_with_the_robot_in_a_process() {
 fn restart_with_the_robot_in_a_process() {
     scenario("process-restart", Start::Process, Some(20));
 }
+
+/// A SIGTERM sent the moment the lower computer prints its address stops
+/// it cleanly (exit 0, its stats on stderr): its handlers are installed
+/// before the address is printed. They were installed when the server
+/// first waited for a signal, after it, and a test that stopped the robot
+/// at once (a schedule refused before the robot moves) saw it killed by
+/// the signal's default action on a loaded CI machine.
+#[test]
+fn a_signal_as_soon_as_the_address_is_printed_stops_the_lower_computer_cleanly() {
+    for _ in 0..40 {
+        let (child, _address) = common::spawn_sim_robot(&[], &[]);
+        // SAFETY: kill(2) on our own child's pid, with no memory involved.
+        #[allow(unsafe_code)]
+        let sent = unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+        assert_eq!(sent, 0, "the signal was sent");
+        let output = child.wait_with_output().expect("sim-robot exits");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            output.status.success() && stderr.contains("sim-robot: stats {"),
+            "sim-robot exited with {}: {stderr}",
+            output.status
+        );
+    }
+}
