@@ -230,7 +230,7 @@ pub fn flip_test(
 /// forty sums a key: 3 MB more at the peak).
 pub fn flip_test_over(
     count: usize,
-    entry: impl Fn(usize) -> Option<(u32, u32, f64)> + Sync,
+    entry: impl Fn(usize) -> FlipEntry + Sync,
     poses: usize,
     weights: &[f64],
     observed: &[f64],
@@ -285,18 +285,20 @@ pub fn flip_test_over(
 const FLIP_BLOCK: usize = 8;
 const _: () = assert!(FLIPS.is_multiple_of(FLIP_BLOCK), "whole blocks of flips");
 
+/// One entry as a flip test reads it: its key, its pose and its `n·m`, or
+/// `None` to leave it out.
+type FlipEntry = Option<(u32, u32, f64)>;
+
 /// Adds each of `count` entries, in order, times each flip's sign of its
 /// pose to its key's `sums`. Where the processor has AVX2, the same loop
 /// four lanes at a time: the same products and sums (a multiply, then an
 /// add), bit for bit.
-fn add_flipped<E>(
+fn add_flipped(
     sums: &mut [[f64; FLIP_BLOCK]],
     signs: &[[f64; FLIP_BLOCK]],
     count: usize,
-    entry: &E,
-) where
-    E: Fn(usize) -> Option<(u32, u32, f64)>,
-{
+    entry: &impl Fn(usize) -> FlipEntry,
+) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
@@ -311,33 +313,26 @@ fn add_flipped<E>(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn add_flipped_avx2<E>(
+fn add_flipped_avx2(
     sums: &mut [[f64; FLIP_BLOCK]],
     signs: &[[f64; FLIP_BLOCK]],
     count: usize,
-    entry: &E,
-) where
-    E: Fn(usize) -> Option<(u32, u32, f64)>,
-{
+    entry: &impl Fn(usize) -> FlipEntry,
+) {
     add_flipped_lanes(sums, signs, count, entry);
 }
 
 #[inline(always)]
-fn add_flipped_lanes<E>(
+fn add_flipped_lanes(
     sums: &mut [[f64; FLIP_BLOCK]],
     signs: &[[f64; FLIP_BLOCK]],
     count: usize,
-    entry: &E,
-) where
-    E: Fn(usize) -> Option<(u32, u32, f64)>,
-{
-    for k in 0..count {
-        if let Some((key, pose, value)) = entry(k) {
-            let row = &mut sums[key as usize];
-            let signs = &signs[pose as usize];
-            for (sum, sign) in row.iter_mut().zip(signs) {
-                *sum += sign * value;
-            }
+    entry: &impl Fn(usize) -> FlipEntry,
+) {
+    for (key, pose, value) in (0..count).filter_map(entry) {
+        let row = &mut sums[key as usize];
+        for (sum, sign) in row.iter_mut().zip(&signs[pose as usize]) {
+            *sum += sign * value;
         }
     }
 }
