@@ -192,15 +192,13 @@ pub fn predict_with_depth_pattern(
 ) -> Result<Option<Matrix6<f64>>, SolveError> {
     let observations = exact_observations(body_poses, nominal);
     let settings = prediction_settings(noise, depth_scale);
-    let solution = solve(&observations, &settings)?;
     let per_pose = (
         noise.normal_sigma_deg.to_radians(),
         noise.offset_sigma_mm * 1e-3,
     );
-    Ok(
-        crate::distortion::plane_part_cost(&observations, &settings, per_pose)
-            .map(|cost| solution.covariance + cost),
-    )
+    let (_, with) =
+        crate::distortion::covariance_with_plane_part(&observations, &settings, per_pose)?;
+    Ok(with)
 }
 
 /// Chooses `count` of `candidates` (commanded body poses) whose predicted

@@ -47,7 +47,7 @@ use crate::solve::{self, Observation, SolveError, SolveSettings};
 
 pub use crate::depth::DepthCorrection;
 pub use alternatives::{DepthDependence, ReliefTest};
-pub use plane_part::plane_part_cost;
+pub use plane_part::{covariance_with_plane_part, plane_part_cost};
 pub use shape::{estimate_shape, estimate_shape_seen_from, ShapeEstimate};
 
 pub use crate::residuals::{cell_centre, GroundResiduals, CELL_PX};

@@ -95,6 +95,23 @@ pub fn plane_part_cost(
     Some(s * covariance * s.transpose())
 }
 
+/// The mount's covariance from `exact` observations (planes as the mount
+/// predicts them) under `settings`, and the same with the plane part's cost
+/// added (`None` when the plane part is not observable): what `plan`
+/// predicts for a schedule with a pattern, and what the pattern's gate
+/// judges a calibration's poses by ([`angle_sigma_growth_by_geometry`]).
+pub fn covariance_with_plane_part(
+    exact: &[Observation],
+    settings: &SolveSettings,
+    noise: (f64, f64),
+) -> Result<(Matrix6<f64>, Option<Matrix6<f64>>), SolveError> {
+    let known = solve::solve(exact, settings)?.covariance;
+    Ok((
+        known,
+        plane_part_cost(exact, settings, noise).map(|cost| known + cost),
+    ))
+}
+
 /// Each angle's σ growth (α, β, γ) from estimating the plane part, by the
 /// poses' geometry alone: the poses `solution` used, each seeing the plane
 /// its mount predicts exactly, with `noise` on each (σ of a normal in
@@ -124,8 +141,8 @@ pub(super) fn angle_sigma_growth_by_geometry(
         noise_from_residuals: false,
         ..*settings
     };
-    let known = solve::solve(&exact, &settings).ok()?.covariance;
-    let with = known + plane_part_cost(&exact, &settings, noise)?;
+    let (known, with) = covariance_with_plane_part(&exact, &settings, noise).ok()?;
+    let with = with?;
     let growth = [0, 1, 2].map(|k| (with[(k, k)].max(0.0) / known[(k, k)]).sqrt());
     growth.iter().all(|g| g.is_finite()).then_some(growth)
 }
