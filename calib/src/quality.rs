@@ -214,18 +214,8 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         }
         if let Some((check, with, known)) = pattern_cost_check(gates, pattern, &solution.sigma()) {
             if !check.passed {
-                let (with, known) = apart(with, known, 4);
-                let by = if pattern.angle_sigma_growth_by_geometry.is_some() {
-                    "by its poses' geometry, "
-                } else {
-                    ""
-                };
-                reasons.push(format!(
-                    "the depth pattern was corrected, but this schedule cannot tell the pattern's slope across the image from a tilt of the sensor: {by}correcting it leaves the angle {} {:.1} times less certain than the ground alone pins it, more than the {:.1} times allowed (here ±{with}° instead of ±{known}°); calibrate with a schedule that spreads the body's heights wider ({WIDER_HEIGHTS})",
-                    check.at.as_deref().unwrap_or("of the sensor"),
-                    check.measured,
-                    check.limit,
-                ));
+                let by_geometry = pattern.angle_sigma_growth_by_geometry.is_some();
+                reasons.push(pattern_cost_reason(&check, with, known, by_geometry));
             }
             checks.push(check);
         }
@@ -332,6 +322,28 @@ fn pattern_cost_check(
         place: Some(GatePlace::Parameter { index: k }),
     };
     Some((check, sigma[k].to_degrees(), known[k].to_degrees()))
+}
+
+/// The words of the pattern-cost gate's rejection. Judged by the poses'
+/// geometry, the growth is not the ratio of the two σ measured on this
+/// calibration (the noise met moves those), so they are quoted as what
+/// they are, not as "±with instead of ±known", which a reader divides.
+fn pattern_cost_reason(check: &GateCheck, with: f64, known: f64, by_geometry: bool) -> String {
+    let (with, known) = apart(with, known, 4);
+    let angle = check.at.as_deref().unwrap_or("of the sensor");
+    let (growth, limit) = (check.measured, check.limit);
+    let cost = if by_geometry {
+        format!(
+            "by its poses' geometry, correcting it makes the angle {angle} {growth:.1} times less certain than the ground alone pins it, more than the {limit:.1} times allowed (measured on these poses: ±{with}° with the correction, ±{known}° were the pattern's slope known)"
+        )
+    } else {
+        format!(
+            "correcting it leaves the angle {angle} {growth:.1} times less certain than the ground alone pins it, more than the {limit:.1} times allowed (here ±{with}° instead of ±{known}°)"
+        )
+    };
+    format!(
+        "the depth pattern was corrected, but this schedule cannot tell the pattern's slope across the image from a tilt of the sensor: {cost}; calibrate with a schedule that spreads the body's heights wider ({WIDER_HEIGHTS})"
+    )
 }
 
 /// What correcting a depth pattern's plane part costs the angles, as the
@@ -1026,5 +1038,22 @@ mod tests {
             "{check:?}"
         );
         assert_eq!(check.at.as_deref(), Some("γ (roll)"));
+        // Its words: the growth judged, and the σ measured as measured (a
+        // ratio of 0.0091/0.0008 = 11.4, not the 11.5 judged).
+        let (with, without) = (sigma[2].to_degrees(), known[2].to_degrees());
+        let words = pattern_cost_reason(&check, with, without, true);
+        assert!(
+            words.contains("by its poses' geometry, correcting it makes the angle γ (roll) 11.5 times less certain")
+                && words.contains("measured on these poses: ±0.0091° with the correction, ±0.0008° were the pattern's slope known")
+                && !words.contains("instead of"),
+            "{words}"
+        );
+        // Judged on the σ measured, their ratio is the growth quoted.
+        let measured = pattern_cost_reason(&check, with, without, false);
+        assert!(
+            measured.contains("leaves the angle γ (roll) 11.5 times")
+                && measured.contains("(here ±0.0091° instead of ±0.0008°)"),
+            "{measured}"
+        );
     }
 }
