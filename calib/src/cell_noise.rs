@@ -238,29 +238,13 @@ pub fn flip_test_over(
 ) -> FlipTest {
     use rayon::prelude::*;
     let size = |shape: &[f64]| -> f64 { shape.iter().zip(weights).map(|(s, w)| w * s * s).sum() };
-    // Every flip's signs drawn first, in the one order the seed gives;
-    // kept pose by pose, a pose's signs for every flip side by side.
-    let mut state = 0x666c_6970_u64;
-    let mut signs = vec![[0.0; FLIPS]; poses];
-    for flip in 0..FLIPS {
-        for pose in signs.iter_mut() {
-            pose[flip] = if splitmix64(&mut state) >> 63 == 1 {
-                1.0
-            } else {
-                -1.0
-            };
-        }
-    }
     // A block of flips at a time, on every core: each block reads the
     // entries once, in their order, adding each to its key's sums of the
     // block's flips (one cache line).
-    let sizes: Vec<f64> = (0..FLIPS / FLIP_BLOCK)
+    let sizes: Vec<f64> = (0..FLIP_BLOCK_COUNT)
         .into_par_iter()
         .flat_map_iter(|block| {
-            let signs: Vec<[f64; FLIP_BLOCK]> = signs
-                .iter()
-                .map(|pose| std::array::from_fn(|j| pose[block * FLIP_BLOCK + j]))
-                .collect();
+            let signs = block_signs(block, poses);
             let mut sums = vec![[0.0; FLIP_BLOCK]; weights.len()];
             add_flipped(&mut sums, &signs, count, &entry);
             (0..FLIP_BLOCK)
@@ -283,7 +267,32 @@ pub fn flip_test_over(
 
 /// Flips made together: one cache line of sums a key.
 const FLIP_BLOCK: usize = 8;
+const FLIP_BLOCK_COUNT: usize = FLIPS / FLIP_BLOCK;
 const _: () = assert!(FLIPS.is_multiple_of(FLIP_BLOCK), "whole blocks of flips");
+
+/// The seed of the flips' signs: the same poses give the same verdict.
+const FLIP_SEED: u64 = 0x666c_6970;
+
+/// The signs of block `block`'s flips, pose by pose: flip by flip, each
+/// pose's sign in turn, from one sequence drawn from [`FLIP_SEED`]. A
+/// block's draws follow the blocks before it in that sequence, and
+/// [`splitmix64`]'s state moves by one constant a draw, so each block
+/// starts where they end without drawing them.
+fn block_signs(block: usize, poses: usize) -> Vec<[f64; FLIP_BLOCK]> {
+    let before = (block * FLIP_BLOCK * poses) as u64;
+    let mut state = FLIP_SEED.wrapping_add(before.wrapping_mul(SPLITMIX_STEP));
+    let mut signs = vec![[0.0; FLIP_BLOCK]; poses];
+    for flip in 0..FLIP_BLOCK {
+        for pose in signs.iter_mut() {
+            pose[flip] = if splitmix64(&mut state) >> 63 == 1 {
+                1.0
+            } else {
+                -1.0
+            };
+        }
+    }
+    signs
+}
 
 /// One entry as a flip test reads it: its key, its pose and its `n·m`, or
 /// `None` to leave it out.
@@ -338,8 +347,11 @@ fn add_flipped_lanes(
 }
 
 /// SplitMix64: the signs' generator (a fixed sequence; no crate needed).
+/// How far [`splitmix64`]'s state moves a draw.
+const SPLITMIX_STEP: u64 = 0x9e37_79b9_7f4a_7c15;
+
 fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    *state = state.wrapping_add(SPLITMIX_STEP);
     let mut z = *state;
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
@@ -453,7 +465,7 @@ mod tests {
         let observed = shape_of(&vec![0.5; keys]);
         let found = flip_test_over(entries.len(), entry, poses, &weights, &observed, shape_of);
         // One flip at a time, over the entries in their order.
-        let mut state = 0x666c_6970_u64;
+        let mut state = FLIP_SEED;
         let sizes: Vec<f64> = (0..FLIPS)
             .map(|_| {
                 let signs: Vec<f64> = (0..poses)
