@@ -19,6 +19,7 @@
 //! - [`observe`]: one pose's evidence (feet and frames) to one observation;
 //! - [`outcome`]: what a calibration found, shared by the solve and the verdict;
 //! - [`solve`]: `robot_from_sensor` from all observations (paper 4.3);
+//! - [`disagreement`]: whether the poses' e_d is the depth camera's noise growing with distance;
 //! - [`quality`]: θ and e_d (paper 5.2), gates and the verdict;
 //! - [`distortion`]: the Kinect's fixed depth pattern, found with the mount;
 //! - [`calibrate`]: the solve then the verdict, in one call;
@@ -36,6 +37,7 @@ pub mod body;
 pub mod calibrate;
 pub mod cell_noise;
 pub mod depth;
+pub mod disagreement;
 pub mod disparity;
 pub mod distortion;
 pub mod geometry;

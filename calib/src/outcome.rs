@@ -162,6 +162,40 @@ pub struct Calibration {
     pub depth_scale: DepthScale,
     /// The depth pattern, when estimated.
     pub depth_pattern: Option<DepthPattern>,
+    /// When the gate on `e_d` failed on flat ground with no foot slipped,
+    /// and the poses' disagreement grows with the ground's distance so that
+    /// its largest is ordinary for its distance: the depth camera's noise,
+    /// not the ground or the body.
+    pub e_d_from_sensor_noise: Option<GrowthWithDistance>,
+}
+
+/// A pattern is not the sensor's fixed one when a test of an alternative
+/// finds it by this many of its σ: a pattern that changes with the depth
+/// (`distortion::DepthDependence`), or residuals that stay with the ground as the
+/// poses move (`distortion::ShapeEstimate::fixed_in_the_ground`). The noise these σ
+/// are of comes from the poses' own scatter (a real Kinect's is correlated
+/// over the image, so no count of pixels can say it).
+pub const ALTERNATIVE_SIGMAS: f64 = 5.0;
+
+/// The poses' height disagreement as it grows with the ground's distance
+/// (`crate::disagreement`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GrowthWithDistance {
+    /// `e_d`'s σ grows as the distance to this power.
+    pub exponent: f64,
+    /// The exponent in its own σ: how clearly the growth stands out.
+    pub exponent_sigmas: f64,
+    /// The nearest used pose's ground distance (m) and `e_d`'s σ there (m).
+    pub nearest: [f64; 2],
+    /// The farthest used pose's ground distance (m) and `e_d`'s σ there (m).
+    pub farthest: [f64; 2],
+    /// The pose with the largest `e_d`: its index, and that `e_d` in its
+    /// σ at the pose's distance.
+    pub worst_pose: u32,
+    pub worst_sigmas: f64,
+    /// The most, in σ, that the largest of this many poses' `e_d` reaches
+    /// by chance once in a hundred calibrations.
+    pub worst_bound: f64,
 }
 
 /// One quality gate as it was checked: its limit, the value measured and

@@ -4,9 +4,10 @@
 use nalgebra::Vector6;
 use serde::{Deserialize, Serialize};
 
+use crate::disagreement::growth_with_distance;
 use crate::outcome::{
-    position_words, rotation_words, Calibration, GateCheck, GatePlace, Observability, PoseOutcome,
-    Solution, Summary, Verdict,
+    position_words, rotation_words, Calibration, GateCheck, GatePlace, GrowthWithDistance,
+    Observability, PoseOutcome, Solution, Summary, Verdict,
 };
 
 /// Thresholds a calibration must meet to be accepted. Degrees and millimetres,
@@ -143,12 +144,14 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         &solution.observability,
     );
     let mut checks = checks;
+    let e_d_from_sensor_noise = e_d_from_sensor_noise(&solution, &checks);
     let mut reasons = judge_checked(
         gates,
         &summary,
         &solution.sigma(),
         &solution.observability,
         &checks,
+        e_d_from_sensor_noise.as_ref(),
     );
     if let Some(check) = depth_scale_check(gates, &solution.depth_scale) {
         if !check.passed {
@@ -238,6 +241,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         checks,
         depth_scale: solution.depth_scale,
         depth_pattern: solution.depth_pattern,
+        e_d_from_sensor_noise,
     }
 }
 
@@ -346,6 +350,28 @@ fn pattern_cost_reason(check: &GateCheck, with: f64, known: f64, by_geometry: bo
     )
 }
 
+/// Whether the failed gate on `e_d` is the depth camera's noise: the
+/// ground showed no relief (the depth pattern's test of residuals that stay
+/// with the ground ran and found none), no used pose's feet moved, and the
+/// poses' disagreement grows with the ground's distance so that its
+/// largest is ordinary there ([`crate::disagreement`]). Without the
+/// ground's test nothing is said: growth with distance alone does not
+/// tell the noise from a ground that tilts away.
+fn e_d_from_sensor_noise(solution: &Solution, checks: &[GateCheck]) -> Option<GrowthWithDistance> {
+    checks
+        .iter()
+        .find(|c| c.gate == "e_d_max_mm")
+        .filter(|c| !c.passed)?;
+    let flat = solution
+        .depth_pattern
+        .as_ref()
+        .and_then(|p| p.fixed_in_the_ground_sigmas)
+        .is_some_and(|sigmas| sigmas <= crate::outcome::ALTERNATIVE_SIGMAS);
+    let feet_held = solution.poses.iter().all(|p| !p.used || p.note.is_none());
+    growth_with_distance(&solution.poses)
+        .filter(|growth| flat && feet_held && growth.explains_the_largest())
+}
+
 /// What correcting a depth pattern's plane part costs the angles, as the
 /// gate `pattern_angle_sigma_growth_max` judges it and `plan` predicts it:
 /// the largest ratio of an angle's σ with the part estimated to its σ with
@@ -386,6 +412,20 @@ pub fn summarise(poses: &[PoseOutcome]) -> Summary {
 
 /// What to do about a σ too large, in words an operator can act on.
 const UNCERTAIN: &str = "calibrate again with the robot on open, flat ground and nothing moving in view; if it stays this uncertain, the schedule needs larger tilts (a maintainer's groundcal plan)";
+
+/// Why the poses disagree when it is the depth camera's noise, in figures
+/// the technician can check against the page's chart of `e_d`.
+fn sensor_noise_words(growth: &GrowthWithDistance) -> String {
+    let [near_m, near_sigma] = growth.nearest;
+    let [far_m, far_sigma] = growth.farthest;
+    format!(
+        "the ground showed no relief and no foot was seen to slip, and the poses' disagreement grows with the ground's distance as a depth camera's noise does (±{:.1} mm at {near_m:.2} m, ±{:.1} mm at {far_m:.2} m), so pose {}'s is ordinary for its distance ({:.1}σ). The sensor is noisier at this schedule's farthest poses than the gate allows, and calibrating again here will not change that: unless a foot has sunk into soft ground, keep the last calibration and report it to a maintainer (a schedule with nearer ground, or a wider gate for this sensor)",
+        near_sigma * 1e3,
+        far_sigma * 1e3,
+        growth.worst_pose,
+        growth.worst_sigmas,
+    )
+}
 
 /// Why a σ is too large when the ground and the body poses disagree beyond
 /// their gates: the σ is taken from that disagreement, so open ground would
@@ -579,16 +619,18 @@ pub fn judge(
     observability: &Observability,
 ) -> Vec<String> {
     let checks = check_gates(gates, summary, poses, sigma, observability);
-    judge_checked(gates, summary, sigma, observability, &checks)
+    judge_checked(gates, summary, sigma, observability, &checks, None)
 }
 
-/// [`judge`] from the checks of [`check_gates`].
+/// [`judge`] from the checks of [`check_gates`], and, when the failed gate
+/// on `e_d` is the depth camera's noise, how that noise grows.
 fn judge_checked(
     gates: &Gates,
     summary: &Summary,
     sigma: &Vector6<f64>,
     observability: &Observability,
     checks: &[GateCheck],
+    e_d_from_sensor_noise: Option<&GrowthWithDistance>,
 ) -> Vec<String> {
     let failed = |gate: &str| checks.iter().find(|c| c.gate == gate).filter(|c| !c.passed);
     let mut reasons: Vec<String> = observability.problems.clone();
@@ -623,8 +665,12 @@ fn judge_checked(
     }
     if let Some(check) = failed("e_d_max_mm") {
         let (measured, limit) = apart(check.measured, gates.e_d_max_mm, 1);
+        let why = match e_d_from_sensor_noise {
+            Some(growth) => sensor_noise_words(growth),
+            None => "the ground may not be flat, or the body pose is wrong".to_string(),
+        };
         reasons.push(format!(
-            "the measured ground height disagrees with the result by up to {measured} mm (pose {}), more than the {limit} mm allowed: the ground may not be flat, or the body pose is wrong",
+            "the measured ground height disagrees with the result by up to {measured} mm (pose {}), more than the {limit} mm allowed: {why}",
             worst(check),
         ));
     }
@@ -1001,6 +1047,92 @@ mod tests {
         let (past, _, _) =
             pattern_cost_check(&gates, &pattern(true, tiny_known), &one_past).unwrap();
         assert!(!past.passed, "one angle past 0.005° is judged by the ratio");
+    }
+
+    /// A failed gate on `e_d` is put down to the depth camera's noise only
+    /// when the poses' disagreement grows with distance, the ground's own
+    /// test found no relief, and no foot was seen to slip; otherwise the
+    /// words stay those of a ground or a body that is wrong.
+    #[test]
+    fn a_disagreement_is_the_sensors_noise_only_on_flat_ground_with_the_feet_held() {
+        let z = [
+            0.3, 1.1, 0.7, 1.6, 0.2, 0.9, 1.3, 0.5, 2.1, 0.1, 0.8, 1.0, 0.4,
+        ];
+        let poses: Vec<PoseOutcome> = (0..52u32)
+            .map(|i| {
+                let d = 0.65 + 0.6 * (f64::from(i) * 0.618_034).fract();
+                let mut p = pose(i + 1, true, 0.05, 2.0 * d.powi(4) * z[i as usize % z.len()]);
+                p.measured.d = d;
+                p
+            })
+            .collect();
+        let ground_test = |sigmas: Option<f64>| crate::outcome::DepthPattern {
+            fixed_in_the_ground_sigmas: sigmas,
+            ..crate::outcome::DepthPattern::not_estimated(String::new())
+        };
+        let solution =
+            |poses: Vec<PoseOutcome>, pattern: Option<crate::outcome::DepthPattern>| Solution {
+                robot_from_sensor: crate::geometry::PoseParams {
+                    alpha: 0.0,
+                    beta: -0.6,
+                    gamma: 0.0,
+                    translation: Vector3::new(0.5, 0.37, 0.0),
+                },
+                covariance: nalgebra::Matrix6::identity() * 1e-12,
+                poses,
+                observability: observability(0.5, Vec::new()),
+                variance_factors: (1.0, 1.0),
+                noise_per_pose: (1e-4, 1e-4),
+                iterations: 1,
+                depth_scale: crate::outcome::DepthScale::fixed(1.0, "given".into()),
+                depth_pattern: pattern,
+            };
+        let gates = Gates::default();
+        let flat = assess(
+            solution(poses.clone(), Some(ground_test(Some(0.4)))),
+            52,
+            &gates,
+        );
+        let growth = flat.e_d_from_sensor_noise.expect("the sensor's noise");
+        let words = flat
+            .reasons
+            .iter()
+            .find(|r| r.contains("ground height"))
+            .unwrap();
+        assert!(
+            words.contains("grows with the ground's distance")
+                && words.contains(&format!("pose {}'s is ordinary", growth.worst_pose))
+                && !words.contains("may not be flat"),
+            "{words}"
+        );
+        // The ground's test found relief, or never ran; a foot slipped.
+        let mut slipped = poses.clone();
+        slipped[20].note = Some("foot 3 slipped 12 mm".into());
+        for (name, calibration) in [
+            (
+                "relief",
+                assess(
+                    solution(poses.clone(), Some(ground_test(Some(9.0)))),
+                    52,
+                    &gates,
+                ),
+            ),
+            ("no test", assess(solution(poses.clone(), None), 52, &gates)),
+            (
+                "slipped",
+                assess(solution(slipped, Some(ground_test(Some(0.4)))), 52, &gates),
+            ),
+        ] {
+            assert!(calibration.e_d_from_sensor_noise.is_none(), "{name}");
+            assert!(
+                calibration
+                    .reasons
+                    .iter()
+                    .any(|r| r.contains("may not be flat")),
+                "{name}: {:?}",
+                calibration.reasons
+            );
+        }
     }
 
     /// The gate judges the schedule: the growth by the poses' geometry when

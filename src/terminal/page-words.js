@@ -68,6 +68,7 @@ const WORDS = {
     // What to do after a failed check, by gate.
     todoGround: 'Make sure the robot stands on flat, firm ground, with nothing on the floor in front of it (boxes, cables, people), then press Calibrate again.',
     todoFeet: 'Make sure the robot stands on flat, firm ground, with nothing on the floor in front of it, and that no foot has slipped; then press Calibrate again.',
+    todoFarNoise: 'The ground is flat, but the Kinect\'s depth is noisier at the farthest poses than the check allows, and calibrating again here will not change that. Unless a foot has sunk into soft ground, do not calibrate again: ask a maintainer.',
     todoStill: 'Press Calibrate again with nothing moving in view. If it fails the same way, ask a maintainer to check the schedule.',
     todoNoGround: 'Many poses found no ground: clear the floor in front of the robot, check that the lens is clean and uncovered and that the Kinect points at the floor, then press Calibrate again.',
     todoScale: 'The depth reads far from the truth: ask a maintainer to check the sensor\'s depth settings.',
@@ -343,6 +344,7 @@ const WORDS = {
 
     todoGround: '确认机器人站在平整、坚实的地面上，前方地面上没有任何东西（箱子、电缆、人），然后再按“标定”。',
     todoFeet: '确认机器人站在平整、坚实的地面上，前方地面上没有任何东西，并且没有脚打滑；然后再按“标定”。',
+    todoFarNoise: '地面是平的，但在最远的几个姿态上 Kinect 的深度噪声超出了检查的允许范围，在这里重新标定也不会改变。除非有脚陷进了松软的地面，否则不要再标定：请联系维护人员。',
     todoStill: '在视野里没有东西移动时再按“标定”。如果还是同样失败，请维护人员检查姿态计划。',
     todoNoGround: '很多姿态找不到地面：清空机器人前方的地面，检查镜头是否干净、没有被遮挡，Kinect 是否朝向地面，然后再按“标定”。',
     todoScale: '深度读数与真实值相差太大：请维护人员检查传感器的深度设置。',

@@ -326,7 +326,11 @@ function todoFor(result) {
     // A pattern fixed in the image that the paper's fit left uncorrected
     // needs the default fit, not flat ground.
     const fixedWarp = c.gate === 'warp_max_mm' && result.depth_pattern && result.depth_pattern.uncorrected_fixed;
-    const line = !c.passed && TODO[c.gate] && t(fixedWarp ? 'todoWarpFixed' : TODO[c.gate]);
+    // Far poses that disagree by the sensor's own noise: the ground is
+    // flat already, and calibrating again would not help.
+    const farNoise = c.gate === 'e_d_max_mm' && result.e_d_from_sensor_noise;
+    const todo = fixedWarp ? 'todoWarpFixed' : farNoise ? 'todoFarNoise' : TODO[c.gate];
+    const line = !c.passed && TODO[c.gate] && t(todo);
     if (line && !lines.includes(line)) lines.push(line);
   }
   if ((result.reasons || []).some((r) => /motor/.test(r))) lines.push(t('todoMotor'));

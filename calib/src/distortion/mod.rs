@@ -42,7 +42,7 @@ mod shape;
 use crate::cell_noise::{flip_test, flip_test_over, CellNoise, Entry, FlipTest};
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;
-use crate::outcome::{DepthPattern, Solution};
+use crate::outcome::{DepthPattern, Solution, ALTERNATIVE_SIGMAS};
 use crate::solve::{self, Observation, SolveError, SolveSettings};
 
 pub use crate::depth::DepthCorrection;
@@ -69,14 +69,6 @@ pub const MIN_PATTERN_POSES: usize = 10;
 /// ([`crate::cell_noise::flip_test`]) and its RMS reaches
 /// [`MIN_SHAPE_RMS_RAW`].
 const SHAPE_SIGNIFICANCE: f64 = 8.0;
-
-/// A pattern is not the sensor's fixed one when a test of an alternative
-/// finds it by this many of its σ: a pattern that changes with the depth
-/// ([`DepthDependence`]), or residuals that stay with the ground as the
-/// poses move ([`ShapeEstimate::fixed_in_the_ground`]). The noise these σ
-/// are of comes from the poses' own scatter (a real Kinect's is correlated
-/// over the image, so no count of pixels can say it).
-const ALTERNATIVE_SIGMAS: f64 = 5.0;
 
 /// Turns of relief and shape taken out of each other in
 /// [`shape_beside_relief`].

@@ -32,6 +32,46 @@ pub use words::*;
 /// depth pattern's estimate as it grows (each cuts less of what is left).
 pub const MOST_GROUND_FITS: usize = 4;
 
+/// A failed gate on `e_d` that is the depth camera's noise: the poses'
+/// disagreement grows with the ground's distance and its largest is
+/// ordinary there (`calib::disagreement`); the page words its advice from
+/// this, not from the reason's English.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SensorNoiseJson {
+    /// `e_d`'s σ grows as the ground's distance to this power.
+    pub exponent: f64,
+    /// The exponent in its own σ.
+    pub exponent_sigmas: f64,
+    /// The nearest used pose's ground distance (m) and `e_d`'s σ there (mm).
+    pub nearest_m: f64,
+    pub nearest_sigma_mm: f64,
+    /// The farthest used pose's ground distance (m) and `e_d`'s σ there (mm).
+    pub farthest_m: f64,
+    pub farthest_sigma_mm: f64,
+    /// The pose with the largest `e_d`, and that `e_d` in its σ there.
+    pub worst_pose: u32,
+    pub worst_sigmas: f64,
+    /// The most, in σ, the largest of this many poses reaches by chance
+    /// once in a hundred calibrations.
+    pub worst_bound: f64,
+}
+
+impl SensorNoiseJson {
+    fn from_growth(g: &crate::calib::outcome::GrowthWithDistance) -> Self {
+        Self {
+            exponent: g.exponent,
+            exponent_sigmas: g.exponent_sigmas,
+            nearest_m: g.nearest[0],
+            nearest_sigma_mm: g.nearest[1] * 1e3,
+            farthest_m: g.farthest[0],
+            farthest_sigma_mm: g.farthest[1] * 1e3,
+            worst_pose: g.worst_pose,
+            worst_sigmas: g.worst_sigmas,
+            worst_bound: g.worst_bound,
+        }
+    }
+}
+
 /// One pose's noise, in `[calibration.noise]`'s keys.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct NoiseJson {
@@ -117,6 +157,10 @@ pub struct ResultJson {
     /// `plan`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise_per_pose: Option<NoiseJson>,
+    /// When the gate on `e_d` failed because of the depth camera's noise at
+    /// the farthest poses, not the ground or the feet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub e_d_from_sensor_noise: Option<SensorNoiseJson>,
     /// The Kinect's fixed depth pattern, found with the mount (docs/method.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth_pattern: Option<DepthPatternJson>,
@@ -193,6 +237,10 @@ impl ResultJson {
                 normal_sigma_deg: c.noise_per_pose.0.to_degrees(),
                 offset_sigma_mm: c.noise_per_pose.1 * 1e3,
             }),
+            e_d_from_sensor_noise: c
+                .e_d_from_sensor_noise
+                .as_ref()
+                .map(SensorNoiseJson::from_growth),
         }
     }
 
@@ -220,6 +268,7 @@ impl ResultJson {
             depth_scale_estimated: None,
             depth_scale_correlations: None,
             noise_per_pose: None,
+            e_d_from_sensor_noise: None,
             depth_pattern: None,
         }
     }
