@@ -144,7 +144,7 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
         &solution.observability,
     );
     let mut checks = checks;
-    let e_d_from_sensor_noise = e_d_from_sensor_noise(&solution, &checks);
+    let e_d_from_sensor_noise = e_d_from_sensor_noise(gates, &solution, &checks);
     let mut reasons = judge_checked(
         gates,
         &summary,
@@ -352,20 +352,33 @@ fn pattern_cost_reason(check: &GateCheck, with: f64, known: f64, by_geometry: bo
 
 /// Whether the failed gate on `e_d` is the depth camera's noise: the
 /// ground showed no relief (the depth pattern's test of residuals that stay
-/// with the ground ran and found none), no used pose's feet moved, and the
-/// poses' disagreement grows with the ground's distance so that its
-/// largest is ordinary there ([`crate::disagreement`]). Without the
-/// ground's test nothing is said: growth with distance alone does not
-/// tell the noise from a ground that tilts away.
-fn e_d_from_sensor_noise(solution: &Solution, checks: &[GateCheck]) -> Option<GrowthWithDistance> {
-    checks
-        .iter()
-        .find(|c| c.gate == "e_d_max_mm")
-        .filter(|c| !c.passed)?;
-    let flat = solution
-        .depth_pattern
-        .as_ref()
-        .and_then(|p| p.fixed_in_the_ground_sigmas)
+/// with the ground ran and found none), every other check of the ground
+/// and the poses passed (θ, the poses used, a warp left uncorrected: in a
+/// corridor a warp that was not the sensor's failed beside it), no used
+/// pose's feet moved, and the poses' disagreement grows with the ground's
+/// distance so that its largest is ordinary there
+/// ([`crate::disagreement`]). Without the ground's test nothing is said:
+/// growth with distance alone does not tell the noise from a ground that
+/// tilts away.
+fn e_d_from_sensor_noise(
+    gates: &Gates,
+    solution: &Solution,
+    checks: &[GateCheck],
+) -> Option<GrowthWithDistance> {
+    let failed = |gate: &str| checks.iter().any(|c| c.gate == gate && !c.passed);
+    if !failed("e_d_max_mm")
+        || ["theta_max_deg", "min_poses_used", "min_used_fraction"]
+            .iter()
+            .any(|gate| failed(gate))
+    {
+        return None;
+    }
+    let pattern = solution.depth_pattern.as_ref()?;
+    if warp_check(gates, pattern).is_some_and(|warp| !warp.passed) {
+        return None;
+    }
+    let flat = pattern
+        .fixed_in_the_ground_sigmas
         .is_some_and(|sigmas| sigmas <= crate::outcome::ALTERNATIVE_SIGMAS);
     let feet_held = solution.poses.iter().all(|p| !p.used || p.note.is_none());
     growth_with_distance(&solution.poses)
@@ -1105,10 +1118,26 @@ mod tests {
                 && !words.contains("may not be flat"),
             "{words}"
         );
-        // The ground's test found relief, or never ran; a foot slipped.
+        // The ground's test found relief, or never ran; a foot slipped; a
+        // warp that is not the sensor's failed beside it; a pose's θ too.
         let mut slipped = poses.clone();
         slipped[20].note = Some("foot 3 slipped 12 mm".into());
+        let warped = crate::outcome::DepthPattern {
+            uncorrected_shape_rms_raw: Some(2.0),
+            raw_per_inverse_depth: -325.0,
+            ..ground_test(Some(0.4))
+        };
+        let mut tilted = poses.clone();
+        tilted[7].theta = 1.5f64.to_radians();
         for (name, calibration) in [
+            (
+                "warped",
+                assess(solution(poses.clone(), Some(warped)), 52, &gates),
+            ),
+            (
+                "θ",
+                assess(solution(tilted, Some(ground_test(Some(0.4)))), 52, &gates),
+            ),
             (
                 "relief",
                 assess(
