@@ -35,24 +35,34 @@ pub const MOST_GROUND_FITS: usize = 4;
 /// A failed gate on `e_d` that is the depth camera's noise: the poses'
 /// disagreement grows with the ground's distance and its largest is
 /// ordinary there (`calib::disagreement`); the page words its advice from
-/// this, not from the reason's English.
+/// this, not from the reason's English. A figure that is not a number (an
+/// exact fit's infinite exponent σ) is written as null and read back as NaN,
+/// as the other figures are, so that the stored result still reads.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SensorNoiseJson {
     /// `e_d`'s σ grows as the ground's distance to this power.
+    #[serde(deserialize_with = "number_or_nan")]
     pub exponent: f64,
     /// The exponent in its own σ.
+    #[serde(deserialize_with = "number_or_nan")]
     pub exponent_sigmas: f64,
     /// The nearest used pose's ground distance (m) and `e_d`'s σ there (mm).
+    #[serde(deserialize_with = "number_or_nan")]
     pub nearest_m: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub nearest_sigma_mm: f64,
     /// The farthest used pose's ground distance (m) and `e_d`'s σ there (mm).
+    #[serde(deserialize_with = "number_or_nan")]
     pub farthest_m: f64,
+    #[serde(deserialize_with = "number_or_nan")]
     pub farthest_sigma_mm: f64,
     /// The pose with the largest `e_d`, and that `e_d` in its σ there.
     pub worst_pose: u32,
+    #[serde(deserialize_with = "number_or_nan")]
     pub worst_sigmas: f64,
     /// The most, in σ, the largest of this many poses reaches by chance
     /// once in a hundred calibrations.
+    #[serde(deserialize_with = "number_or_nan")]
     pub worst_bound: f64,
 }
 
@@ -571,6 +581,30 @@ mod tests {
             error.contains("\"angle_sigma_growth_by_geometry[1]\" is inf, not a ratio of σ"),
             "{error}"
         );
+    }
+
+    /// A figure of the sensor-noise finding that is not a finite number is
+    /// written as null (JSON has no infinity) and the stored result still
+    /// reads: the daemon reads its results back.
+    #[test]
+    fn a_sensor_noise_finding_with_an_infinite_figure_reads_back() {
+        let mut result = table2();
+        result.e_d_from_sensor_noise = Some(SensorNoiseJson {
+            exponent: 4.0,
+            exponent_sigmas: f64::INFINITY,
+            nearest_m: 0.64,
+            nearest_sigma_mm: 0.1,
+            farthest_m: 1.23,
+            farthest_sigma_mm: 3.0,
+            worst_pose: 35,
+            worst_sigmas: 2.0,
+            worst_bound: 3.73,
+        });
+        let text = serde_json::to_string(&result).unwrap();
+        assert!(text.contains("\"exponent_sigmas\":null"), "{text}");
+        let back: ResultJson = serde_json::from_str(&text).expect("reads back");
+        let noise = back.e_d_from_sensor_noise.expect("kept");
+        assert!(noise.exponent_sigmas.is_nan() && noise.worst_pose == 35);
     }
 
     fn table2() -> ResultJson {
