@@ -447,6 +447,13 @@ fn sensor_noise_words(growth: &GrowthWithDistance) -> String {
 /// he stood on).
 const UNCERTAIN_FROM_DISAGREEMENT: &str = "this follows from the ground and the body poses disagreeing (the reasons above): find the cause of that first";
 
+/// Why a σ is too large when the poses' disagreement is the depth camera's
+/// noise ([`crate::disagreement`]): the σ is taken from that noise, so
+/// neither open ground nor another run would help (a simulated flat floor
+/// under the Kinect's held noise failed both gates with "find the cause of
+/// that first", after the reason above had named it).
+const UNCERTAIN_FROM_SENSOR_NOISE: &str = "this follows from the depth camera's noise at the farthest poses (the reason above), which calibrating again here will not change";
+
 /// Where a schedule that pins a depth pattern's plane part comes from.
 const WIDER_HEIGHTS: &str =
     "schedules/designed-52.toml, installed with groundcal beside its configuration, or a maintainer's groundcal plan --design 52";
@@ -687,7 +694,9 @@ fn judge_checked(
             worst(check),
         ));
     }
-    let advice = if failed("theta_max_deg").is_some() || failed("e_d_max_mm").is_some() {
+    let advice = if e_d_from_sensor_noise.is_some() {
+        UNCERTAIN_FROM_SENSOR_NOISE
+    } else if failed("theta_max_deg").is_some() || failed("e_d_max_mm").is_some() {
         UNCERTAIN_FROM_DISAGREEMENT
     } else {
         UNCERTAIN
@@ -1117,6 +1126,20 @@ mod tests {
                 && words.contains(&format!("pose {}'s is ordinary", growth.worst_pose))
                 && !words.contains("may not be flat"),
             "{words}"
+        );
+        // A σ too large beside it follows from the same noise.
+        let mut uncertain = solution(poses.clone(), Some(ground_test(Some(0.4))));
+        uncertain.covariance[(1, 1)] = 0.2f64.to_radians().powi(2);
+        let uncertain = assess(uncertain, 52, &gates);
+        assert!(uncertain.e_d_from_sensor_noise.is_some());
+        let sigma_words = uncertain
+            .reasons
+            .iter()
+            .find(|r| r.contains("is uncertain"))
+            .expect("the σ's reason");
+        assert!(
+            sigma_words.ends_with(UNCERTAIN_FROM_SENSOR_NOISE),
+            "{sigma_words}"
         );
         // The ground's test found relief, or never ran; a foot slipped; a
         // warp that is not the sensor's failed beside it; a pose's θ too.

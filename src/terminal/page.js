@@ -327,8 +327,11 @@ function todoFor(result) {
     // needs the default fit, not flat ground.
     const fixedWarp = c.gate === 'warp_max_mm' && result.depth_pattern && result.depth_pattern.uncorrected_fixed;
     // Far poses that disagree by the sensor's own noise: the ground is
-    // flat already, and calibrating again would not help.
-    const farNoise = c.gate === 'e_d_max_mm' && result.e_d_from_sensor_noise;
+    // flat already, and calibrating again would not help; a σ too large
+    // beside it comes from the same noise ("press Calibrate again" was
+    // shown next to "do not calibrate again").
+    const farNoise = result.e_d_from_sensor_noise
+      && ['e_d_max_mm', 'sigma_angle_max_deg', 'sigma_position_max_mm'].includes(c.gate);
     const todo = fixedWarp ? 'todoWarpFixed' : farNoise ? 'todoFarNoise' : TODO[c.gate];
     const line = !c.passed && TODO[c.gate] && t(todo);
     if (line && !lines.includes(line)) lines.push(line);
