@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{distance, groundcal, groundcal_json, mount_of};
+use common::{distance, gate_check, groundcal, groundcal_json, mount_of};
 use groundcal::calib::geometry::PoseDegMm;
 
 fn sim_config() -> PathBuf {
@@ -327,12 +327,7 @@ fn a_disagreement_that_grows_with_distance_is_named_the_sensors_noise() {
         groundcal_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
     let _ = std::fs::remove_file(&config);
     assert_eq!(code, 3, "{result:#}");
-    let gate = result["gate_checks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["gate"] == "e_d_max_mm")
-        .expect("the gate on e_d");
+    let gate = gate_check(&result, "e_d_max_mm");
     assert_eq!(gate["passed"], false, "{gate:#}");
     let noise = &result["e_d_from_sensor_noise"];
     assert_eq!(

@@ -14,7 +14,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{groundcal, sim_config_with_pattern, temp_dir};
+use common::{gate_check, groundcal, sim_config_with_pattern, temp_dir};
 use groundcal::calib::sensor::Intrinsics;
 use groundcal_hal::sim::kinect::{DepthDistortion, DistortionShape};
 use serde_json::Value;
@@ -105,15 +105,6 @@ fn errors(result: &Value) -> ((f64, f64), (f64, f64)) {
         (worst(0..3, &error), worst(0..3, &in_sigma)),
         (worst(3..6, &error), worst(3..6, &in_sigma)),
     )
-}
-
-/// A result's check of the gate `gate`, or `Value::Null` when it was not
-/// checked.
-fn gate_check<'a>(result: &'a Value, gate: &str) -> &'a Value {
-    result["gate_checks"]
-        .as_array()
-        .and_then(|checks| checks.iter().find(|c| c["gate"] == gate))
-        .unwrap_or(&Value::Null)
 }
 
 /// RMS of a found pattern's cells (a result's `depth_pattern`, or an

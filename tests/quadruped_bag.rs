@@ -11,7 +11,9 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use common::{groundcal, mcap_python, prerequisite_missing, root, temp_dir, MOUNT_KEYS as KEYS};
+use common::{
+    gate_check, groundcal, mcap_python, prerequisite_missing, root, temp_dir, MOUNT_KEYS as KEYS,
+};
 use serde_json::Value;
 
 /// Writes the bag with `args`; its truth, as the script prints it.
@@ -172,12 +174,7 @@ fn another_cameras_pattern_is_judged_in_its_own_pixels_of_disparity() {
     assert_eq!(pattern["corrected"], true);
     let largest_mm = pattern["largest_mm_at_2m"].as_f64().unwrap();
     assert!(largest_mm > 45.0, "{largest_mm} mm: past a Kinect's gate");
-    let gate = result["gate_checks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|g| g["gate"] == "pattern_max_mm")
-        .expect("the pattern's gate");
+    let gate = gate_check(&result, "pattern_max_mm");
     assert!(
         (gate["limit"].as_f64().unwrap() - 90.6).abs() < 0.1,
         "{gate}"

@@ -171,6 +171,16 @@ impl Drop for TempDir {
     }
 }
 
+/// A result's check of one gate (`gate_checks[]` by its key), or null when
+/// the result has none.
+pub fn gate_check<'a>(result: &'a serde_json::Value, gate: &str) -> &'a serde_json::Value {
+    static NONE: serde_json::Value = serde_json::Value::Null;
+    result["gate_checks"]
+        .as_array()
+        .and_then(|checks| checks.iter().find(|c| c["gate"] == gate))
+        .unwrap_or(&NONE)
+}
+
 /// The `robot_from_sensor` of a result JSON (cli.md).
 pub fn mount_of(result: &serde_json::Value) -> groundcal::calib::geometry::PoseDegMm {
     let m = &result["robot_from_sensor"];
