@@ -346,10 +346,10 @@ fn add_flipped_lanes(
     }
 }
 
-/// SplitMix64: the signs' generator (a fixed sequence; no crate needed).
 /// How far [`splitmix64`]'s state moves a draw.
 const SPLITMIX_STEP: u64 = 0x9e37_79b9_7f4a_7c15;
 
+/// SplitMix64: the signs' generator (a fixed sequence; no crate needed).
 fn splitmix64(state: &mut u64) -> u64 {
     *state = state.wrapping_add(SPLITMIX_STEP);
     let mut z = *state;

@@ -26,10 +26,10 @@ use crate::outcome::{GrowthWithDistance, PoseOutcome};
 
 /// Fewest poses whose disagreement is asked how it grows: two parameters
 /// from their scatter.
-pub const MIN_POSES: usize = 12;
+const MIN_POSES: usize = 12;
 
 /// The growth must stand this far out of its σ to be said.
-pub const MIN_EXPONENT_SIGMAS: f64 = 2.0;
+const MIN_EXPONENT_SIGMAS: f64 = 2.0;
 
 /// The farthest pose's ground at least this many times the nearest's:
 /// nearer alike, no growth could show.
@@ -43,9 +43,7 @@ impl GrowthWithDistance {
     /// growth stands out, and the largest `e_d` is within what chance
     /// gives that many poses at its distance.
     pub fn explains_the_largest(&self) -> bool {
-        self.exponent > 0.0
-            && self.exponent_sigmas >= MIN_EXPONENT_SIGMAS
-            && self.worst_sigmas <= self.worst_bound
+        self.exponent_sigmas >= MIN_EXPONENT_SIGMAS && self.worst_sigmas <= self.worst_bound
     }
 
     /// `e_d`'s σ (m) at a ground distance `d` (m).
@@ -58,18 +56,20 @@ impl GrowthWithDistance {
 /// with fewer than [`MIN_POSES`] poses that disagree at all, or distances
 /// too alike to tell.
 pub fn growth_with_distance(poses: &[PoseOutcome]) -> Option<GrowthWithDistance> {
+    let distance = |p: &PoseOutcome| p.measured.d.abs();
+    // Each pose with `ln d` and `ln e_d`.
     let used: Vec<(&PoseOutcome, f64, f64)> = poses
         .iter()
-        .filter(|p| p.used && p.e_d > 0.0 && p.e_d.is_finite() && p.measured.d.abs() > 0.0)
-        .map(|p| (p, p.measured.d.abs().ln(), p.e_d.ln()))
+        .filter(|p| p.used && p.e_d > 0.0 && p.e_d.is_finite() && distance(p) > 0.0)
+        .map(|p| (p, distance(p).ln(), p.e_d.ln()))
         .collect();
     let n = used.len();
     if n < MIN_POSES {
         return None;
     }
-    let (nearest, farthest) = used.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), u| {
-        (lo.min(u.1.exp()), hi.max(u.1.exp()))
-    });
+    let distances = used.iter().map(|u| distance(u.0));
+    let nearest = distances.clone().fold(f64::INFINITY, f64::min);
+    let farthest = distances.fold(0.0, f64::max);
     if farthest < MIN_DISTANCE_RATIO * nearest {
         return None;
     }
@@ -97,7 +97,7 @@ pub fn growth_with_distance(poses: &[PoseOutcome]) -> Option<GrowthWithDistance>
         nearest: [nearest, sigma(nearest)],
         farthest: [farthest, sigma(farthest)],
         worst_pose: worst.index,
-        worst_sigmas: worst.e_d / sigma(worst.measured.d.abs()),
+        worst_sigmas: worst.e_d / sigma(distance(worst)),
         worst_bound: normal_upper_quantile(0.005 / count),
     })
 }
@@ -130,8 +130,9 @@ pub fn normal_upper_quantile(tail: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::geometry::Plane;
+    use crate::test_noise::gaussian;
     use nalgebra::Vector3;
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
     fn pose(index: u32, distance: f64, e_d: f64) -> PoseOutcome {
@@ -152,12 +153,6 @@ mod tests {
         }
     }
 
-    fn normal(rng: &mut ChaCha8Rng) -> f64 {
-        // Box–Muller.
-        let (u, v): (f64, f64) = (rng.gen_range(1e-12..1.0), rng.gen_range(0.0..1.0));
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
-
     /// Poses whose ground lies 0.65–1.25 m off, `e_d` drawn as
     /// `σ(d)·|z|`.
     fn drawn(seed: u64, sigma: impl Fn(f64) -> f64) -> Vec<PoseOutcome> {
@@ -165,7 +160,7 @@ mod tests {
         (0..52)
             .map(|i| {
                 let d = 0.65 + 0.6 * (i as f64 * 0.618_034).fract();
-                pose(i + 1, d, sigma(d) * normal(&mut rng).abs())
+                pose(i + 1, d, sigma(d) * gaussian(&mut rng).abs())
             })
             .collect()
     }
