@@ -245,21 +245,32 @@ fn finish_check(
             ("failed", Vec::new(), Some(e), None)
         }
     };
-    let verdict = {
+    // Which calibration was checked, by whom, and when it started: the
+    // running check's entry in the status.
+    let previous = state.status_mut().check.clone();
+    let check = CheckStatus {
+        calibration_id: previous.as_ref().and_then(|c| c.calibration_id.clone()),
+        outcome: outcome_words.into(),
+        by: previous.as_ref().map_or_else(String::new, |c| c.by.clone()),
+        started_by_service: !by_a_person,
+        started: previous.map_or_else(String::new, |c| c.started),
+        finished: Some(now()),
+        reasons: reasons.clone(),
+        error,
+        report,
+    };
+    let verdict = (check.outcome != "failed").then(|| check.clone());
+    // Kept before the status shows it, outside the status's lock (a write
+    // waits for the disk): shown first, a knock the page had already told
+    // was lost to a crash in between (tests/serve_browser.rs, killed the
+    // moment the status said "drift").
+    if let Some(verdict) = &verdict {
+        if let Err(e) = state.store().save_check(verdict) {
+            tracing::warn!("cannot keep the check's verdict in the store: {e}");
+        }
+    }
+    {
         let mut status = state.status_mut();
-        let previous = status.check.take();
-        let check = CheckStatus {
-            calibration_id: previous.as_ref().and_then(|c| c.calibration_id.clone()),
-            outcome: outcome_words.into(),
-            by: previous.as_ref().map_or_else(String::new, |c| c.by.clone()),
-            started_by_service: !by_a_person,
-            started: previous.map_or_else(String::new, |c| c.started),
-            finished: Some(now()),
-            reasons: reasons.clone(),
-            error,
-            report,
-        };
-        let verdict = (check.outcome != "failed").then(|| check.clone());
         if let Some(v) = &verdict {
             status.verdict = Some(v.clone());
         }
@@ -269,16 +280,9 @@ fn finish_check(
         }
         status.state = RunState::Idle;
         status.provisional = None;
-        verdict
-    };
+    }
     if verdict.is_some() && by_a_person {
         state.note_run_took(super::api::Task::Check);
-    }
-    // Kept once the status is released: a write waits for the disk.
-    if let Some(verdict) = verdict {
-        if let Err(e) = state.store().save_check(&verdict) {
-            tracing::warn!("cannot keep the check's verdict in the store: {e}");
-        }
     }
     state.publish(EventJson::Checked {
         outcome: outcome_words.into(),
