@@ -10,6 +10,7 @@ use crate::disparity::{
     clear_above, lane_sum, EdgeGuard, FitValue, InverseDepthImage, PixelPlane, ValueDomain,
 };
 use crate::geometry::Plane;
+use crate::noise_with_depth::ScatterWithDepth;
 use crate::plane::{GroundFit, InlierBand};
 use crate::sensor::DepthCamera;
 
@@ -40,8 +41,9 @@ pub fn cell_centre(k: usize, columns: usize, intrinsics: &Intrinsics) -> (f64, f
 /// than it is; at ±4σ the loss is under 1 %.
 const WIDER_BAND: f64 = 2.0;
 
-/// One cell's sums over a pose's ground readings: residual `r` (1/m) and
-/// pixel offsets `u' = u − cx`, `v' = v − cy`.
+/// One cell's sums over a pose's ground readings as the pass makes them:
+/// residual `r` (1/m), its square, and pixel offsets `u' = u − cx`,
+/// `v' = v − cy`.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct CellSums {
     pub(crate) n: f64,
@@ -51,13 +53,66 @@ pub(crate) struct CellSums {
     pub(crate) v: f64,
 }
 
+/// One cell's sums at one pose as the pattern's estimate reads them:
+/// readings, residuals (1/m) and pixel offsets, as in [`CellSums`]; the
+/// squares are read once, when the pose's residuals are made
+/// ([`GroundResiduals::reading_scatter`], [`GroundResiduals::scatter_with_depth`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct GroundCell {
+    pub(crate) n: f64,
+    pub(crate) r: f64,
+    pub(crate) u: f64,
+    pub(crate) v: f64,
+}
+
+/// [`GroundCell`] as a pose keeps it until the calibration's end, in f32:
+/// 16 bytes where five f64 sums were 40, and a calibration keeps 4,800 a
+/// pose (52 poses' were 10 MB, half of a replay's heap at its peak). The
+/// rounding (a relative 6·10⁻⁸) is far below a cell mean's noise; the
+/// counts are whole numbers, exact in f32 below 2²⁴.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct KeptCell {
+    n: f32,
+    r: f32,
+    u: f32,
+    v: f32,
+}
+
+impl From<&CellSums> for KeptCell {
+    fn from(sums: &CellSums) -> Self {
+        Self {
+            n: sums.n as f32,
+            r: sums.r as f32,
+            u: sums.u as f32,
+            v: sums.v as f32,
+        }
+    }
+}
+
+impl From<&KeptCell> for GroundCell {
+    fn from(kept: &KeptCell) -> Self {
+        Self {
+            n: f64::from(kept.n),
+            r: f64::from(kept.r),
+            u: f64::from(kept.u),
+            v: f64::from(kept.v),
+        }
+    }
+}
+
 /// One pose's ground residuals, summed per cell: what the pattern's
 /// estimate needs from a pose, taken while its frames are in memory.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GroundResiduals {
     pub(crate) columns: usize,
     pub(crate) rows: usize,
-    pub(crate) cells: Vec<CellSums>,
+    cells: Vec<KeptCell>,
+    /// The readings' scatter about their cells' means, `Σ(Σr² − (Σr)²/n)`
+    /// over the cells of two readings or more, and its degrees of freedom
+    /// `Σ(n − 1)`.
+    reading_scatter: (f64, f64),
+    /// The cells' scatter against the ground's depth.
+    scatter_with_depth: ScatterWithDepth,
     /// Σφφᵀ over the pose's ground readings, φ = (1, u', v').
     pub(crate) moments: Matrix3<f64>,
     /// Σ r·φ.
@@ -94,15 +149,12 @@ struct Sums {
     cells: Vec<CellSums>,
     moments: Matrix3<f64>,
     rhs: Vector3<f64>,
-    /// Per cell of the band of rows being read: its readings' sums in eight
-    /// lanes, reduced once when the band is done rather than once a row
-    /// (the reductions across lanes were most of the pass's time).
-    band: Vec<CellLanes>,
 }
 
 /// One cell's sums over a band of rows, in eight f32 lanes (k is the pixel
 /// in the cell, 0–7; `dv` the row's `v − cy`), written as independent
-/// lanes that the compiler turns into vector instructions. Every lane sums
+/// lanes that the compiler turns into vector instructions and keeps in
+/// registers while the band's rows of the cell are read. Every lane sums
 /// at most a few dozen readings, where f32 loses nothing that matters
 /// (residuals of a few hundredths; `dv²` below 2²⁴). Lane k's `Σk` and
 /// `Σk²` are k and k² times its count, exactly (whole numbers far below
@@ -119,11 +171,69 @@ struct CellLanes {
     r_dv: [f32; CELL_PX],
 }
 
+/// One row of a band as the pass reads it: its pixels, the row
+/// [`EdgeGuard::rows`] above it where the fit guarded it, and both rows'
+/// `v − cy`.
+struct BandRow<'a, T> {
+    pixels: &'a [T],
+    above: Option<&'a [T]>,
+    dv: f64,
+    dv_above: f64,
+}
+
 impl CellLanes {
     /// Each lane's count times `k^power` (k the lane): what summing `kᵖ·n`
     /// pixel by pixel gives, bit for bit.
     fn times_k(&self, power: i32) -> [f32; CELL_PX] {
         std::array::from_fn(|l| (l as f32).powi(power) * self.n[l])
+    }
+
+    /// Adds one row's readings of the cell whose first pixel is `first`
+    /// (`u − cx`) that lie within the pass's band of its plane, where the
+    /// plane lies within its region, without a branch. With `GUARDED`, a
+    /// reading counts only where the reading above it (`x_above`) clears
+    /// the fit's edge guard, as the fit's own loop tests it. A last cell
+    /// narrower than [`CELL_PX`] is padded with NaN, which no comparison
+    /// takes.
+    #[inline(always)]
+    fn add_row<const GUARDED: bool>(
+        &mut self,
+        (x, x_above): ([f32; CELL_PX], [f32; CELL_PX]),
+        (dv, dv_above): (f64, f64),
+        first: f64,
+        pass: &Pass,
+    ) {
+        let Pass {
+            plane,
+            band,
+            region,
+            guard,
+            ..
+        } = *pass;
+        let cu = plane.cu as f32;
+        let (dv1, dv2) = (dv as f32, (dv * dv) as f32);
+        // The plane at the cell's first pixel, then a step a pixel.
+        let start = (plane.c0 + plane.cv * dv + plane.cu * first) as f32;
+        let start_above = (plane.c0 + plane.cv * dv_above + plane.cu * first) as f32;
+        // Lane l of every sum at once: one vector instruction a sum.
+        #[allow(clippy::needless_range_loop)]
+        for l in 0..CELL_PX {
+            let k = l as f32;
+            let on_plane = start + cu * k;
+            let r = x[l] - on_plane;
+            let clear = !GUARDED || clear_above(x_above[l], start_above + cu * k, guard);
+            let keep = r.abs() <= band && on_plane >= region.0 && on_plane <= region.1 && clear;
+            let n = if keep { 1.0 } else { 0.0 };
+            let r = if keep { r } else { 0.0 };
+            self.n[l] += n;
+            self.r[l] += r;
+            self.rr[l] += r * r;
+            self.kr[l] += k * r;
+            self.n_dv[l] += n * dv1;
+            self.k_dv[l] += k * n * dv1;
+            self.n_dv2[l] += n * dv2;
+            self.r_dv[l] += r * dv1;
+        }
     }
 }
 
@@ -133,105 +243,41 @@ impl Sums {
             cells: vec![CellSums::default(); columns * rows],
             moments: Matrix3::zeros(),
             rhs: Vector3::zeros(),
-            band: vec![CellLanes::default(); columns],
         }
     }
 
-    /// Adds one row's readings within `band` of `plane` (both in the row's
-    /// value units), where the plane lies within `region`, to the band's
-    /// lanes, without a branch. With `GUARDED`, a reading counts only where
-    /// the reading in `above` ([`EdgeGuard::rows`] up) clears the fit's
-    /// edge guard, as the fit's own loop tests it. A last cell narrower
-    /// than [`CELL_PX`] is padded with NaN, which no comparison takes.
-    #[inline(always)]
-    fn add_row<T: FitValue, const GUARDED: bool>(
-        &mut self,
-        row: &[T],
-        above: &[T],
-        (dv, dv_above): (f64, f64),
-        pass: &Pass,
-    ) {
-        let Pass {
-            intrinsics,
-            plane,
-            band,
-            region,
-            guard,
-            ..
-        } = *pass;
-        let cx = intrinsics.cx;
-        let cu = plane.cu as f32;
-        let (dv1, dv2) = (dv as f32, (dv * dv) as f32);
-        let cells = row.chunks(CELL_PX);
-        let cells_above = above.chunks(CELL_PX).chain(std::iter::repeat(&[][..]));
-        for (cell_index, ((lanes, chunk), chunk_above)) in
-            self.band.iter_mut().zip(cells).zip(cells_above).enumerate()
-        {
-            let x = cell_values(chunk);
-            let x_above = if GUARDED { cell_values(chunk_above) } else { x };
-            // The plane at the cell's first pixel, then a step a pixel.
-            let first = (cell_index * CELL_PX) as f64 - cx;
-            let start = (plane.c0 + plane.cv * dv + plane.cu * first) as f32;
-            let start_above = (plane.c0 + plane.cv * dv_above + plane.cu * first) as f32;
-            // Lane l of every sum at once: one vector instruction a sum.
-            #[allow(clippy::needless_range_loop)]
-            for l in 0..CELL_PX {
-                let k = l as f32;
-                let on_plane = start + cu * k;
-                let r = x[l] - on_plane;
-                let clear = !GUARDED || clear_above(x_above[l], start_above + cu * k, guard);
-                let keep = r.abs() <= band && on_plane >= region.0 && on_plane <= region.1 && clear;
-                let n = if keep { 1.0 } else { 0.0 };
-                let r = if keep { r } else { 0.0 };
-                lanes.n[l] += n;
-                lanes.r[l] += r;
-                lanes.rr[l] += r * r;
-                lanes.kr[l] += k * r;
-                lanes.n_dv[l] += n * dv1;
-                lanes.k_dv[l] += k * n * dv1;
-                lanes.n_dv2[l] += n * dv2;
-                lanes.r_dv[l] += r * dv1;
-            }
-        }
-    }
-
-    /// Reduces the band's lanes into the cells of band row `band_row` and
-    /// the pose's moments (residuals times `to_inverse_depth`), and clears
-    /// them for the next band.
-    fn end_band(&mut self, band_row: usize, cx: f64, to_inverse_depth: f64) {
+    /// Reduces one cell's lanes over a band (`first`: its first pixel's
+    /// `u − cx`) into the cell and the pose's moments, the residuals times
+    /// `to_inverse_depth`.
+    fn add_cell(&mut self, cell: usize, first: f64, lanes: &CellLanes, to_inverse_depth: f64) {
         let scale = to_inverse_depth;
-        let cell_row = band_row * self.band.len();
-        for (cell_index, lanes) in self.band.iter_mut().enumerate() {
-            let sum = |lane: [f32; CELL_PX]| lane_sum(&lane);
-            let n = sum(lanes.n);
-            if n == 0.0 {
-                continue;
-            }
-            let (sr, srr) = (sum(lanes.r) * scale, sum(lanes.rr) * scale * scale);
-            let (sk, skk) = (sum(lanes.times_k(1)), sum(lanes.times_k(2)));
-            let skr = sum(lanes.kr) * scale;
-            let (n_dv, k_dv, n_dv2) = (sum(lanes.n_dv), sum(lanes.k_dv), sum(lanes.n_dv2));
-            let r_dv = sum(lanes.r_dv) * scale;
-            *lanes = CellLanes::default();
-            // Offsets within the cell (k) back to u' = first + k.
-            let first = (cell_index * CELL_PX) as f64 - cx;
-            let sum_u = first * n + sk;
-            let cell = &mut self.cells[cell_row + cell_index];
-            cell.n += n;
-            cell.r += sr;
-            cell.rr += srr;
-            cell.u += sum_u;
-            cell.v += n_dv;
-            self.moments[(0, 0)] += n;
-            self.moments[(0, 1)] += sum_u;
-            self.moments[(0, 2)] += n_dv;
-            self.moments[(1, 1)] += first * first * n + 2.0 * first * sk + skk;
-            self.moments[(1, 2)] += first * n_dv + k_dv;
-            self.moments[(2, 2)] += n_dv2;
-            self.rhs[0] += sr;
-            self.rhs[1] += first * sr + skr;
-            self.rhs[2] += r_dv;
+        let sum = |lane: [f32; CELL_PX]| lane_sum(&lane);
+        let n = sum(lanes.n);
+        if n == 0.0 {
+            return;
         }
+        let (sr, srr) = (sum(lanes.r) * scale, sum(lanes.rr) * scale * scale);
+        let (sk, skk) = (sum(lanes.times_k(1)), sum(lanes.times_k(2)));
+        let skr = sum(lanes.kr) * scale;
+        let (n_dv, k_dv, n_dv2) = (sum(lanes.n_dv), sum(lanes.k_dv), sum(lanes.n_dv2));
+        let r_dv = sum(lanes.r_dv) * scale;
+        // Offsets within the cell (k) back to u' = first + k.
+        let sum_u = first * n + sk;
+        let cell = &mut self.cells[cell];
+        cell.n += n;
+        cell.r += sr;
+        cell.rr += srr;
+        cell.u += sum_u;
+        cell.v += n_dv;
+        self.moments[(0, 0)] += n;
+        self.moments[(0, 1)] += sum_u;
+        self.moments[(0, 2)] += n_dv;
+        self.moments[(1, 1)] += first * first * n + 2.0 * first * sk + skk;
+        self.moments[(1, 2)] += first * n_dv + k_dv;
+        self.moments[(2, 2)] += n_dv2;
+        self.rhs[0] += sr;
+        self.rhs[1] += first * sr + skr;
+        self.rhs[2] += r_dv;
     }
 
     /// Every [`ROW_STEP`]th row of each of `frames` (all of the same
@@ -258,30 +304,56 @@ impl Sums {
         self.add_frames_lanes(frames, pass);
     }
 
+    /// Cell by cell of a band, its rows in the frames' order: a cell's
+    /// lanes stay in registers through the band (stored and loaded a row at
+    /// a time, they were most of the pass's time), and each lane adds the
+    /// same numbers in the same order as row by row across the band.
     #[inline(always)]
     fn add_frames_lanes<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
-        let (width, cy) = (pass.width, pass.intrinsics.cy);
+        let (width, cx, cy) = (pass.width, pass.intrinsics.cx, pass.intrinsics.cy);
+        let columns = width.div_ceil(CELL_PX);
         let band_px = width * CELL_PX;
         let bands = frames.first().map_or(0, |f| f.len().div_ceil(band_px));
         let guard_rows = pass.guard_rows;
+        let mut rows: Vec<BandRow<'_, T>> = Vec::with_capacity(frames.len() * CELL_PX);
         for band_row in 0..bands {
+            rows.clear();
             for frame in frames {
-                let rows = frame.len() / width;
+                let height = frame.len() / width;
                 let first = band_row * CELL_PX;
-                for v in (first..rows.min(first + CELL_PX)).step_by(ROW_STEP) {
-                    let row = &frame[v * width..(v + 1) * width];
-                    let dv = v as f64 - cy;
+                for v in (first..height.min(first + CELL_PX)).step_by(ROW_STEP) {
                     // The fit guards the rows with a row that far above them.
-                    match v.checked_sub(guard_rows).filter(|_| guard_rows > 0) {
-                        Some(up) => {
-                            let above = &frame[up * width..(up + 1) * width];
-                            self.add_row::<T, true>(row, above, (dv, up as f64 - cy), pass);
-                        }
-                        None => self.add_row::<T, false>(row, &[], (dv, dv), pass),
-                    }
+                    let up = v.checked_sub(guard_rows).filter(|_| guard_rows > 0);
+                    rows.push(BandRow {
+                        pixels: &frame[v * width..(v + 1) * width],
+                        above: up.map(|up| &frame[up * width..(up + 1) * width]),
+                        dv: v as f64 - cy,
+                        dv_above: up.map_or(v as f64, |up| up as f64) - cy,
+                    });
                 }
             }
-            self.end_band(band_row, pass.intrinsics.cx, pass.to_inverse_depth);
+            for column in 0..columns {
+                let pixels = column * CELL_PX..((column + 1) * CELL_PX).min(width);
+                let first = (column * CELL_PX) as f64 - cx;
+                let mut lanes = CellLanes::default();
+                for row in &rows {
+                    let x = cell_values(&row.pixels[pixels.clone()]);
+                    let dv = (row.dv, row.dv_above);
+                    match row.above {
+                        Some(above) => {
+                            let x_above = cell_values(&above[pixels.clone()]);
+                            lanes.add_row::<true>((x, x_above), dv, first, pass);
+                        }
+                        None => lanes.add_row::<false>((x, x), dv, first, pass),
+                    }
+                }
+                self.add_cell(
+                    band_row * columns + column,
+                    first,
+                    &lanes,
+                    pass.to_inverse_depth,
+                );
+            }
         }
     }
 }
@@ -328,27 +400,69 @@ struct Pass {
 }
 
 impl GroundResiduals {
-    /// Residuals made up by a test: these cells about this plane.
-    #[cfg(test)]
-    pub(crate) fn for_test(
-        columns: usize,
-        rows: usize,
-        cells: Vec<CellSums>,
+    /// A pose's residuals from its cells' sums (`columns × rows` of them)
+    /// and its moments `(Σφφᵀ, Σr·φ)`, with the depth model's raw units per
+    /// 1/m and the fit's band (1/m), about the fit's `plane`: the squares
+    /// read into the pose's scatter here, the cells kept in f32.
+    pub(crate) fn from_sums(
+        (columns, rows, cells): (usize, usize, &[CellSums]),
+        (moments, rhs): (Matrix3<f64>, Vector3<f64>),
         intrinsics: Intrinsics,
+        (raw_per_inverse_depth, fit_band): (f64, f64),
         plane: PixelPlane,
     ) -> Self {
+        let mut reading_scatter = (0.0, 0.0);
+        let mut scatter_with_depth = ScatterWithDepth::default();
+        for (k, cell) in cells.iter().enumerate() {
+            if cell.n > 1.0 {
+                reading_scatter.0 += cell.rr - cell.r * cell.r / cell.n;
+                reading_scatter.1 += cell.n - 1.0;
+            }
+            let (du, dv) = cell_centre(k, columns, &intrinsics);
+            scatter_with_depth.add_cell(cell.n, cell.r, cell.rr, plane.at(du, dv));
+        }
         Self {
             columns,
             rows,
-            cells,
-            moments: Matrix3::zeros(),
-            rhs: Vector3::zeros(),
+            cells: cells.iter().map(KeptCell::from).collect(),
+            reading_scatter,
+            scatter_with_depth,
+            moments,
+            rhs,
             intrinsics,
-            raw_per_inverse_depth: 325.0,
-            fit_band: 0.01,
+            raw_per_inverse_depth,
+            fit_band,
             plane,
             beside_another_fit: None,
         }
+    }
+
+    /// How many cells the image has (read or not).
+    pub(crate) fn cell_count(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Cell `k`'s sums.
+    #[inline]
+    pub(crate) fn cell(&self, k: usize) -> GroundCell {
+        GroundCell::from(&self.cells[k])
+    }
+
+    /// Every cell's sums, in order.
+    pub(crate) fn cells(&self) -> impl ExactSizeIterator<Item = GroundCell> + '_ {
+        self.cells.iter().map(GroundCell::from)
+    }
+
+    /// The readings' scatter about their cells' means and its degrees of
+    /// freedom (the field's documentation).
+    pub(crate) fn reading_scatter(&self) -> (f64, f64) {
+        self.reading_scatter
+    }
+
+    /// The cells' scatter against the ground's depth, for
+    /// [`crate::noise_with_depth::noise_exponent`].
+    pub fn scatter_with_depth(&self) -> &ScatterWithDepth {
+        &self.scatter_with_depth
     }
 
     /// These residuals, marked as taken from the default fit made beside
@@ -460,23 +574,17 @@ impl GroundResiduals {
             cells,
             mut moments,
             rhs,
-            ..
         } = sums;
         moments[(1, 0)] = moments[(0, 1)];
         moments[(2, 0)] = moments[(0, 2)];
         moments[(2, 1)] = moments[(1, 2)];
-        Some(Self {
-            columns,
-            rows,
-            cells,
-            moments,
-            rhs,
+        Some(Self::from_sums(
+            (columns, rows, &cells),
+            (moments, rhs),
             intrinsics,
-            raw_per_inverse_depth: camera.raw_per_inverse_depth(),
-            fit_band: band,
+            (camera.raw_per_inverse_depth(), band),
             plane,
-            beside_another_fit: None,
-        })
+        ))
     }
 }
 

@@ -20,7 +20,7 @@ pub(super) fn bend(
 ) -> Vector3<f64> {
     let inverse = pose.moments.try_inverse().unwrap_or_else(Matrix3::zeros);
     let mut untruncated = Vector3::zeros();
-    for (k, cell) in pose.cells.iter().enumerate() {
+    for (k, cell) in pose.cells().enumerate() {
         if seen[k] && cell.n > 0.0 {
             untruncated += Vector3::new(cell.n, cell.u, cell.v) * shape[k];
         }
@@ -33,8 +33,7 @@ pub(super) fn bend(
     // The cells with readings, their centres and pattern, once: each Newton
     // step walks them all.
     let cells: Vec<BentCell> = pose
-        .cells
-        .iter()
+        .cells()
         .enumerate()
         .filter(|(_, cell)| cell.n > 0.0)
         .map(|(k, cell)| BentCell {

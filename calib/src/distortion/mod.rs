@@ -293,9 +293,22 @@ mod tests {
     use super::*;
     use crate::residuals::CellSums;
 
+    /// One synthetic pose's sums: its cells and its moments.
+    type PoseSums = (Vec<CellSums>, Matrix3<f64>, Vector3<f64>);
+
     /// Residuals of synthetic poses: a pattern plus a plane per pose over
     /// a varying ground region, no noise.
     fn synthetic(pattern: impl Fn(f64, f64) -> f64, poses: usize) -> Vec<GroundResiduals> {
+        synthetic_changed(pattern, poses, |_, _| {})
+    }
+
+    /// [`synthetic`], each pose's sums changed by `change` (given the
+    /// pose's place) before they are kept.
+    fn synthetic_changed(
+        pattern: impl Fn(f64, f64) -> f64,
+        poses: usize,
+        change: impl Fn(usize, &mut PoseSums),
+    ) -> Vec<GroundResiduals> {
         let intrinsics = Intrinsics::default();
         let columns = intrinsics.width.div_ceil(CELL_PX);
         let rows = intrinsics.height.div_ceil(CELL_PX);
@@ -306,43 +319,50 @@ mod tests {
                     2e-6 * (i % 3) as f64,
                     -1e-6 * (i % 5) as f64,
                 );
-                let mut cells = vec![CellSums::default(); columns * rows];
-                let (mut moments, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
+                let mut sums: PoseSums = (
+                    vec![CellSums::default(); columns * rows],
+                    Matrix3::zeros(),
+                    Vector3::zeros(),
+                );
                 // The ground covers rows from a height that changes with the pose.
                 let top = 120 + 10 * (i % 7);
                 for v in top..intrinsics.height {
                     for u in 0..intrinsics.width {
                         let (du, dv) = (u as f64 - intrinsics.cx, v as f64 - intrinsics.cy);
                         let r = pattern(du, dv) + tilt.dot(&Vector3::new(1.0, du, dv));
-                        let cell = &mut cells[(v / CELL_PX) * columns + u / CELL_PX];
-                        cell.n += 1.0;
-                        cell.r += r;
-                        cell.rr += r * r + 1e-12;
-                        cell.u += du;
-                        cell.v += dv;
-                        let phi = Vector3::new(1.0, du, dv);
-                        moments += phi * phi.transpose();
-                        rhs += phi * r;
+                        add_reading(&mut sums, (v / CELL_PX) * columns + u / CELL_PX, r, du, dv);
                     }
                 }
-                GroundResiduals {
-                    columns,
-                    rows,
-                    cells,
-                    moments,
-                    rhs,
+                change(i, &mut sums);
+                let (cells, moments, rhs) = sums;
+                GroundResiduals::from_sums(
+                    (columns, rows, &cells),
+                    (moments, rhs),
                     intrinsics,
-                    raw_per_inverse_depth: -1.0 / 0.003,
-                    fit_band: f64::INFINITY,
-                    plane: PixelPlane {
+                    (-1.0 / 0.003, f64::INFINITY),
+                    PixelPlane {
                         c0: 0.5,
                         cu: 0.0,
                         cv: 0.0,
                     },
-                    beside_another_fit: None,
-                }
+                )
             })
             .collect()
+    }
+
+    /// One reading `r` at pixel offsets `(du, dv)` added to cell `k` and the
+    /// pose's moments.
+    fn add_reading(sums: &mut PoseSums, k: usize, r: f64, du: f64, dv: f64) {
+        let (cells, moments, rhs) = sums;
+        let cell = &mut cells[k];
+        cell.n += 1.0;
+        cell.r += r;
+        cell.rr += r * r + 1e-12;
+        cell.u += du;
+        cell.v += dv;
+        let phi = Vector3::new(1.0, du, dv);
+        *moments += phi * phi.transpose();
+        *rhs += phi * r;
     }
 
     #[test]
@@ -403,26 +423,23 @@ mod tests {
     #[test]
     fn readings_of_a_cell_no_other_pose_saw_leave_the_planes_alone() {
         let bowl = |du: f64, dv: f64| 1e-3 * ((du / 320.0).powi(2) + (dv / 240.0).powi(2));
-        let mut poses = synthetic(bowl, 12);
         // Something 3 raw units nearer than the ground, above the rows any
         // other pose sees (pose 0's plane is the pattern's own: no tilt).
-        let pose = &mut poses[0];
-        let (intrinsics, columns) = (pose.intrinsics, pose.columns);
-        for v in 104..120 {
-            for u in 200..264 {
-                let (du, dv) = (u as f64 - intrinsics.cx, v as f64 - intrinsics.cy);
-                let r = bowl(du, dv) + 0.01;
-                let cell = &mut pose.cells[(v / CELL_PX) * columns + u / CELL_PX];
-                cell.n += 1.0;
-                cell.r += r;
-                cell.rr += r * r;
-                cell.u += du;
-                cell.v += dv;
-                let phi = Vector3::new(1.0, du, dv);
-                pose.moments += phi * phi.transpose();
-                pose.rhs += phi * r;
+        let poses = synthetic_changed(bowl, 12, |i, sums| {
+            if i > 0 {
+                return;
             }
-        }
+            let intrinsics = Intrinsics::default();
+            let columns = intrinsics.width.div_ceil(CELL_PX);
+            for v in 104..120 {
+                for u in 200..264 {
+                    let (du, dv) = (u as f64 - intrinsics.cx, v as f64 - intrinsics.cy);
+                    let r = bowl(du, dv) + 0.01;
+                    add_reading(sums, (v / CELL_PX) * columns + u / CELL_PX, r, du, dv);
+                }
+            }
+        });
+        let columns = poses[0].columns;
         let refs: Vec<&GroundResiduals> = poses.iter().collect();
         let estimate = estimate_shape(&refs).expect("an estimate");
         assert!(
@@ -737,9 +754,8 @@ mod bend_on_frames {
         let mut worst: (f64, usize) = (0.0, 0);
         let mut rows_seen = 0;
         for row in 0..residuals.rows {
-            let cells = &residuals.cells[row * residuals.columns..(row + 1) * residuals.columns];
-            let (n, r): (f64, f64) = cells
-                .iter()
+            let (n, r): (f64, f64) = (row * residuals.columns..(row + 1) * residuals.columns)
+                .map(|k| residuals.cell(k))
                 .fold((0.0, 0.0), |(n, r), c| (n + c.n, r + c.r));
             if n < 1000.0 {
                 continue;
@@ -784,7 +800,7 @@ mod bend_on_frames {
         let (fit, residuals) = fitted(&truth, &prior, 1, bowl, Lost::ByTheTruth);
 
         // The bowl per cell (1/m), less its plane part over the cells seen.
-        let cells = residuals.cells.len();
+        let cells = residuals.cell_count();
         let centre = |k: usize| {
             let (column, row) = (k % residuals.columns, k / residuals.columns);
             let half = (CELL_PX as f64 - 1.0) / 2.0;
@@ -793,8 +809,8 @@ mod bend_on_frames {
                 (row * CELL_PX) as f64 + half,
             )
         };
-        let seen: Vec<bool> = residuals.cells.iter().map(|c| c.n > 0.0).collect();
-        let readings: Vec<f64> = residuals.cells.iter().map(|c| c.n).collect();
+        let seen: Vec<bool> = residuals.cells().map(|c| c.n > 0.0).collect();
+        let readings: Vec<f64> = residuals.cells().map(|c| c.n).collect();
         let mut shape: Vec<f64> = (0..cells)
             .map(|k| {
                 let (u0, v0) = centre(k);
@@ -830,16 +846,9 @@ mod bend_on_frames {
         ) - plane_part;
         let sigma = reading_variance(&[&residuals]).sqrt();
         let predicted = bend(&residuals, &shape, &seen, sigma);
-        let untruncated = bend(
-            &GroundResiduals {
-                fit_band: f64::INFINITY,
-                beside_another_fit: None,
-                ..residuals.clone()
-            },
-            &shape,
-            &seen,
-            sigma,
-        );
+        let mut unbanded = residuals.clone();
+        (unbanded.fit_band, unbanded.beside_another_fit) = (f64::INFINITY, None);
+        let untruncated = bend(&unbanded, &shape, &seen, sigma);
         let (taken, predicted, untruncated) = (taken.x / b, predicted.x / b, untruncated.x / b);
         eprintln!("offset bend: taken {taken}, predicted {predicted}, untruncated {untruncated} raw units");
         assert!(taken < -0.03, "the fit's offset bend: {taken} raw units");

@@ -237,11 +237,11 @@ pub fn estimate_shape_seen_from(
     if poses.len() < MIN_PATTERN_POSES
         || poses
             .iter()
-            .any(|p| p.cells.len() != first.cells.len() || p.columns != first.columns)
+            .any(|p| p.cell_count() != first.cell_count() || p.columns != first.columns)
     {
         return None;
     }
-    let cells = first.cells.len();
+    let cells = first.cell_count();
     let within = reading_variance(poses);
     let mut kept = Kept::all(poses);
     let seen_at_first = kept.seen.clone();
@@ -475,7 +475,7 @@ pub(super) struct Kept {
 impl Kept {
     /// Every sum.
     fn all(poses: &[&GroundResiduals]) -> Self {
-        let cells = poses[0].cells.len();
+        let cells = poses[0].cell_count();
         Self::from_out(poses, vec![false; poses.len() * cells], None)
     }
 
@@ -495,7 +495,7 @@ impl Kept {
             .zip(poses)
             .zip(&fitted.planes)
             .for_each(|((out, pose), c)| {
-                for (k, cell) in pose.cells.iter().enumerate() {
+                for (k, cell) in pose.cells().enumerate() {
                     if first_seen[k] && cell.n > 0.0 {
                         let model =
                             fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
@@ -511,11 +511,11 @@ impl Kept {
     }
 
     fn from_out(poses: &[&GroundResiduals], out: Vec<bool>, among: Option<&[bool]>) -> Self {
-        let cells = poses[0].cells.len();
+        let cells = poses[0].cell_count();
         let mut readings = vec![0.0; cells];
         let mut poses_seen = vec![0usize; cells];
         for (pose, out) in poses.iter().zip(out.chunks(cells)) {
-            for (k, (cell, out)) in pose.cells.iter().zip(out).enumerate() {
+            for (k, (cell, out)) in pose.cells().zip(out).enumerate() {
                 if cell.n > 0.0 && !out {
                     readings[k] += cell.n;
                     poses_seen[k] += 1;
@@ -556,7 +556,7 @@ impl Kept {
             .map(|(pose, out)| {
                 let (mut moments, mut sums) = (pose.moments, pose.rhs);
                 let mut taken = Vec::new();
-                for (k, cell) in pose.cells.iter().enumerate().filter(|(_, c)| c.n > 0.0) {
+                for (k, cell) in pose.cells().enumerate().filter(|(_, c)| c.n > 0.0) {
                     if seen[k] && !out[k] {
                         taken.push(k as u32);
                         continue;
@@ -628,7 +628,7 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
         planes.par_iter_mut().enumerate().for_each(|(i, plane)| {
             let mut rhs = kept.rhs[i];
             for &k in &kept.taken[i] {
-                let cell = &poses[i].cells[k as usize];
+                let cell = poses[i].cell(k as usize);
                 rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k as usize];
             }
             *plane = kept.inverse_moments[i] * rhs;
@@ -649,7 +649,7 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
                         if k >= end {
                             break;
                         }
-                        let cell = &pose.cells[k];
+                        let cell = pose.cell(k);
                         next[k - first] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
                     }
                 }
@@ -683,12 +683,9 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
 pub(super) fn reading_variance(poses: &[&GroundResiduals]) -> f64 {
     let (mut within, mut within_dof) = (0.0, 0.0);
     for pose in poses {
-        for cell in &pose.cells {
-            if cell.n > 1.0 {
-                within += cell.rr - cell.r * cell.r / cell.n;
-                within_dof += cell.n - 1.0;
-            }
-        }
+        let (scatter, dof) = pose.reading_scatter();
+        within += scatter;
+        within_dof += dof;
     }
     if within_dof > 0.0 {
         (within / within_dof).max(f64::MIN_POSITIVE)
@@ -716,7 +713,7 @@ fn entries_of<'a>(
         let c = fitted.planes[i];
         kept.taken[i].iter().map(move |&k| {
             let k = k as usize;
-            let cell = &pose.cells[k];
+            let cell = pose.cell(k);
             let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
             let about_plane = (cell.r - plane) / cell.n;
             Entry {
@@ -757,7 +754,7 @@ pub(super) fn cell_variances(
     let mut information = vec![0.0; cells];
     for (i, pose) in poses.iter().enumerate() {
         for &k in &kept.taken[i] {
-            information[k as usize] += weights.of(pose.cells[k as usize].n);
+            information[k as usize] += weights.of(pose.cell(k as usize).n);
         }
     }
     information

@@ -71,10 +71,10 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     let (fits, frames_read) = fit_poses(bag, &observer, &bodies, &pool, threads)?;
     let (observations, failed) = split(bag, fits);
     let exponent = noise_with_depth::noise_exponent(
-        &observations
+        observations
             .iter()
             .filter_map(|o| o.ground_residuals.as_deref())
-            .collect::<Vec<_>>(),
+            .map(|r| r.scatter_with_depth()),
     );
     if let Some(p) = exponent {
         tracing::info!("the depth's noise against distance: σ(1/z) ∝ (1/z)^{p:.3}");
