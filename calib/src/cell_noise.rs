@@ -39,6 +39,60 @@ pub struct Entry {
     pub about_plane: f64,
 }
 
+/// Entries read in order, as often as a test needs them: a slice of them,
+/// or an estimate's own made as they are read from its poses' cells
+/// (`distortion`'s: 52 poses' entries, stored whole, were 6 MB at the
+/// estimate's peak).
+pub trait Entries: Sync {
+    /// How many there are.
+    fn count(&self) -> usize;
+    /// Every entry, in order.
+    fn each(&self) -> impl Iterator<Item = Entry> + '_;
+}
+
+impl Entries for [Entry] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    fn each(&self) -> impl Iterator<Item = Entry> + '_ {
+        self.iter().copied()
+    }
+}
+
+impl Entries for Vec<Entry> {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    fn each(&self) -> impl Iterator<Item = Entry> + '_ {
+        self.iter().copied()
+    }
+}
+
+/// Entries with their residuals replaced, in order (the residuals less
+/// something a test has accounted for), the rest as they are.
+pub struct WithResiduals<'a, E: ?Sized> {
+    pub entries: &'a E,
+    pub residuals: Vec<f32>,
+}
+
+impl<E: Entries + ?Sized> Entries for WithResiduals<'_, E> {
+    fn count(&self) -> usize {
+        self.entries.count()
+    }
+
+    fn each(&self) -> impl Iterator<Item = Entry> + '_ {
+        self.entries
+            .each()
+            .zip(&self.residuals)
+            .map(|(e, residual)| Entry {
+                residual: f64::from(*residual),
+                ..e
+            })
+    }
+}
+
 /// The noise of a cell's mean at one pose (module documentation), (1/m)².
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CellNoise {
@@ -84,10 +138,10 @@ impl CellNoise {
     /// `shared` from the entries' scatter about pattern and plane, with
     /// `parameters` fitted to them (the cells' pattern and the poses'
     /// planes): `Σ e² ≈ (1 − p/N)·Σ (within/n + shared)`.
-    pub fn estimate(within: f64, entries: &[Entry], parameters: f64) -> Self {
+    pub fn estimate(within: f64, entries: &(impl Entries + ?Sized), parameters: f64) -> Self {
         Self::estimate_from(
             within,
-            entries.iter().map(|e| (e.n, e.residual)),
+            entries.each().map(|e| (e.n, e.residual)),
             parameters,
         )
     }
@@ -119,12 +173,12 @@ impl CellNoise {
 
     /// χ² of the entries about pattern and plane under this noise, and its
     /// degrees of freedom.
-    pub fn chi2(&self, entries: &[Entry], parameters: f64) -> (f64, f64) {
+    pub fn chi2(&self, entries: &(impl Entries + ?Sized), parameters: f64) -> (f64, f64) {
         let chi2 = entries
-            .iter()
+            .each()
             .map(|e| e.residual * e.residual / self.of_mean(e.n))
             .sum();
-        (chi2, entries.len() as f64 - parameters)
+        (chi2, entries.count() as f64 - parameters)
     }
 }
 
@@ -195,17 +249,17 @@ pub const FLIPS: usize = 40;
 /// the readings, removing the plane part). The draws are fixed by a seed:
 /// the same poses give the same verdict.
 pub fn flip_test(
-    entries: &[Entry],
+    entries: &(impl Entries + ?Sized),
     poses: usize,
     weights: &[f64],
     observed: &[f64],
     shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
 ) -> FlipTest {
     flip_test_over(
-        entries.len(),
-        |k| {
-            let e = &entries[k];
-            Some((e.cell, e.pose, e.n * e.about_plane))
+        || {
+            entries
+                .each()
+                .map(|e| Some((e.cell, e.pose, e.n * e.about_plane)))
         },
         poses,
         weights,
@@ -214,10 +268,10 @@ pub fn flip_test(
     )
 }
 
-/// [`flip_test`] of `count` entries read in place, entry `k` as its key
-/// (a cell, or a bin of the ground: below `weights.len()`), its pose and
-/// its `n·m`, or `None` to leave it out: a test of the entries binned
-/// another way, or less something, where a copy of a calibration's
+/// [`flip_test`] of the entries `entries()` reads in place, in order, each
+/// as its key (a cell, or a bin of the ground: below `weights.len()`), its
+/// pose and its `n·m`, or `None` to leave it out: a test of the entries
+/// binned another way, or less something, where a copy of a calibration's
 /// entries was 6 MB at the peak.
 ///
 /// The flips are made [`FLIP_BLOCK`] at a time: each entry, read once a
@@ -228,9 +282,8 @@ pub fn flip_test(
 /// same, bit for bit (a sign is ±1, its product exact). Every flip at
 /// once, key by key, was slower (an index of the entries by key, and
 /// forty sums a key: 3 MB more at the peak).
-pub fn flip_test_over(
-    count: usize,
-    entry: impl Fn(usize) -> FlipEntry + Sync,
+pub fn flip_test_over<I: Iterator<Item = FlipEntry>>(
+    entries: impl Fn() -> I + Sync,
     poses: usize,
     weights: &[f64],
     observed: &[f64],
@@ -246,7 +299,7 @@ pub fn flip_test_over(
         .flat_map_iter(|block| {
             let signs = block_signs(block, poses);
             let mut sums = vec![[0.0; FLIP_BLOCK]; weights.len()];
-            add_flipped(&mut sums, &signs, count, &entry);
+            add_flipped(&mut sums, &signs, entries());
             (0..FLIP_BLOCK)
                 .map(|j| {
                     let column: Vec<f64> = sums.iter().map(|row| row[j]).collect();
@@ -298,26 +351,25 @@ fn block_signs(block: usize, poses: usize) -> Vec<[f64; FLIP_BLOCK]> {
 /// `None` to leave it out.
 type FlipEntry = Option<(u32, u32, f64)>;
 
-/// Adds each of `count` entries, in order, times each flip's sign of its
-/// pose to its key's `sums`. Where the processor has AVX2, the same loop
+/// Adds each of `entries`, in order, times each flip's sign of its pose to
+/// its key's `sums`. Where the processor has AVX2, the same loop
 /// four lanes at a time: the same products and sums (a multiply, then an
 /// add), bit for bit.
 fn add_flipped(
     sums: &mut [[f64; FLIP_BLOCK]],
     signs: &[[f64; FLIP_BLOCK]],
-    count: usize,
-    entry: &impl Fn(usize) -> FlipEntry,
+    entries: impl Iterator<Item = FlipEntry>,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
         #[allow(unsafe_code)]
         unsafe {
-            add_flipped_avx2(sums, signs, count, entry)
+            add_flipped_avx2(sums, signs, entries)
         };
         return;
     }
-    add_flipped_lanes(sums, signs, count, entry);
+    add_flipped_lanes(sums, signs, entries);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -325,20 +377,18 @@ fn add_flipped(
 fn add_flipped_avx2(
     sums: &mut [[f64; FLIP_BLOCK]],
     signs: &[[f64; FLIP_BLOCK]],
-    count: usize,
-    entry: &impl Fn(usize) -> FlipEntry,
+    entries: impl Iterator<Item = FlipEntry>,
 ) {
-    add_flipped_lanes(sums, signs, count, entry);
+    add_flipped_lanes(sums, signs, entries);
 }
 
 #[inline(always)]
 fn add_flipped_lanes(
     sums: &mut [[f64; FLIP_BLOCK]],
     signs: &[[f64; FLIP_BLOCK]],
-    count: usize,
-    entry: &impl Fn(usize) -> FlipEntry,
+    entries: impl Iterator<Item = FlipEntry>,
 ) {
-    for (key, pose, value) in (0..count).filter_map(entry) {
+    for (key, pose, value) in entries.flatten() {
         let row = &mut sums[key as usize];
         for (sum, sign) in row.iter_mut().zip(&signs[pose as usize]) {
             *sum += sign * value;
@@ -463,7 +513,13 @@ mod tests {
                 .collect()
         };
         let observed = shape_of(&vec![0.5; keys]);
-        let found = flip_test_over(entries.len(), entry, poses, &weights, &observed, shape_of);
+        let found = flip_test_over(
+            || (0..entries.len()).map(entry),
+            poses,
+            &weights,
+            &observed,
+            shape_of,
+        );
         // One flip at a time, over the entries in their order.
         let mut state = FLIP_SEED;
         let sizes: Vec<f64> = (0..FLIPS)

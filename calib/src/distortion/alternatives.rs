@@ -45,7 +45,7 @@ impl DepthDependence {
 /// [`DepthDependence`] of the sums kept under the shape.
 pub(super) fn depth_dependence(
     poses: &[&GroundResiduals],
-    entries: &[Entry],
+    entries: &impl Entries,
     shape: &[f64],
     noise: &CellNoise,
 ) -> DepthDependence {
@@ -70,8 +70,8 @@ pub(super) fn depth_dependence(
     // Each cell's mean depth over the poses that saw it.
     let (mut sum, mut weight) = (vec![0.0; cells], vec![0.0; cells]);
     let weights = noise.weights();
-    for e in entries {
-        if let Some(z) = depth(e) {
+    for e in entries.each() {
+        if let Some(z) = depth(&e) {
             let w = weights.of(e.n);
             sum[e.cell as usize] += w * z;
             weight[e.cell as usize] += w;
@@ -80,9 +80,9 @@ pub(super) fn depth_dependence(
     // residual ≈ −per_m·x with x = shape·(z − z̄), weighted by w (made
     // twice, for the fit and for its σ, rather than kept: 6 MB).
     let rows = || {
-        entries.iter().filter_map(|e| {
+        entries.each().filter_map(|e| {
             let k = e.cell as usize;
-            let (Some(z), true) = (depth(e), weight[k] > 0.0) else {
+            let (Some(z), true) = (depth(&e), weight[k] > 0.0) else {
                 return None;
             };
             let x = shape[k] * (z - sum[k] / weight[k]);
@@ -115,15 +115,16 @@ pub(super) fn depth_dependence(
 /// depth (quantiles of the depths the cells were seen at).
 pub(super) const DEPTH_BINS: usize = 8;
 
-/// The entries less what the pattern's change with depth accounts for: the
-/// shape times a gain per bin of depth (any change with depth, not only the
-/// linear one [`DepthDependence`] measures), each cell about its own mean
-/// gain, by least squares.
+/// The entries' residuals less what the pattern's change with depth
+/// accounts for: the shape times a gain per bin of depth (any change with
+/// depth, not only the linear one [`DepthDependence`] measures), each cell
+/// about its own mean gain, by least squares. `None` where too few depths
+/// were seen to bin them: the residuals as they are.
 pub(super) fn without_depth_dependence(
     poses: &[&GroundResiduals],
-    entries: &[Entry],
+    entries: &impl Entries,
     shape: &[f64],
-) -> Vec<Entry> {
+) -> Option<Vec<f32>> {
     use nalgebra::{SMatrix, SVector};
     let first = poses[0];
     let z = |e: &Entry| {
@@ -131,9 +132,9 @@ pub(super) fn without_depth_dependence(
         let q = poses[e.pose as usize].plane.at(du, dv);
         (q > 0.0).then(|| 1.0 / q)
     };
-    let mut depths: Vec<f64> = entries.iter().filter_map(z).collect();
+    let mut depths: Vec<f64> = entries.each().filter_map(|e| z(&e)).collect();
     if depths.len() < DEPTH_BINS * 10 {
-        return entries.to_vec();
+        return None;
     }
     depths.sort_by(f64::total_cmp);
     let edges: Vec<f64> = (1..DEPTH_BINS)
@@ -144,8 +145,8 @@ pub(super) fn without_depth_dependence(
     let cells = shape.len();
     let mut share = vec![[0.0; DEPTH_BINS]; cells];
     let mut total = vec![0.0; cells];
-    for e in entries {
-        if let Some(z) = z(e) {
+    for e in entries.each() {
+        if let Some(z) = z(&e) {
             share[e.cell as usize][bin(z)] += e.n;
             total[e.cell as usize] += e.n;
         }
@@ -161,10 +162,10 @@ pub(super) fn without_depth_dependence(
     };
     let mut normal = SMatrix::<f64, DEPTH_BINS, DEPTH_BINS>::zeros();
     let mut rhs = SVector::<f64, DEPTH_BINS>::zeros();
-    for e in entries {
-        if let Some(z) = z(e) {
+    for e in entries.each() {
+        if let Some(z) = z(&e) {
             if total[e.cell as usize] > 0.0 {
-                let row = design(e, z);
+                let row = design(&e, z);
                 normal += row * row.transpose() * e.n;
                 rhs += row * (e.residual * e.n);
             }
@@ -177,16 +178,15 @@ pub(super) fn without_depth_dependence(
         .try_inverse()
         .map(|h| h * rhs)
         .unwrap_or_default();
-    entries
-        .iter()
-        .map(|e| match z(e) {
-            Some(z) if total[e.cell as usize] > 0.0 => Entry {
-                residual: e.residual - design(e, z).dot(&gains),
-                ..*e
-            },
-            _ => *e,
+    let residuals = entries
+        .each()
+        .map(|e| match z(&e) {
+            Some(z) if total[e.cell as usize] > 0.0 => e.residual - design(&e, z).dot(&gains),
+            _ => e.residual,
         })
-        .collect()
+        .map(|residual| residual as f32)
+        .collect();
+    Some(residuals)
 }
 
 /// Where each entry's cell meets the ground seen from its pose, in bins of
@@ -196,7 +196,7 @@ pub(super) fn without_depth_dependence(
 /// entries' poses and cells only, so it is made beside the other tests.
 pub(super) fn ground_bins(
     poses: &[&GroundResiduals],
-    entries: &[Entry],
+    entries: &impl Entries,
     ground_from_sensor: &[crate::geometry::Transform],
 ) -> (usize, Vec<Bin>) {
     let first = poses[0];
@@ -204,7 +204,7 @@ pub(super) fn ground_bins(
     let sensor_from_optical = crate::geometry::sensor_from_optical();
     // Each cell's ray in the sensor's frame, once: the same at every pose.
     let cells = entries
-        .iter()
+        .each()
         .map(|e| e.cell as usize + 1)
         .max()
         .unwrap_or(0);
@@ -228,7 +228,7 @@ pub(super) fn ground_bins(
             (z / GROUND_BIN_M).floor() as i64,
         ))
     };
-    number_in_order_met(entries.iter().map(bin_key))
+    number_in_order_met(entries.each().map(|e| bin_key(&e)))
 }
 
 /// Whether the residuals left by pattern and planes stay with the ground:
@@ -238,13 +238,13 @@ pub(super) fn ground_bins(
 /// less what a pattern changing with depth accounts for.
 pub(super) fn ground_fixed(
     poses: usize,
-    entries: &[Entry],
+    entries: &(impl Entries + ?Sized),
     bins: usize,
     bin_of: &[Bin],
 ) -> FlipTest {
     let binned = || {
         entries
-            .iter()
+            .each()
             .zip(bin_of)
             .filter_map(|(e, bin)| bin.number().map(|bin| (bin, e)))
     };
@@ -261,12 +261,11 @@ pub(super) fn ground_fixed(
             .collect()
     };
     flip_test_over(
-        entries.len(),
-        |k| {
-            bin_of
-                .get(k)
-                .and_then(|bin| bin.number())
-                .map(|bin| (bin, entries[k].pose, entries[k].n * entries[k].residual))
+        || {
+            entries
+                .each()
+                .zip(bin_of)
+                .map(|(e, bin)| bin.number().map(|bin| (bin, e.pose, e.n * e.residual)))
         },
         poses,
         &weights,
@@ -429,7 +428,7 @@ impl BinNumbers {
 /// the shape with them. A bin seen by fewer than three poses has no relief
 /// (it would take in those poses' cells whole).
 pub(super) fn shape_beside_relief(
-    entries: &[Entry],
+    entries: &impl Entries,
     bin_of: &[Bin],
     poses: usize,
     weights: &[f64],
@@ -441,7 +440,7 @@ pub(super) fn shape_beside_relief(
         .max()
         .map_or(0, |b| b as usize + 1);
     let mut seen_by = vec![(0u32, u32::MAX); bins];
-    for (e, bin) in entries.iter().zip(bin_of) {
+    for (e, bin) in entries.each().zip(bin_of) {
         if let Some(b) = bin.number() {
             let (count, last) = &mut seen_by[b as usize];
             if *last != e.pose {
@@ -457,7 +456,7 @@ pub(super) fn shape_beside_relief(
     let mut relief = vec![0.0; bins];
     for _ in 0..RELIEF_TURNS {
         let mut sums = vec![(0.0, 0.0); bins];
-        for (e, bin) in entries.iter().zip(bin_of) {
+        for (e, bin) in entries.each().zip(bin_of) {
             if let Some(b) = bin.number().filter(|b| seen_by[*b as usize].0 >= 3) {
                 let (s, w) = &mut sums[b as usize];
                 *s += e.n * (e.about_plane - shape[e.cell as usize]);
@@ -473,27 +472,23 @@ pub(super) fn shape_beside_relief(
             e.about_plane - relief_of(bin)
         }));
     }
-    let beside = |k: usize| {
-        let e = &entries[k];
-        let about_plane = e.about_plane
-            - bin_of
-                .get(k)
-                .and_then(|bin| bin.number())
-                .map_or(0.0, |b| relief[b as usize]);
-        Some((e.cell, e.pose, e.n * about_plane))
+    let beside = || {
+        entries.each().zip(bin_of).map(|(e, bin)| {
+            let about_plane = e.about_plane - bin.number().map_or(0.0, |b| relief[b as usize]);
+            Some((e.cell, e.pose, e.n * about_plane))
+        })
     };
     let size = |s: &[f64]| s.iter().zip(weights).map(|(v, w)| w * v * v).sum::<f64>();
     // The relief's size over the ground seen, weighted by readings.
     let (mut relief_sum, mut readings) = (0.0, 0.0);
-    for (e, bin) in entries.iter().zip(bin_of) {
+    for (e, bin) in entries.each().zip(bin_of) {
         if let Some(b) = bin.number() {
             relief_sum += e.n * relief[b as usize].powi(2);
             readings += e.n;
         }
     }
     ReliefTest {
-        shape_sigmas: flip_test_over(entries.len(), beside, poses, weights, &shape, &shape_of)
-            .sigmas(),
+        shape_sigmas: flip_test_over(beside, poses, weights, &shape, &shape_of).sigmas(),
         shape_share: (size(&shape) / size(&alone).max(f64::MIN_POSITIVE)).sqrt(),
         relief_rms: (relief_sum / readings.max(f64::MIN_POSITIVE)).sqrt(),
     }
@@ -501,14 +496,14 @@ pub(super) fn shape_beside_relief(
 
 /// Per cell, `Σ n·value` of the entries (with each its bin).
 fn per_cell(
-    entries: &[Entry],
+    entries: &impl Entries,
     bin_of: &[Bin],
     cells: usize,
     value: impl Fn(&Entry, Option<u32>) -> f64,
 ) -> Vec<f64> {
     let mut sums = vec![0.0; cells];
-    for (e, bin) in entries.iter().zip(bin_of) {
-        sums[e.cell as usize] += e.n * value(e, bin.number());
+    for (e, bin) in entries.each().zip(bin_of) {
+        sums[e.cell as usize] += e.n * value(&e, bin.number());
     }
     sums
 }

@@ -39,7 +39,9 @@ mod found;
 mod plane_part;
 mod shape;
 
-use crate::cell_noise::{flip_test, flip_test_over, CellNoise, Entry, FlipTest};
+use crate::cell_noise::{
+    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, WithResiduals,
+};
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;
 use crate::outcome::{DepthPattern, Solution, ALTERNATIVE_SIGMAS};
@@ -412,6 +414,43 @@ mod tests {
             DepthCorrection::from_cells(4, 3, 8, &[None; 12]).map(|c| c.raw_at(9.0, 9.0)),
             Some(0.0)
         );
+    }
+
+    /// The estimate's entries, walked from the poses' cells and their kept
+    /// means, are the entries made whole, in order: poses that take no cell
+    /// (the last among them) are stepped over, and only the means' rounding
+    /// to f32 differs.
+    #[test]
+    fn the_entries_walked_are_the_entries_made_whole() {
+        let bowl = |du: f64, dv: f64| 1e-3 * ((du / 320.0).powi(2) + (dv / 240.0).powi(2));
+        let poses = synthetic_changed(bowl, 9, |i, sums| {
+            if i == 1 || i == 4 || i == 8 {
+                *sums = (
+                    vec![CellSums::default(); sums.0.len()],
+                    Matrix3::zeros(),
+                    Vector3::zeros(),
+                );
+            }
+        });
+        let refs: Vec<&GroundResiduals> = poses.iter().collect();
+        let kept = Kept::all(&refs);
+        let fitted = alternate(&refs, &kept, None);
+        let walked = entries(&refs, &kept, &fitted);
+        let whole: Vec<Entry> = entries_of(&refs, &kept, &fitted).collect();
+        assert!(whole.len() > 10_000, "{} entries", whole.len());
+        assert_eq!(walked.count(), whole.len());
+        assert_eq!(walked.each().count(), whole.len());
+        for (a, b) in walked.each().zip(&whole) {
+            assert_eq!((a.pose, a.cell, a.n), (b.pose, b.cell, b.n));
+            let rounding = 1e-7 * b.about_plane.abs();
+            assert!(
+                (a.about_plane - b.about_plane).abs() <= rounding,
+                "{a:?} {b:?}"
+            );
+            assert!((a.residual - b.residual).abs() <= rounding, "{a:?} {b:?}");
+        }
+        let poses_met: std::collections::BTreeSet<u32> = walked.each().map(|e| e.pose).collect();
+        assert_eq!(poses_met, [0, 2, 3, 5, 6, 7].into_iter().collect());
     }
 
     /// A cell only one pose saw holds no estimate of the pattern, so its

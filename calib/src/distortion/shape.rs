@@ -310,7 +310,7 @@ pub fn estimate_shape_seen_from(
         shape
     };
     let mut plain = vec![0.0; cells];
-    for e in &sums {
+    for e in sums.each() {
         plain[e.cell as usize] += e.n * e.about_plane;
     }
     // The test that there is a shape, the pattern's change with depth and
@@ -330,15 +330,22 @@ pub fn estimate_shape_seen_from(
     // pattern changing with depth would leave: each alternative is asked
     // what the other does not explain.
     let ground_tests = ground_bins.map(|(bins, bin_of)| {
-        // Borrowed when nothing is taken out (a copy was 7 MB of the peak
-        // on a 52-pose calibration). The entries less the change with
-        // depth are the same entries, in order: their bins are the same.
-        let beyond_depth = if depth.significant() {
-            std::borrow::Cow::Owned(without_depth_dependence(poses, &sums, shape))
-        } else {
-            std::borrow::Cow::Borrowed(&sums[..])
+        // The entries less the change with depth are the same entries, in
+        // order, with other residuals: their bins are the same.
+        let beyond_depth = depth
+            .significant()
+            .then(|| without_depth_dependence(poses, &sums, shape))
+            .flatten();
+        let test = match beyond_depth {
+            Some(residuals) => {
+                let less = WithResiduals {
+                    entries: &sums,
+                    residuals,
+                };
+                ground_fixed(poses.len(), &less, bins, &bin_of)
+            }
+            None => ground_fixed(poses.len(), &sums, bins, &bin_of),
         };
-        let test = ground_fixed(poses.len(), &beyond_depth, bins, &bin_of);
         // Only asked when the ground's test finds something.
         let beside = (test.sigmas() > ALTERNATIVE_SIGMAS)
             .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), &weights, shape_of));
@@ -474,7 +481,7 @@ pub(super) struct Kept {
 
 impl Kept {
     /// Every sum.
-    fn all(poses: &[&GroundResiduals]) -> Self {
+    pub(super) fn all(poses: &[&GroundResiduals]) -> Self {
         let cells = poses[0].cell_count();
         Self::from_out(poses, vec![false; poses.len() * cells], None)
     }
@@ -696,15 +703,91 @@ pub(super) fn reading_variance(poses: &[&GroundResiduals]) -> f64 {
 
 /// The sums kept, each as its cell's mean residual about pattern and plane
 /// and about the plane alone.
-pub(super) fn entries(poses: &[&GroundResiduals], kept: &Kept, fitted: &Fitted) -> Vec<Entry> {
-    let mut entries = Vec::with_capacity(kept.taken.iter().map(Vec::len).sum());
-    entries.extend(entries_of(poses, kept, fitted));
-    entries
+pub(super) fn entries<'a>(
+    poses: &'a [&'a GroundResiduals],
+    kept: &'a Kept,
+    fitted: &'a Fitted,
+) -> KeptEntries<'a> {
+    let mut about_plane = Vec::with_capacity(kept.taken.iter().map(Vec::len).sum());
+    about_plane.extend(entries_of(poses, kept, fitted).map(|e| e.about_plane as f32));
+    KeptEntries {
+        poses,
+        taken: &kept.taken,
+        shape: &fitted.shape,
+        about_plane,
+    }
+}
+
+/// The sums kept as the estimate's entries, made as they are read: pose by
+/// pose, the cells it takes ([`Kept`]'s work lists), each with its
+/// readings from the pose's cell and its mean about the pose's plane, kept
+/// in f32 (4 bytes an entry, where whole entries were 32: 6 MB for 52
+/// poses at the estimate's peak); the residual about the pattern is that
+/// mean less the pattern's cell.
+pub(super) struct KeptEntries<'a> {
+    poses: &'a [&'a GroundResiduals],
+    taken: &'a [Vec<u32>],
+    shape: &'a [f64],
+    about_plane: Vec<f32>,
+}
+
+impl Entries for KeptEntries<'_> {
+    fn count(&self) -> usize {
+        self.about_plane.len()
+    }
+
+    fn each(&self) -> impl Iterator<Item = Entry> + '_ {
+        EachKeptEntry {
+            entries: self,
+            pose: 0,
+            cells: self.taken.first().map_or([].iter(), |taken| taken.iter()),
+            about_plane: self.about_plane.iter(),
+        }
+    }
+}
+
+/// [`KeptEntries::each`]: where the walk is, pose by pose (written out
+/// rather than a `flat_map` zipped with the means, whose every step asked
+/// which pose it was in).
+struct EachKeptEntry<'a> {
+    entries: &'a KeptEntries<'a>,
+    pose: usize,
+    /// The pose's work list, and every entry's mean, from here on.
+    cells: std::slice::Iter<'a, u32>,
+    about_plane: std::slice::Iter<'a, f32>,
+}
+
+impl Iterator for EachKeptEntry<'_> {
+    type Item = Entry;
+
+    #[inline]
+    fn next(&mut self) -> Option<Entry> {
+        let entries = self.entries;
+        loop {
+            if let Some(&cell) = self.cells.next() {
+                let about_plane = f64::from(*self.about_plane.next()?);
+                return Some(Entry {
+                    pose: self.pose as u32,
+                    cell,
+                    n: entries.poses[self.pose].cell(cell as usize).n,
+                    residual: about_plane - entries.shape[cell as usize],
+                    about_plane,
+                });
+            }
+            self.pose += 1;
+            self.cells = entries.taken.get(self.pose)?.iter();
+        }
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let left = self.about_plane.len();
+        (left, Some(left))
+    }
 }
 
 /// [`entries`] as they are made, in the same order: pose by pose, the
 /// cells it takes (those with readings, seen and not left out) in order.
-fn entries_of<'a>(
+pub(super) fn entries_of<'a>(
     poses: &'a [&GroundResiduals],
     kept: &'a Kept,
     fitted: &'a Fitted,
