@@ -293,39 +293,49 @@ pub(super) fn lane_sums<T: FitValue, const GUARDED: bool>(
         guard,
     } = *test;
     let mut acc: LaneSums = [[0f32; LANES]; 6];
-    let mut lanes = |v: &[T], a: &[T], d: &[f32], d2: &[f32]| {
-        for l in 0..LANES {
-            let r = v[l].to_f32() - (base + cu * d[l]);
-            let mut inside = r.abs() < band;
-            if GUARDED {
-                inside &= clear_above(a[l].to_f32(), base_above + cu * d[l], guard);
+    // Half the lanes at a time, over the whole row, then the other half:
+    // each lane adds the same numbers in the same order, and a half's six
+    // sums stay in registers (all sixteen lanes' twelve AVX2 registers of
+    // sums, beside the test's constants, were stored and loaded on every
+    // chunk).
+    for half in [0, HALF] {
+        let mut lanes = |v: &[T], a: &[T], d: &[f32], d2: &[f32]| {
+            for l in half..half + HALF {
+                let r = v[l].to_f32() - (base + cu * d[l]);
+                let mut inside = r.abs() < band;
+                if GUARDED {
+                    inside &= clear_above(a[l].to_f32(), base_above + cu * d[l], guard);
+                }
+                let one = if inside { 1.0 } else { 0.0 };
+                let kept = if inside { r } else { 0.0 };
+                acc[0][l] += one;
+                acc[1][l] += one * d[l];
+                acc[2][l] += one * d2[l];
+                acc[3][l] += kept;
+                acc[4][l] += kept * d[l];
+                acc[5][l] += kept * kept;
             }
-            let one = if inside { 1.0 } else { 0.0 };
-            let kept = if inside { r } else { 0.0 };
-            acc[0][l] += one;
-            acc[1][l] += one * d[l];
-            acc[2][l] += one * d2[l];
-            acc[3][l] += kept;
-            acc[4][l] += kept * d[l];
-            acc[5][l] += kept * kept;
-        }
-    };
-    let chunks = row
-        .values
-        .chunks_exact(LANES)
-        .zip(row.du.chunks_exact(LANES))
-        .zip(row.du2.chunks_exact(LANES));
-    if GUARDED {
-        for (((v, d), d2), a) in chunks.zip(row.above.chunks_exact(LANES)) {
-            lanes(v, a, d, d2);
-        }
-    } else {
-        for ((v, d), d2) in chunks {
-            lanes(v, v, d, d2);
+        };
+        let chunks = row
+            .values
+            .chunks_exact(LANES)
+            .zip(row.du.chunks_exact(LANES))
+            .zip(row.du2.chunks_exact(LANES));
+        if GUARDED {
+            for (((v, d), d2), a) in chunks.zip(row.above.chunks_exact(LANES)) {
+                lanes(v, a, d, d2);
+            }
+        } else {
+            for ((v, d), d2) in chunks {
+                lanes(v, v, d, d2);
+            }
         }
     }
     acc
 }
+
+/// Half of [`LANES`]: one AVX2 register of f32.
+const HALF: usize = LANES / 2;
 
 /// [`lane_sums`] in NEON, four vectors of four lanes: the same operations
 /// in the same order (a multiply then an add, never fused, as Rust's scalar
