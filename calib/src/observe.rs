@@ -11,7 +11,7 @@ use crate::geometry::{PoseDegMm, Transform};
 use crate::plane::{
     fit_ground, FitBuffers, GroundFit, GroundFitMethod, GroundPrior, PlaneFitSettings,
 };
-use crate::residuals::GroundResiduals;
+use crate::residuals::{GroundResiduals, ScatterMeasured};
 use crate::sensor::{DepthCamera, DepthEncoding, DepthModel, DepthRange, Intrinsics};
 use crate::solve::Observation;
 use serde::{Deserialize, Serialize};
@@ -105,6 +105,9 @@ pub struct ObserveSettings {
     /// pattern: a calibration estimates one, a check against a calibration
     /// takes the calibration's and needs none.
     pub ground_residuals: bool,
+    /// What the residuals measure of the readings' scatter: the cells'
+    /// scatter against depth too for a camera of unknown kind (a bag's).
+    pub scatter: ScatterMeasured,
 }
 
 impl Default for ObserveSettings {
@@ -115,6 +118,7 @@ impl Default for ObserveSettings {
             body_pose_source: BodyPoseSource::Feet,
             depth_range: DepthRange::default(),
             ground_residuals: true,
+            scatter: ScatterMeasured::Pooled,
         }
     }
 }
@@ -399,17 +403,28 @@ impl PoseObserver {
         buffers: &mut FitBuffers,
     ) -> Option<GroundResiduals> {
         match fit.method {
-            GroundFitMethod::Disparity => {
-                GroundResiduals::of_fitted(frames, &self.camera, fit, buffers)
-            }
+            GroundFitMethod::Disparity => GroundResiduals::of_fitted_measuring(
+                frames,
+                &self.camera,
+                fit,
+                buffers,
+                self.settings.scatter,
+            ),
             GroundFitMethod::Paper => {
                 let settings = PlaneFitSettings {
                     method: GroundFitMethod::Disparity,
                     ..self.settings.plane
                 };
                 let beside = fit_ground(frames, &self.camera, prior, &settings, buffers).ok()?;
-                GroundResiduals::of_fitted(frames, &self.camera, &beside, buffers)
-                    .map(|r| r.beside_another_fit(beside.plane, beside.covariance))
+                let scatter = self.settings.scatter;
+                GroundResiduals::of_fitted_measuring(
+                    frames,
+                    &self.camera,
+                    &beside,
+                    buffers,
+                    scatter,
+                )
+                .map(|r| r.beside_another_fit(beside.plane, beside.covariance))
             }
         }
     }

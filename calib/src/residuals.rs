@@ -100,6 +100,20 @@ impl From<&KeptCell> for GroundCell {
     }
 }
 
+/// What a pose's residuals measure of the readings' scatter, beyond the
+/// pooled scatter every calibration needs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum ScatterMeasured {
+    /// The pooled scatter only.
+    #[default]
+    Pooled,
+    /// And the cells' scatter against the ground's depth
+    /// ([`crate::noise_with_depth`], for a camera of unknown kind): two
+    /// logarithms a cell, 0.14 ms a pose, which a Kinect's calibration
+    /// does not need.
+    AlsoWithDepth,
+}
+
 /// One pose's ground residuals, summed per cell: what the pattern's
 /// estimate needs from a pose, taken while its frames are in memory.
 #[derive(Debug, Clone, PartialEq)]
@@ -111,8 +125,8 @@ pub struct GroundResiduals {
     /// over the cells of two readings or more, and its degrees of freedom
     /// `Σ(n − 1)`.
     reading_scatter: (f64, f64),
-    /// The cells' scatter against the ground's depth.
-    scatter_with_depth: ScatterWithDepth,
+    /// The cells' scatter against the ground's depth, where measured.
+    scatter_with_depth: Option<ScatterWithDepth>,
     /// Σφφᵀ over the pose's ground readings, φ = (1, u', v').
     pub(crate) moments: Matrix3<f64>,
     /// Σ r·φ.
@@ -403,24 +417,27 @@ impl GroundResiduals {
     /// A pose's residuals from its cells' sums (`columns × rows` of them)
     /// and its moments `(Σφφᵀ, Σr·φ)`, with the depth model's raw units per
     /// 1/m and the fit's band (1/m), about the fit's `plane`: the squares
-    /// read into the pose's scatter here, the cells kept in f32.
+    /// read into the pose's scatter here (`scatter`), the cells kept in f32.
     pub(crate) fn from_sums(
         (columns, rows, cells): (usize, usize, &[CellSums]),
         (moments, rhs): (Matrix3<f64>, Vector3<f64>),
         intrinsics: Intrinsics,
         (raw_per_inverse_depth, fit_band): (f64, f64),
-        plane: PixelPlane,
+        (plane, scatter): (PixelPlane, ScatterMeasured),
     ) -> Self {
         let mut reading_scatter = (0.0, 0.0);
-        let mut scatter_with_depth = ScatterWithDepth::default();
-        for (k, cell) in cells.iter().enumerate() {
-            if cell.n > 1.0 {
-                reading_scatter.0 += cell.rr - cell.r * cell.r / cell.n;
-                reading_scatter.1 += cell.n - 1.0;
-            }
-            let (du, dv) = cell_centre(k, columns, &intrinsics);
-            scatter_with_depth.add_cell(cell.n, cell.r, cell.rr, plane.at(du, dv));
+        for cell in cells.iter().filter(|cell| cell.n > 1.0) {
+            reading_scatter.0 += cell.rr - cell.r * cell.r / cell.n;
+            reading_scatter.1 += cell.n - 1.0;
         }
+        let scatter_with_depth = (scatter == ScatterMeasured::AlsoWithDepth).then(|| {
+            let mut with_depth = ScatterWithDepth::default();
+            for (k, cell) in cells.iter().enumerate() {
+                let (du, dv) = cell_centre(k, columns, &intrinsics);
+                with_depth.add_cell(cell.n, cell.r, cell.rr, plane.at(du, dv));
+            }
+            with_depth
+        });
         Self {
             columns,
             rows,
@@ -460,9 +477,10 @@ impl GroundResiduals {
     }
 
     /// The cells' scatter against the ground's depth, for
-    /// [`crate::noise_with_depth::noise_exponent`].
-    pub fn scatter_with_depth(&self) -> &ScatterWithDepth {
-        &self.scatter_with_depth
+    /// [`crate::noise_with_depth::noise_exponent`], where measured
+    /// ([`ScatterMeasured::AlsoWithDepth`]).
+    pub fn scatter_with_depth(&self) -> Option<&ScatterWithDepth> {
+        self.scatter_with_depth.as_ref()
     }
 
     /// These residuals, marked as taken from the default fit made beside
@@ -492,7 +510,12 @@ impl GroundResiduals {
         fit: &GroundFit,
         image: &mut InverseDepthImage,
     ) -> Option<Self> {
-        Self::of_read(Read::Converting(frames, image), camera, fit)
+        Self::of_read(
+            Read::Converting(frames, image),
+            camera,
+            fit,
+            ScatterMeasured::Pooled,
+        )
     }
 
     /// [`GroundResiduals::of`] the frames that `fit` was just fitted to
@@ -504,15 +527,32 @@ impl GroundResiduals {
         fit: &GroundFit,
         buffers: &mut crate::plane::FitBuffers,
     ) -> Option<Self> {
+        Self::of_fitted_measuring(frames, camera, fit, buffers, ScatterMeasured::Pooled)
+    }
+
+    /// [`GroundResiduals::of_fitted`], measuring `scatter`.
+    pub fn of_fitted_measuring(
+        frames: &[&[u16]],
+        camera: &DepthCamera,
+        fit: &GroundFit,
+        buffers: &mut crate::plane::FitBuffers,
+        scatter: ScatterMeasured,
+    ) -> Option<Self> {
         if buffers.converted_images(frames, camera).is_some() {
             let images = buffers.converted_images(frames, camera)?;
-            Self::of_read(Read::Converted(frames, images), camera, fit)
+            Self::of_read(Read::Converted(frames, images), camera, fit, scatter)
         } else {
-            Self::of(frames, camera, fit, buffers.residual_image())
+            let read = Read::Converting(frames, buffers.residual_image());
+            Self::of_read(read, camera, fit, scatter)
         }
     }
 
-    fn of_read(read: Read<'_>, camera: &DepthCamera, fit: &GroundFit) -> Option<Self> {
+    fn of_read(
+        read: Read<'_>,
+        camera: &DepthCamera,
+        fit: &GroundFit,
+        scatter: ScatterMeasured,
+    ) -> Option<Self> {
         let InlierBand::InverseDepth { band, edge_guard } = fit.band else {
             return None;
         };
@@ -583,7 +623,7 @@ impl GroundResiduals {
             (moments, rhs),
             intrinsics,
             (camera.raw_per_inverse_depth(), band),
-            plane,
+            (plane, scatter),
         ))
     }
 }

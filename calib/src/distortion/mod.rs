@@ -293,7 +293,7 @@ pub fn solve_with_pattern_taken_out(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::residuals::CellSums;
+    use crate::residuals::{CellSums, ScatterMeasured};
 
     /// One synthetic pose's sums: its cells and its moments.
     type PoseSums = (Vec<CellSums>, Matrix3<f64>, Vector3<f64>);
@@ -342,11 +342,14 @@ mod tests {
                     (moments, rhs),
                     intrinsics,
                     (-1.0 / 0.003, f64::INFINITY),
-                    PixelPlane {
-                        c0: 0.5,
-                        cu: 0.0,
-                        cv: 0.0,
-                    },
+                    (
+                        PixelPlane {
+                            c0: 0.5,
+                            cu: 0.0,
+                            cv: 0.0,
+                        },
+                        ScatterMeasured::Pooled,
+                    ),
                 )
             })
             .collect()

@@ -16,6 +16,7 @@ use crate::calib::geometry::PoseDegMm;
 use crate::calib::noise_with_depth;
 use crate::calib::observe::{BodyPoseSource, PoseObserver};
 use crate::calib::plane::FitBuffers;
+use crate::calib::residuals::ScatterMeasured;
 use crate::formats::output::{CameraDisparityJson, PatternDisparityJson, ResultJson, SetupJson};
 use crate::solving::replay::{Replay, ReplayOptions};
 pub use session::{read_bag, BagError, BagOptions, BagSession, CameraDisparity, GivenBaseline};
@@ -44,6 +45,9 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
     // A bag gives the feet, not what was commanded.
     let mut settings = options.pose;
     settings.body_pose_source = BodyPoseSource::Feet;
+    // Whose camera it is a bag does not say: its noise against distance is
+    // measured, to tell a disparity camera from a time-of-flight one.
+    settings.scatter = ScatterMeasured::AlsoWithDepth;
     let observer = PoseObserver::for_encoding(
         DepthEncoding::Metric {
             metres_per_unit: bag.units.metres_per_unit(),
@@ -74,7 +78,7 @@ pub fn replay_bag(bag: &BagSession, options: &ReplayOptions) -> Result<Replay, B
         observations
             .iter()
             .filter_map(|o| o.ground_residuals.as_deref())
-            .map(|r| r.scatter_with_depth()),
+            .filter_map(|r| r.scatter_with_depth()),
     );
     if let Some(p) = exponent {
         tracing::info!("the depth's noise against distance: σ(1/z) ∝ (1/z)^{p:.3}");
