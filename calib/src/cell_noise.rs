@@ -73,7 +73,10 @@ impl Entries for Vec<Entry> {
 /// Entries with their residuals replaced, in order (the residuals less
 /// something a test has accounted for), the rest as they are.
 pub struct WithResiduals<'a, E: ?Sized> {
+    /// The entries, as they are.
     pub entries: &'a E,
+    /// Each entry's residual in their order (1/m; f32, 4 bytes an entry
+    /// where a copy of the entries was 32).
     pub residuals: Vec<f32>,
 }
 
