@@ -62,11 +62,11 @@ impl Entries for [Entry] {
 
 impl Entries for Vec<Entry> {
     fn count(&self) -> usize {
-        self.len()
+        self.as_slice().count()
     }
 
     fn each(&self) -> impl Iterator<Item = Entry> + '_ {
-        self.iter().copied()
+        self.as_slice().each()
     }
 }
 
