@@ -179,9 +179,15 @@ fn models() -> [(&'static str, DepthModel); 2] {
 #[test]
 #[ignore = "prints docs/method.md's table (minutes): run with --ignored"]
 fn table() {
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_writer(std::io::stderr)
+    use tracing_subscriber::{filter::LevelFilter, filter::Targets, prelude::*};
+    // `RUST_LOG` as targets and levels; errors only when unset.
+    let filter = std::env::var("RUST_LOG")
+        .ok()
+        .and_then(|value| value.parse::<Targets>().ok())
+        .unwrap_or_else(|| Targets::new().with_default(LevelFilter::ERROR));
+    let _ = tracing_subscriber::registry()
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(filter)
         .try_init();
     let scenes: Vec<String> = std::env::var("GROUNDCAL_SCENES")
         .unwrap_or_else(|_| {
