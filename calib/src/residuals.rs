@@ -27,7 +27,12 @@ pub const CELL_PX: usize = 8;
 /// principal point (`u − cx`, `v − cy`): the one place the pattern's cells
 /// meet the image's coordinates.
 pub fn cell_centre(k: usize, columns: usize, intrinsics: &Intrinsics) -> (f64, f64) {
-    let (column, row) = (k % columns, k / columns);
+    centre_of(k % columns, k / columns, intrinsics)
+}
+
+/// [`cell_centre`] from the cell's column and row.
+#[inline]
+fn centre_of(column: usize, row: usize, intrinsics: &Intrinsics) -> (f64, f64) {
     let half = (CELL_PX as f64 - 1.0) / 2.0;
     (
         (column * CELL_PX) as f64 + half - intrinsics.cx,
@@ -65,40 +70,92 @@ pub(crate) struct GroundCell {
     pub(crate) v: f64,
 }
 
-/// [`GroundCell`] as a pose keeps it until the calibration's end, in f32:
-/// 16 bytes where five f64 sums were 40, and a calibration keeps 4,800 a
-/// pose (52 poses' were 10 MB, half of a replay's heap at its peak). The
-/// rounding (a relative 6·10⁻⁸) is far below a cell mean's noise; the
-/// counts are whole numbers, exact in f32 below 2²⁴.
+/// [`GroundCell`] as a pose keeps it until the calibration's end: 12 bytes
+/// where five f64 sums were 40, and a calibration keeps 4,800 a pose (52
+/// poses' were 10 MB, half of a replay's heap at its peak). The count and
+/// the residuals' sum in f32 (a relative rounding of 6·10⁻⁸, far below a
+/// cell mean's noise; counts are whole numbers, exact below 2²⁴); the
+/// readings' centre as its offset from the cell's centre, in steps of
+/// [`CENTRE_STEP_PX`] (the centre lies within the cell's 8 pixels).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct KeptCell {
     n: f32,
     r: f32,
-    u: f32,
-    v: f32,
+    du: i16,
+    dv: i16,
 }
 
-impl From<&CellSums> for KeptCell {
-    fn from(sums: &CellSums) -> Self {
+/// The step of a kept cell's centre offset, pixels: 1/8192, so that ±4
+/// pixels fit an i16 and the centre is rounded by at most 6·10⁻⁵ pixels
+/// (where the f32 sums it replaced rounded it by up to 2·10⁻⁵).
+const CENTRE_STEP_PX: f64 = 1.0 / 8192.0;
+
+impl KeptCell {
+    /// `sums` of the cell whose centre is `centre` (pixels from the
+    /// principal point).
+    fn new(sums: &CellSums, centre: (f64, f64)) -> Self {
+        let per_reading = if sums.n > 0.0 { 1.0 / sums.n } else { 0.0 };
+        // To the nearest step (half away from 0; the cast saturates).
+        let offset = |sum: f64, centre: f64| {
+            let steps = if sums.n > 0.0 {
+                (sum * per_reading - centre) / CENTRE_STEP_PX
+            } else {
+                0.0
+            };
+            (steps + 0.5f64.copysign(steps)) as i16
+        };
         Self {
             n: sums.n as f32,
             r: sums.r as f32,
-            u: sums.u as f32,
-            v: sums.v as f32,
+            du: offset(sums.u, centre.0),
+            dv: offset(sums.v, centre.1),
+        }
+    }
+
+    /// The sums again, for the cell whose centre is `centre`.
+    #[inline]
+    fn sums(&self, centre: (f64, f64)) -> GroundCell {
+        let n = f64::from(self.n);
+        GroundCell {
+            n,
+            r: f64::from(self.r),
+            u: n * (centre.0 + f64::from(self.du) * CENTRE_STEP_PX),
+            v: n * (centre.1 + f64::from(self.dv) * CENTRE_STEP_PX),
         }
     }
 }
 
-impl From<&KeptCell> for GroundCell {
-    fn from(kept: &KeptCell) -> Self {
-        Self {
-            n: f64::from(kept.n),
-            r: f64::from(kept.r),
-            u: f64::from(kept.u),
-            v: f64::from(kept.v),
+/// [`GroundResiduals::cells`]: the cell the walk is at and its place, each
+/// cell's centre counted along the rows rather than found from its number.
+pub(crate) struct EachCell<'a> {
+    residuals: &'a GroundResiduals,
+    k: usize,
+    column: usize,
+    row: usize,
+}
+
+impl Iterator for EachCell<'_> {
+    type Item = GroundCell;
+
+    #[inline]
+    fn next(&mut self) -> Option<GroundCell> {
+        let kept = self.residuals.cells.get(self.k)?;
+        let cell = kept.sums(centre_of(self.column, self.row, &self.residuals.intrinsics));
+        self.k += 1;
+        self.column += 1;
+        if self.column == self.residuals.columns {
+            (self.column, self.row) = (0, self.row + 1);
         }
+        Some(cell)
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let left = self.residuals.cells.len() - self.k;
+        (left, Some(left))
     }
 }
+
+impl ExactSizeIterator for EachCell<'_> {}
 
 /// What a pose's residuals measure of the readings' scatter, beyond the
 /// pooled scatter every calibration needs.
@@ -441,7 +498,11 @@ impl GroundResiduals {
         Self {
             columns,
             rows,
-            cells: cells.iter().map(KeptCell::from).collect(),
+            cells: cells
+                .iter()
+                .enumerate()
+                .map(|(k, sums)| KeptCell::new(sums, cell_centre(k, columns, &intrinsics)))
+                .collect(),
             reading_scatter,
             scatter_with_depth,
             moments,
@@ -462,12 +523,42 @@ impl GroundResiduals {
     /// Cell `k`'s sums.
     #[inline]
     pub(crate) fn cell(&self, k: usize) -> GroundCell {
-        GroundCell::from(&self.cells[k])
+        self.cells[k].sums(cell_centre(k, self.columns, &self.intrinsics))
+    }
+
+    /// Cell `k`'s sums, its centre given (from [`GroundResiduals::centres`]:
+    /// the estimate's loops, which read every cell kept at every turn).
+    #[inline]
+    pub(crate) fn cell_centred(&self, k: usize, centre: (f64, f64)) -> GroundCell {
+        self.cells[k].sums(centre)
+    }
+
+    /// Every cell's centre, pixels from the principal point, in order.
+    pub(crate) fn centres(&self) -> Vec<(f64, f64)> {
+        (0..self.cells.len())
+            .map(|k| cell_centre(k, self.columns, &self.intrinsics))
+            .collect()
+    }
+
+    /// Cell `k`'s count of readings alone (its sums need its place too).
+    #[inline]
+    pub(crate) fn readings(&self, k: usize) -> f64 {
+        f64::from(self.cells[k].n)
     }
 
     /// Every cell's sums, in order.
-    pub(crate) fn cells(&self) -> impl ExactSizeIterator<Item = GroundCell> + '_ {
-        self.cells.iter().map(GroundCell::from)
+    pub(crate) fn cells(&self) -> EachCell<'_> {
+        EachCell {
+            residuals: self,
+            k: 0,
+            column: 0,
+            row: 0,
+        }
+    }
+
+    /// Every cell's count of readings, in order.
+    pub(crate) fn each_readings(&self) -> impl ExactSizeIterator<Item = f64> + '_ {
+        self.cells.iter().map(|cell| f64::from(cell.n))
     }
 
     /// The readings' scatter about their cells' means and its degrees of
@@ -654,4 +745,45 @@ fn guard_test(domain: &ValueDomain, guard: Option<EdgeGuard>, per_unit: f64) -> 
 fn fit_region(domain: &ValueDomain, band: f64) -> (f32, f32) {
     let band = band as f32;
     (domain.plane_within.0 + band, domain.plane_within.1 - band)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A kept cell gives its sums back, the readings' centre within
+    /// 6.1·10⁻⁵ pixels anywhere in the cell, and an empty cell as empty.
+    #[test]
+    fn a_kept_cell_gives_its_sums_back() {
+        let centre = (-316.5, 238.5);
+        for (n, mean_u, mean_v) in [
+            (1.0, -320.0, 235.0),
+            (96.0, -316.123_456, 242.0),
+            (3072.0, -313.0, 238.5),
+        ] {
+            let sums = CellSums {
+                n,
+                r: 0.003 * n,
+                rr: 0.0,
+                u: mean_u * n,
+                v: mean_v * n,
+            };
+            let back = KeptCell::new(&sums, centre).sums(centre);
+            assert_eq!(back.n, n);
+            assert!((back.r - sums.r).abs() < 1e-7 * sums.r, "{back:?}");
+            assert!(
+                (back.u / n - mean_u).abs() <= 6.11e-5,
+                "{} against {mean_u}",
+                back.u / n
+            );
+            assert!(
+                (back.v / n - mean_v).abs() <= 6.11e-5,
+                "{} against {mean_v}",
+                back.v / n
+            );
+        }
+        assert_eq!(std::mem::size_of::<KeptCell>(), 12);
+        let empty = KeptCell::new(&CellSums::default(), centre).sums(centre);
+        assert_eq!(empty, GroundCell::default());
+    }
 }

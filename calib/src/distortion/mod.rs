@@ -35,6 +35,7 @@ use rayon::prelude::*;
 
 mod alternatives;
 mod bend;
+mod cell_set;
 mod found;
 mod plane_part;
 mod shape;
@@ -851,8 +852,8 @@ mod bend_on_frames {
                 (row * CELL_PX) as f64 + half,
             )
         };
-        let seen: Vec<bool> = residuals.cells().map(|c| c.n > 0.0).collect();
-        let readings: Vec<f64> = residuals.cells().map(|c| c.n).collect();
+        let seen: Vec<bool> = residuals.each_readings().map(|n| n > 0.0).collect();
+        let readings: Vec<f64> = residuals.each_readings().collect();
         let mut shape: Vec<f64> = (0..cells)
             .map(|k| {
                 let (u0, v0) = centre(k);

@@ -3,6 +3,7 @@
 //! the noise of a cell from the poses' own scatter, and the tests of the
 //! shape against none and against its alternatives ([`super::alternatives`]).
 
+use super::cell_set::CellSet;
 use super::*;
 
 /// The pattern's shape over the cells, and what it changes in each pose's
@@ -464,8 +465,8 @@ pub(super) const ENTRY_SIGMAS: f64 = 4.5;
 pub(super) struct Kept {
     /// Cells per row of the image.
     pub(super) columns: usize,
-    /// `out[i·cells + k]`: pose i's sum of cell k is left out.
-    pub(super) out: Vec<bool>,
+    /// Per pose: the cells whose sums are left out.
+    pub(super) out: Vec<CellSet>,
     /// Per cell: readings of the sums kept.
     pub(super) readings: Vec<f64>,
     /// Per cell: whether it enters the estimate (enough readings kept,
@@ -476,14 +477,17 @@ pub(super) struct Kept {
     pub(super) inverse_moments: Vec<Matrix3<f64>>,
     pub(super) rhs: Vec<Vector3<f64>>,
     /// Per pose: the cells whose sums are taken (the loops' work list).
-    pub(super) taken: Vec<Vec<u32>>,
+    pub(super) taken: Vec<CellSet>,
+    /// Per cell: its centre (pixels from the principal point), for its
+    /// sums at every pose.
+    pub(super) centres: Vec<(f64, f64)>,
 }
 
 impl Kept {
     /// Every sum.
     pub(super) fn all(poses: &[&GroundResiduals]) -> Self {
         let cells = poses[0].cell_count();
-        Self::from_out(poses, vec![false; poses.len() * cells], None)
+        Self::from_out(poses, vec![CellSet::empty(cells); poses.len()], None)
     }
 
     /// The sums within [`ENTRY_SIGMAS`] of `fitted`, among the cells first
@@ -497,34 +501,38 @@ impl Kept {
         first_seen: &[bool],
     ) -> Option<Self> {
         let cells = first_seen.len();
-        let mut out = vec![false; poses.len() * cells];
-        out.par_chunks_mut(cells)
-            .zip(poses)
+        let out: Vec<CellSet> = poses
+            .par_iter()
             .zip(&fitted.planes)
-            .for_each(|((out, pose), c)| {
+            .map(|(pose, c)| {
+                let mut out = CellSet::empty(cells);
                 for (k, cell) in pose.cells().enumerate() {
                     if first_seen[k] && cell.n > 0.0 {
                         let model =
                             fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
                         let z = (cell.r - model) / cell.n / noise.of_mean(cell.n).sqrt();
-                        out[k] = z.abs() > ENTRY_SIGMAS;
+                        if z.abs() > ENTRY_SIGMAS {
+                            out.insert(k);
+                        }
                     }
                 }
-            });
+                out
+            })
+            .collect();
         if out == self.out {
             return None;
         }
         Some(Self::from_out(poses, out, Some(first_seen)))
     }
 
-    fn from_out(poses: &[&GroundResiduals], out: Vec<bool>, among: Option<&[bool]>) -> Self {
+    fn from_out(poses: &[&GroundResiduals], out: Vec<CellSet>, among: Option<&[bool]>) -> Self {
         let cells = poses[0].cell_count();
         let mut readings = vec![0.0; cells];
         let mut poses_seen = vec![0usize; cells];
-        for (pose, out) in poses.iter().zip(out.chunks(cells)) {
-            for (k, (cell, out)) in pose.cells().zip(out).enumerate() {
-                if cell.n > 0.0 && !out {
-                    readings[k] += cell.n;
+        for (pose, out) in poses.iter().zip(&out) {
+            for (k, n) in pose.each_readings().enumerate() {
+                if n > 0.0 && !out.contains(k) {
+                    readings[k] += n;
                     poses_seen[k] += 1;
                 }
             }
@@ -542,6 +550,7 @@ impl Kept {
             inverse_moments: Vec::new(),
             rhs: Vec::new(),
             taken: Vec::new(),
+            centres: poses[0].centres(),
         };
         kept.take_what_is_seen(poses);
         kept
@@ -557,17 +566,18 @@ impl Kept {
         let cells = self.seen.len();
         let spread = ((CELL_PX * CELL_PX) as f64 - 1.0) / 12.0;
         let (seen, out) = (&self.seen, &self.out);
-        let per_pose: Vec<(Vec<u32>, Matrix3<f64>, Vector3<f64>)> = poses
+        let per_pose: Vec<(CellSet, Matrix3<f64>, Vector3<f64>)> = poses
             .par_iter()
-            .zip(out.par_chunks(cells))
+            .zip(out)
             .map(|(pose, out)| {
                 let (mut moments, mut sums) = (pose.moments, pose.rhs);
-                let mut taken = Vec::new();
-                for (k, cell) in pose.cells().enumerate().filter(|(_, c)| c.n > 0.0) {
-                    if seen[k] && !out[k] {
-                        taken.push(k as u32);
+                let mut taken = CellSet::empty(cells);
+                for (k, _) in pose.each_readings().enumerate().filter(|(_, n)| *n > 0.0) {
+                    if seen[k] && !out.contains(k) {
+                        taken.insert(k);
                         continue;
                     }
+                    let cell = pose.cell(k);
                     let centre = Vector3::new(1.0, cell.u / cell.n, cell.v / cell.n);
                     moments -= (centre * centre.transpose()
                         + Matrix3::from_diagonal(&Vector3::new(0.0, spread, spread)))
@@ -628,15 +638,16 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
     };
     let mut planes = vec![Vector3::zeros(); poses.len()];
     let plane_part = PlanePartRemover::new(&kept.readings, &kept.seen, grid);
+    let centres = &kept.centres;
     let mut iterations = 0;
     for _ in 0..2000 {
         iterations += 1;
         // Each pose's plane given the pattern.
         planes.par_iter_mut().enumerate().for_each(|(i, plane)| {
             let mut rhs = kept.rhs[i];
-            for &k in &kept.taken[i] {
-                let cell = poses[i].cell(k as usize);
-                rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k as usize];
+            for k in kept.taken[i].iter() {
+                let cell = poses[i].cell_centred(k, centres[k]);
+                rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k];
             }
             *plane = kept.inverse_moments[i] * rhs;
         });
@@ -649,14 +660,11 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
                 let (first, end) = (block * CELL_BLOCK, block * CELL_BLOCK + next.len());
                 for (i, pose) in poses.iter().enumerate() {
                     let c = planes[i];
-                    let taken = &kept.taken[i];
-                    let from = taken.partition_point(|&k| (k as usize) < first);
-                    for &k in &taken[from..] {
-                        let k = k as usize;
+                    for k in kept.taken[i].iter_from(first) {
                         if k >= end {
                             break;
                         }
-                        let cell = pose.cell(k);
+                        let cell = pose.cell_centred(k, centres[k]);
                         next[k - first] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
                     }
                 }
@@ -708,53 +716,60 @@ pub(super) fn entries<'a>(
     kept: &'a Kept,
     fitted: &'a Fitted,
 ) -> KeptEntries<'a> {
-    let mut about_plane = Vec::with_capacity(kept.taken.iter().map(Vec::len).sum());
-    about_plane.extend(entries_of(poses, kept, fitted).map(|e| e.about_plane as f32));
+    let mut each = Vec::with_capacity(kept.taken.iter().map(CellSet::len).sum());
+    each.extend(entries_of(poses, kept, fitted).map(|e| (e.cell, e.about_plane as f32)));
+    let mut pose_ends = Vec::with_capacity(poses.len());
+    let mut end = 0;
+    for taken in &kept.taken {
+        end += taken.len();
+        pose_ends.push(end);
+    }
     KeptEntries {
         poses,
-        taken: &kept.taken,
         shape: &fitted.shape,
-        about_plane,
+        pose_ends,
+        each,
     }
 }
 
-/// The sums kept as the estimate's entries, made as they are read: pose by
-/// pose, the cells it takes ([`Kept`]'s work lists), each with its
-/// readings from the pose's cell and its mean about the pose's plane, kept
-/// in f32 (4 bytes an entry, where whole entries were 32: 6 MB for 52
-/// poses at the estimate's peak); the residual about the pattern is that
-/// mean less the pattern's cell.
+/// The sums kept as the estimate's entries, made as they are read: each
+/// entry's cell and its mean about its pose's plane (in f32), in order,
+/// pose by pose; its readings from the pose's cell, its residual about the
+/// pattern that mean less the pattern's cell. 8 bytes an entry, where
+/// whole entries were 32 (6 MB for 52 poses at the estimate's peak); the
+/// cells are kept beside the means, not walked from the poses' work lists
+/// (bits: a third of the memory, but the walk, a hundred times over the
+/// entries in the flip tests, took 12 ms longer).
 pub(super) struct KeptEntries<'a> {
     poses: &'a [&'a GroundResiduals],
-    taken: &'a [Vec<u32>],
     shape: &'a [f64],
-    about_plane: Vec<f32>,
+    /// Per pose, the end of its entries in `each`.
+    pose_ends: Vec<usize>,
+    /// Each entry's cell and mean about its pose's plane.
+    each: Vec<(u32, f32)>,
 }
 
 impl Entries for KeptEntries<'_> {
     fn count(&self) -> usize {
-        self.about_plane.len()
+        self.each.len()
     }
 
     fn each(&self) -> impl Iterator<Item = Entry> + '_ {
         EachKeptEntry {
             entries: self,
             pose: 0,
-            cells: self.taken.first().map_or([].iter(), |taken| taken.iter()),
-            about_plane: self.about_plane.iter(),
+            pose_end: self.pose_ends.first().copied().unwrap_or(0),
+            index: 0,
         }
     }
 }
 
-/// [`KeptEntries::each`]: where the walk is, pose by pose (written out
-/// rather than a `flat_map` zipped with the means, whose every step asked
-/// which pose it was in).
+/// [`KeptEntries::each`]: the entry the walk is at, and its pose's end.
 struct EachKeptEntry<'a> {
     entries: &'a KeptEntries<'a>,
     pose: usize,
-    /// The pose's work list, and every entry's mean, from here on.
-    cells: std::slice::Iter<'a, u32>,
-    about_plane: std::slice::Iter<'a, f32>,
+    pose_end: usize,
+    index: usize,
 }
 
 impl Iterator for EachKeptEntry<'_> {
@@ -763,24 +778,25 @@ impl Iterator for EachKeptEntry<'_> {
     #[inline]
     fn next(&mut self) -> Option<Entry> {
         let entries = self.entries;
-        loop {
-            if let Some(&cell) = self.cells.next() {
-                let about_plane = f64::from(*self.about_plane.next()?);
-                return Some(Entry {
-                    pose: self.pose as u32,
-                    cell,
-                    n: entries.poses[self.pose].cell(cell as usize).n,
-                    residual: about_plane - entries.shape[cell as usize],
-                    about_plane,
-                });
-            }
+        let (cell, about_plane) = *entries.each.get(self.index)?;
+        // Past its pose's end (a pose may take no cell): the next pose.
+        while self.index == self.pose_end {
             self.pose += 1;
-            self.cells = entries.taken.get(self.pose)?.iter();
+            self.pose_end = entries.pose_ends[self.pose];
         }
+        self.index += 1;
+        let about_plane = f64::from(about_plane);
+        Some(Entry {
+            pose: self.pose as u32,
+            cell,
+            n: entries.poses[self.pose].readings(cell as usize),
+            residual: about_plane - entries.shape[cell as usize],
+            about_plane,
+        })
     }
 
     fn size_hint(&self) -> (usize, Option<usize>) {
-        let left = self.about_plane.len();
+        let left = self.entries.each.len() - self.index;
         (left, Some(left))
     }
 }
@@ -794,9 +810,8 @@ pub(super) fn entries_of<'a>(
 ) -> impl Iterator<Item = Entry> + 'a {
     poses.iter().enumerate().flat_map(move |(i, pose)| {
         let c = fitted.planes[i];
-        kept.taken[i].iter().map(move |&k| {
-            let k = k as usize;
-            let cell = pose.cell(k);
+        kept.taken[i].iter().map(move |k| {
+            let cell = pose.cell_centred(k, kept.centres[k]);
             let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
             let about_plane = (cell.r - plane) / cell.n;
             Entry {
@@ -836,8 +851,8 @@ pub(super) fn cell_variances(
     let weights = noise.weights();
     let mut information = vec![0.0; cells];
     for (i, pose) in poses.iter().enumerate() {
-        for &k in &kept.taken[i] {
-            information[k as usize] += weights.of(pose.cell(k as usize).n);
+        for k in kept.taken[i].iter() {
+            information[k] += weights.of(pose.readings(k));
         }
     }
     information
