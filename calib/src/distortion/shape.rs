@@ -645,10 +645,10 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
         // Each pose's plane given the pattern.
         planes.par_iter_mut().enumerate().for_each(|(i, plane)| {
             let mut rhs = kept.rhs[i];
-            for k in kept.taken[i].iter() {
+            kept.taken[i].for_each_in(0..cells, |k| {
                 let cell = poses[i].cell_centred(k, centres[k]);
                 rhs -= Vector3::new(cell.n, cell.u, cell.v) * shape[k];
-            }
+            });
             *plane = kept.inverse_moments[i] * rhs;
         });
         // The pattern given the planes, a block of cells at a time (each
@@ -660,13 +660,10 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
                 let (first, end) = (block * CELL_BLOCK, block * CELL_BLOCK + next.len());
                 for (i, pose) in poses.iter().enumerate() {
                     let c = planes[i];
-                    for k in kept.taken[i].iter_from(first) {
-                        if k >= end {
-                            break;
-                        }
+                    kept.taken[i].for_each_in(first..end, |k| {
                         let cell = pose.cell_centred(k, centres[k]);
                         next[k - first] += cell.r - (c.x * cell.n + c.y * cell.u + c.z * cell.v);
-                    }
+                    });
                 }
             });
         for ((value, seen), readings) in next.iter_mut().zip(&kept.seen).zip(&kept.readings) {
@@ -851,9 +848,9 @@ pub(super) fn cell_variances(
     let weights = noise.weights();
     let mut information = vec![0.0; cells];
     for (i, pose) in poses.iter().enumerate() {
-        for k in kept.taken[i].iter() {
+        kept.taken[i].for_each_in(0..cells, |k| {
             information[k] += weights.of(pose.readings(k));
-        }
+        });
     }
     information
         .iter()
