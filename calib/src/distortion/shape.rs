@@ -735,8 +735,9 @@ pub(super) fn entries<'a>(
 /// pattern that mean less the pattern's cell. 8 bytes an entry, where
 /// whole entries were 32 (6 MB for 52 poses at the estimate's peak); the
 /// cells are kept beside the means, not walked from the poses' work lists
-/// (bits: a third of the memory, but the walk, a hundred times over the
-/// entries in the flip tests, took 12 ms longer).
+/// (bits: 0.76 MB less, but walked a cell at a time by the flip tests and
+/// the relief's turns, some thirty times over the entries, they took 9 %
+/// more instructions of a 156-frame replay).
 pub(super) struct KeptEntries<'a> {
     poses: &'a [&'a GroundResiduals],
     shape: &'a [f64],
