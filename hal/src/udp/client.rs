@@ -137,6 +137,12 @@ pub enum Failure {
         sends: u32,
         waited: Duration,
     },
+    /// A motion command not sent, or not sent again: it was asked for
+    /// longer than [`MOTION_FRESH`] ago.
+    NotSentInTime {
+        request: &'static str,
+        waited: Duration,
+    },
     /// ACK 1, 2 or 4.
     Refused {
         request: &'static str,
@@ -161,6 +167,13 @@ impl std::fmt::Display for Failure {
             Failure::Refused { request, status } => {
                 write!(f, "the lower computer refused {request}: {status}")
             }
+            Failure::NotSentInTime { request, waited } => write!(
+                f,
+                "{request} not sent (or not sent again): asked for {} ms ago, more than {} ms \
+                 (the lower computer's watchdog may have halted the body meanwhile)",
+                waited.as_millis(),
+                MOTION_FRESH.as_millis()
+            ),
             Failure::Protocol(what) => f.write_str(what),
         }
     }
@@ -222,6 +235,28 @@ struct Job {
     request: Request,
     /// Sessions opened for it so far after ACK 3.
     renewals: u32,
+    /// When the caller asked for it (none for the client's own
+    /// keep-alives and a caller's HELLO, which move nothing).
+    issued: Option<Instant>,
+}
+
+/// A motion command is not sent, nor sent again, once this long has passed
+/// since it was asked for: the lower computer's watchdog (1 s,
+/// hexapod-udp.md) may have halted the body meanwhile, and the caller
+/// decided to move before the wait (a process stopped and resumed, a request
+/// ahead of it retried over a lossy link). A retransmission is acted on if
+/// the first send was lost, so it is held to the same bound. The caller
+/// learns why and ends the run (HALT and HOME are never held back). Longer
+/// than the default retries' 1.1 s, so that a link that only loses
+/// datagrams still ends as lost.
+pub const MOTION_FRESH: Duration = Duration::from_millis(1500);
+
+impl Job {
+    /// How long a motion command waited past [`MOTION_FRESH`] to be sent.
+    fn stale_motion(&self, now: Instant) -> Option<Duration> {
+        let waited = now.saturating_duration_since(self.issued?);
+        (matches!(self.request, Request::SetPose { .. }) && waited > MOTION_FRESH).then_some(waited)
+    }
 }
 
 /// Why a HELLO is in flight.
@@ -259,7 +294,7 @@ pub struct Client {
     session: Option<u32>,
     next_seq: u32,
     next_id: u64,
-    queue: VecDeque<(RequestId, Request)>,
+    queue: VecDeque<(RequestId, Request, Instant)>,
     in_flight: Option<InFlight>,
     /// The body is (believed) moving: keep-alives are due.
     motion_expected: bool,
@@ -329,9 +364,16 @@ impl Client {
     /// Queues a request; it is answered by an [`Event::Completed`] with the
     /// returned id.
     pub fn submit(&mut self, request: Request, now: Instant) -> RequestId {
+        self.submit_issued(request, now, now)
+    }
+
+    /// [`Client::submit`] of a request the caller asked for at `issued`
+    /// (before it reached the client): a motion command is not sent once it
+    /// is older than [`MOTION_FRESH`].
+    pub fn submit_issued(&mut self, request: Request, issued: Instant, now: Instant) -> RequestId {
         let id = RequestId(self.next_id);
         self.next_id += 1;
-        self.queue.push_back((id, request));
+        self.queue.push_back((id, request, issued));
         self.start_next(now);
         id
     }
@@ -367,6 +409,21 @@ impl Client {
     pub fn handle_timeout(&mut self, now: Instant) {
         if let Some(flight) = &mut self.in_flight {
             if now < flight.deadline {
+                return;
+            }
+            let stale = match &flight.exchange {
+                Exchange::Request(job) => job.stale_motion(now).map(|w| (job.request.name(), w)),
+                Exchange::Hello { .. } => None,
+            };
+            if let Some((request, waited)) = stale {
+                let Some(flight) = self.in_flight.take() else {
+                    return;
+                };
+                self.finish(
+                    flight.exchange,
+                    Err(Failure::NotSentInTime { request, waited }),
+                );
+                self.start_next(now);
                 return;
             }
             if flight.sends <= self.config.retry_limit {
@@ -407,6 +464,7 @@ impl Client {
                         id: None,
                         request: Request::GetState,
                         renewals: 0,
+                        issued: None,
                     },
                     now,
                 );
@@ -574,6 +632,7 @@ impl Client {
                 id: Some(id),
                 request: Request::Hello,
                 renewals: 0,
+                issued: None,
             },
             HelloFor::Job(job) => job,
         };
@@ -585,13 +644,14 @@ impl Client {
         if self.in_flight.is_some() {
             return;
         }
-        let Some((id, request)) = self.queue.pop_front() else {
+        let Some((id, request, issued)) = self.queue.pop_front() else {
             return;
         };
         let job = Job {
             id: Some(id),
             request,
             renewals: 0,
+            issued: Some(issued),
         };
         match (request, self.session) {
             (Request::Hello, _) => self.send_hello(HelloFor::Caller(id), now),
@@ -617,6 +677,15 @@ impl Client {
     }
 
     fn send_request(&mut self, job: Job, now: Instant) {
+        if let Some(waited) = job.stale_motion(now) {
+            let request = job.request.name();
+            self.finish(
+                Exchange::Request(job),
+                Err(Failure::NotSentInTime { request, waited }),
+            );
+            self.start_next(now);
+            return;
+        }
         let Some(session) = self.session else {
             self.send_hello(HelloFor::Job(job), now);
             return;
@@ -802,6 +871,81 @@ mod tests {
             pose: pose(),
             duration_ms: 1000,
         }
+    }
+
+    /// A SET_POSE that waits behind another request (or in a process that
+    /// was stopped) longer than [`MOTION_FRESH`] is not sent: it ends as not
+    /// sent in time, and the next request goes; one that waits less goes.
+    /// A retransmission of one already sent goes whatever its age.
+    #[test]
+    fn a_motion_command_too_old_to_send_is_not_sent() {
+        for (wait_ms, sent) in [(1400, true), (1600, false), (3000, false)] {
+            let mut h = Harness::new();
+            h.open(7);
+            let state_id = h.client.submit(Request::GetState, h.now);
+            let get_state = h.sent().pop().unwrap();
+            let pose_id = h.client.submit_issued(set_pose(3), h.now, h.now);
+            let after = h.client.submit(Request::GetState, h.now);
+            assert!(h.sent().is_empty(), "queued behind the GET_STATE");
+            // The process stood still (no timeout handled), then the answer.
+            h.now += Duration::from_millis(wait_ms);
+            h.reply(&get_state, 7, state(MotionState::Idle, 0));
+            let out = h.sent();
+            let events = completed(&h.events());
+            assert_eq!(events[0].0, state_id, "{wait_ms} ms: {events:?}");
+            if sent {
+                assert!(
+                    matches!(
+                        out[..],
+                        [Datagram {
+                            message: Message::SetPose { .. },
+                            ..
+                        }]
+                    ),
+                    "{out:?}"
+                );
+                continue;
+            }
+            let (id, Err(Failure::NotSentInTime { request, waited })) = &events[1] else {
+                panic!("{wait_ms} ms: {events:?}");
+            };
+            assert_eq!((*id, *request), (pose_id, "SET_POSE"));
+            assert_eq!(*waited, Duration::from_millis(wait_ms));
+            assert!(events[1]
+                .1
+                .as_ref()
+                .unwrap_err()
+                .to_string()
+                .contains("not sent"));
+            // The next request goes instead.
+            assert!(
+                matches!(
+                    out[..],
+                    [Datagram {
+                        message: Message::GetState,
+                        ..
+                    }]
+                ),
+                "{out:?}"
+            );
+            let _ = after;
+        }
+        // Sent in time and not answered: sent again within the bound, not
+        // after the process stood still (were the first send lost, the
+        // lower computer would act on the second).
+        let mut h = Harness::new();
+        h.open(7);
+        let id = h.client.submit_issued(set_pose(4), h.now, h.now);
+        let first = h.sent().pop().unwrap();
+        h.advance_ms(100);
+        assert_eq!(h.sent(), vec![first], "a retransmission within the bound");
+        h.advance_ms(3000);
+        assert!(h.sent().is_empty(), "nothing sent after the stand-still");
+        let events = completed(&h.events());
+        assert!(
+            matches!(events[..], [(i, Err(Failure::NotSentInTime { request: "SET_POSE", .. }))] if i == id),
+            "{events:?}"
+        );
     }
 
     fn completed(events: &[Event]) -> Vec<(RequestId, Result<Reply, Failure>)> {

@@ -156,6 +156,10 @@ impl UdpError {
                 request,
                 status,
             },
+            Failure::NotSentInTime { .. } => UdpError::Timeout {
+                peer,
+                what: failure.to_string(),
+            },
             Failure::Protocol(what) => UdpError::Protocol { peer, what },
         }
     }
@@ -235,6 +239,9 @@ fn bind_to_device(_: &Socket, _: &str) -> io::Result<()> {
 
 struct Command {
     request: Request,
+    /// When the caller asked: a motion command too old by the time the
+    /// link's task sends it is not sent ([`crate::udp::client::MOTION_FRESH`]).
+    issued: Instant,
     reply: oneshot::Sender<Result<Reply, Failure>>,
 }
 
@@ -304,9 +311,14 @@ impl Link {
             peer: self.peer.to_string(),
             what: what.to_string(),
         };
+        let issued = now();
         let (reply, answer) = oneshot::channel();
         self.commands
-            .send(Command { request, reply })
+            .send(Command {
+                request,
+                issued,
+                reply,
+            })
             .await
             .map_err(|_| lost("the link's task has ended"))?;
         match tokio::time::timeout(self.request_timeout, answer).await {
@@ -397,8 +409,8 @@ async fn drive(
         );
         tokio::select! {
             command = commands.recv() => match command {
-                Some(Command { request, reply }) => {
-                    let id = client.submit(request, now());
+                Some(Command { request, issued, reply }) => {
+                    let id = client.submit_issued(request, issued, now());
                     waiting.insert(id, reply);
                 }
                 // The controller is gone.

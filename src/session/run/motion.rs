@@ -10,7 +10,9 @@ use super::*;
 /// an Abort pressed meanwhile could not arrive). The session asks
 /// [`StallWatch::check`] before every motion it commands, so that a command
 /// queued before the stall is not sent after it, whichever of the two runs
-/// first when the thread resumes.
+/// first when the thread resumes; a command the stop caught after that check
+/// (on its way to the link's task, or queued there) is held back by the UDP
+/// client itself once it is older than `udp::client::MOTION_FRESH`.
 pub(super) struct StallWatch {
     pub(super) limit: Duration,
     pub(super) last: std::cell::Cell<std::time::Instant>,
