@@ -94,14 +94,13 @@ impl KeptCell {
     /// `sums` of the cell whose centre is `centre` (pixels from the
     /// principal point).
     fn new(sums: &CellSums, centre: (f64, f64)) -> Self {
-        let per_reading = if sums.n > 0.0 { 1.0 / sums.n } else { 0.0 };
+        if sums.n <= 0.0 {
+            return Self::default();
+        }
+        let per_reading = 1.0 / sums.n;
         // To the nearest step (half away from 0; the cast saturates).
         let offset = |sum: f64, centre: f64| {
-            let steps = if sums.n > 0.0 {
-                (sum * per_reading - centre) / CENTRE_STEP_PX
-            } else {
-                0.0
-            };
+            let steps = (sum * per_reading - centre) / CENTRE_STEP_PX;
             (steps + 0.5f64.copysign(steps)) as i16
         };
         Self {
