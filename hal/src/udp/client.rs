@@ -252,7 +252,8 @@ struct Job {
 pub const MOTION_FRESH: Duration = Duration::from_millis(1500);
 
 impl Job {
-    /// How long a motion command waited past [`MOTION_FRESH`] to be sent.
+    /// How long ago a motion command was asked for, when that is longer
+    /// than [`MOTION_FRESH`] (none for any other request).
     fn stale_motion(&self, now: Instant) -> Option<Duration> {
         let waited = now.saturating_duration_since(self.issued?);
         (matches!(self.request, Request::SetPose { .. }) && waited > MOTION_FRESH).then_some(waited)
