@@ -506,7 +506,8 @@ mod tests {
                 pattern(du, dv)
             })
             .collect();
-        PlanePartRemover::new(&estimate.readings, &estimate.seen, poses[0]).remove(&mut truth);
+        PlanePartRemover::new(&estimate.readings, &estimate.seen, &poses[0].centres())
+            .remove(&mut truth);
         (0..truth.len())
             .filter(|&k| estimate.seen[k])
             .map(|k| (truth[k] - estimate.shape[k]).abs())
@@ -868,7 +869,7 @@ mod bend_on_frames {
             })
             .collect();
         let whole = shape.clone();
-        PlanePartRemover::new(&readings, &seen, &residuals).remove(&mut shape);
+        PlanePartRemover::new(&readings, &seen, &residuals.centres()).remove(&mut shape);
         let (mut moments, mut sums) = (Matrix3::zeros(), Vector3::zeros());
         for k in (0..cells).filter(|&k| seen[k]) {
             let (u, v) = centre(k);

@@ -300,7 +300,7 @@ pub fn estimate_shape_seen_from(
     let weights: Vec<f64> = (0..cells)
         .map(|k| if seen[k] { kept.readings[k] } else { 0.0 })
         .collect();
-    let plane_part = PlanePartRemover::new(&kept.readings, &seen, first);
+    let plane_part = PlanePartRemover::new(&kept.readings, &seen, &kept.centres);
     let shape_of = |per_cell: &[f64]| -> Vec<f64> {
         let mut shape: Vec<f64> = per_cell
             .iter()
@@ -641,7 +641,7 @@ pub(super) fn alternate(poses: &[&GroundResiduals], kept: &Kept, start: Option<&
         _ => vec![0.0; cells],
     };
     let mut planes = vec![Vector3::zeros(); poses.len()];
-    let plane_part = PlanePartRemover::new(&kept.readings, &kept.seen, grid);
+    let plane_part = PlanePartRemover::new(&kept.readings, &kept.seen, &kept.centres);
     let centres = &kept.centres;
     let mut iterations = 0;
     for _ in 0..2000 {
@@ -895,12 +895,10 @@ pub(super) struct PlanePartRemover<'a> {
 }
 
 impl<'a> PlanePartRemover<'a> {
-    pub(super) fn new(readings: &'a [f64], seen: &'a [bool], grid: &GroundResiduals) -> Self {
-        let centres: Vec<Vector3<f64>> = (0..seen.len())
-            .map(|k| {
-                let (du, dv) = cell_centre(k, grid.columns, &grid.intrinsics);
-                Vector3::new(1.0, du, dv)
-            })
+    pub(super) fn new(readings: &'a [f64], seen: &'a [bool], centres: &[(f64, f64)]) -> Self {
+        let centres: Vec<Vector3<f64>> = centres
+            .iter()
+            .map(|&(du, dv)| Vector3::new(1.0, du, dv))
             .collect();
         let mut normal = Matrix3::zeros();
         for k in 0..seen.len() {
