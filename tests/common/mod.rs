@@ -125,7 +125,10 @@ pub fn root() -> &'static Path {
 /// A fresh directory of its own under the system's temporary directory,
 /// removed with everything in it when the guard drops, so a test run leaves
 /// nothing behind: the simulated recordings are tens of MB each, and a CI
-/// machine's disk ran out on what earlier tests had left.
+/// machine's disk ran out on what earlier tests had left. Each call gets a
+/// directory of its own even with the same tag: two tests of one process
+/// calling one helper shared a directory, and the first to finish removed
+/// it under the other (CI of f9edc7c1, `mcap_session`).
 pub fn temp_dir(tag: &str) -> TempDir {
     TempDir::new(tag)
 }
@@ -135,7 +138,10 @@ pub struct TempDir(PathBuf);
 
 impl TempDir {
     pub fn new(tag: &str) -> Self {
-        let dir = std::env::temp_dir().join(format!("groundcal-{tag}-{}", std::process::id()));
+        static MADE: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+        let made = MADE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir =
+            std::env::temp_dir().join(format!("groundcal-{tag}-{}-{made}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("temporary directory");
         Self(dir)
