@@ -238,12 +238,21 @@ async fn calibrate_accept_and_activate_over_http() {
     );
 
     // A second calibration, aborted by the operator: the robot is sent home
-    // and no result is kept.
+    // and no result is kept. The status's count of changes goes on through
+    // the start of a run (the page orders its answers by it; when a start
+    // counted anew, the page dropped the new run's status as older).
+    let (_, before) = request(addr, "GET", "/api/status", None).await;
     assert_eq!(
         request(addr, "POST", "/api/calibrations", Some(TOKEN))
             .await
             .0,
         202
+    );
+    let (_, after) = request(addr, "GET", "/api/status", None).await;
+    assert_eq!(after["instance"], before["instance"], "{after}");
+    assert!(
+        after["revision"].as_u64() > before["revision"].as_u64(),
+        "{before}\n{after}"
     );
     tokio::time::sleep(Duration::from_millis(300)).await;
     let (code, body) = request(addr, "POST", "/api/calibrations/current/abort", Some(TOKEN)).await;

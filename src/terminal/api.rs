@@ -390,6 +390,13 @@ pub enum Phase {
 /// What `GET /api/status` shows.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Status {
+    /// This run of the service (its start, in milliseconds since the Unix
+    /// epoch): revisions count anew when it starts again.
+    pub instance: u64,
+    /// Counts the status's changes within `instance`. A page shows an
+    /// answer only if it is no older than the one it shows: answers on two
+    /// connections can arrive in the other order than the daemon read them.
+    pub revision: u64,
     pub state: RunState,
     /// What the running (or last) session does.
     pub task: Task,

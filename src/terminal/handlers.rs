@@ -338,6 +338,9 @@ pub fn start(state: &AppState, starter: Starter, task: Task) -> Result<String, A
             previous.interrupted
         };
         let mut next = Status {
+            // The count of changes goes on: a page orders its answers by it.
+            instance: previous.instance,
+            revision: previous.revision,
             state: RunState::Running,
             task,
             by: Some(by.clone()),

@@ -1020,19 +1020,23 @@ function lose() {
   render();
 }
 let retry = 1000;
-// Reads of the status overlap (the timer's and each event's); the answers
-// can come back out of order. One asked for before an answer already shown
-// is older than it and is dropped: a stale "running, 0 s so far" must not
-// replace "aborting…" (seen once in CI under load).
-let statusAsked = 0, statusShown = 0;
+// Reads of the status overlap (the timer's and each event's), on several
+// connections; the answers can come back in another order than the daemon
+// read them, even one asked for later. An answer older than the one shown
+// (by the daemon's own count of its changes) is dropped: a stale "pose 3 of
+// 52" must not replace "aborting…" (seen twice in CI under load; the order
+// of asking, the first guard, did not hold the second time).
+let shownRevision = null;
+function isOlderThanShown(s) {
+  return !!shownRevision && s.instance === shownRevision.instance && s.revision < shownRevision.revision;
+}
 async function refresh() {
-  const asked = ++statusAsked;
   try {
     const r = await fetchWithin('/api/status', {}, 2000);
     if (!r.ok) { lose(); return false; }
     const s = await r.json();
-    if (asked < statusShown) return true;
-    statusShown = asked;
+    if (isOlderThanShown(s)) return true;
+    shownRevision = { instance: s.instance, revision: s.revision };
     // A poll answered after a newer provisional event must not take the
     // live chart back: within a run it only grows.
     const before = model.status;

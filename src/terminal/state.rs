@@ -123,6 +123,9 @@ impl AppState {
             token: token.trim().to_string(),
             store,
             status: Mutex::new(Status {
+                instance: std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |since| since.as_millis() as u64),
                 state: RunState::Idle,
                 robot: "idle".into(),
                 step: "idle".into(),
@@ -147,12 +150,14 @@ impl AppState {
 
     /// A snapshot of the status.
     pub fn status(&self) -> Status {
-        self.status_mut().at(Instant::now())
+        lock(&self.0.status).at(Instant::now())
     }
 
-    /// The status, to change it.
+    /// The status, to change it: its revision counts the change.
     pub(super) fn status_mut(&self) -> MutexGuard<'_, Status> {
-        lock(&self.0.status)
+        let mut status = lock(&self.0.status);
+        status.revision += 1;
+        status
     }
 
     /// Records how the hardware check at start went (shown on the page).
@@ -445,6 +450,27 @@ mod tests {
             Ok(true),
             "the new session thread waited for the previous one"
         );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Each change of the status counts: a page orders its answers by the
+    /// count (`revision`), within one run of the service (`instance`), and
+    /// reading the status changes neither.
+    #[test]
+    fn the_status_counts_its_changes_and_reading_it_does_not() {
+        let dir = std::env::temp_dir().join(format!("groundcal-revision-{}", std::process::id()));
+        let (config, schedule) = Config::embedded_sim();
+        let state = AppState::new(config, schedule, Selection::default(), "t".into(), &dir);
+        let first = state.status();
+        assert_eq!(state.status().revision, first.revision);
+        state.publish(EventJson::Aborting { by: "pad".into() });
+        let aborting = state.status();
+        assert!(aborting.revision > first.revision);
+        state.publish(EventJson::WalkingHome);
+        let later = state.status();
+        assert!(later.revision > aborting.revision);
+        assert_eq!(later.instance, first.instance);
+        assert!(first.instance > 1_700_000_000_000, "{}", first.instance);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
