@@ -34,6 +34,7 @@ use super::geometry::{
 };
 use crate::outcome::{position_axis_words, DepthScale, Observability, PoseOutcome, Solution};
 
+mod jackknife;
 mod observability;
 mod outliers;
 mod scale;
@@ -426,17 +427,22 @@ pub fn solve(
         }
         if settled {
             // The translation's marginal covariance, and the scale's σ,
-            // from the joint fit (with the offsets' variance factor).
-            let factor = solution.variance_factors.1;
+            // from the joint fit: by leaving each pose out when the poses
+            // are enough to say (as the position's alone, `jackknife`),
+            // else the formula's with the offsets' variance factor.
+            let joint_covariance = match &joint.jackknife {
+                Some(by_poses) if jackknife_applies(used.len(), 4, settings) => *by_poses,
+                _ => joint.covariance * solution.variance_factors.1,
+            };
             for i in 0..3 {
                 for j in 0..3 {
-                    solution.covariance[(3 + i, 3 + j)] = joint.covariance[(i, j)] * factor;
+                    solution.covariance[(3 + i, 3 + j)] = joint_covariance[(i, j)];
                 }
             }
             // s = scale/q with q ≈ 1 here: σ_s = scale·σ_q. Judged here, at
             // the settled scale: before, the residuals still hold the scale's
             // own error and overstate the noise.
-            let sigma = scale * (joint.covariance[(3, 3)] * factor).max(0.0).sqrt();
+            let sigma = scale * joint_covariance[(3, 3)].max(0.0).sqrt();
             if sigma > MAX_SCALE_SIGMA {
                 let fallback = solve_fallback(settings);
                 let mut fallen = solve_at_scale(observations, settings, fallback)?;
@@ -451,13 +457,13 @@ pub fn solve(
                 return Ok(fallen);
             }
             let translation_sigma: Vec<f64> = (0..3)
-                .map(|i| (joint.covariance[(i, i)] * factor).max(0.0).sqrt())
+                .map(|i| joint_covariance[(i, i)].max(0.0).sqrt())
                 .collect();
-            let q_sigma = (joint.covariance[(3, 3)] * factor).max(0.0).sqrt();
+            let q_sigma = joint_covariance[(3, 3)].max(0.0).sqrt();
             // Correlation of s with each parameter (q and s anticorrelate).
             let mut correlations = [0.0; 6];
             for i in 0..3 {
-                let c = joint.covariance[(i, 3)] * factor;
+                let c = joint_covariance[(i, 3)];
                 correlations[3 + i] = if translation_sigma[i] > 0.0 && q_sigma > 0.0 {
                     -c / (translation_sigma[i] * q_sigma)
                 } else {
@@ -573,6 +579,20 @@ fn solve_six(
             .copy_from(&(inverse * factor));
     }
 
+    // The position's covariance by leaving each pose out ([`jackknife`]),
+    // once the poses are enough to say: the formula's holds only when the
+    // weights match each pose's noise, which a Kinect's held noise does not
+    // let them. Never below the plane fits' own share.
+    if jackknife_applies(used.len(), 3, settings) {
+        if let Some(by_poses) = jackknife::position_covariance(&used, settings) {
+            let formula = covariance.fixed_view::<3, 3>(3, 3).into_owned();
+            let fit_share = formula * (floor_offsets / variance_factors.1).min(1.0);
+            covariance
+                .fixed_view_mut::<3, 3>(3, 3)
+                .copy_from(&jackknife::at_least(&by_poses, &fit_share));
+        }
+    }
+
     let observability = observability(&used, settings);
     let outcomes = outcomes(observations, &set_aside, &robot_from_sensor);
     Ok(Solution {
@@ -589,6 +609,13 @@ fn solve_six(
         depth_scale: DepthScale::fixed(1.0, "given".into()),
         depth_pattern: None,
     })
+}
+
+/// Whether a block of `parameters` is judged by the poses themselves (its
+/// covariance by the jackknife): when the noise comes from the residuals
+/// and they are enough to say ([`MIN_EVIDENCE_DOF`]).
+fn jackknife_applies(poses: usize, parameters: usize, settings: &SolveSettings) -> bool {
+    settings.noise_from_residuals && poses as f64 - parameters as f64 >= MIN_EVIDENCE_DOF
 }
 
 /// Residual degrees of freedom a block needs before its noise is taken from

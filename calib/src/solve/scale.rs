@@ -20,6 +20,9 @@ pub(super) struct ScaleFit {
     pub(super) covariance: Matrix4<f64>,
     /// RMS (weighted) of the distances beyond what the tilts explain.
     pub(super) leverage: f64,
+    /// Covariance of (p_x, p_y, p_z, q) by leaving each pose out
+    /// ([`super::jackknife`]), in the noise the poses show.
+    pub(super) jackknife: Option<Matrix4<f64>>,
 }
 
 /// Weighted least squares of `up · p − q·d' + h = 0` over the used poses
@@ -37,6 +40,7 @@ pub(super) fn scale_fit(
     let mut up_block = Matrix3::zeros();
     let mut up_d = Vector3::zeros();
     let (mut dd, mut weight_sum) = (0.0, 0.0);
+    let mut rows = Vec::with_capacity(used.len());
     for o in used {
         let w = Weights::of(o, settings).offset_whitener.powi(2) * scale * scale;
         let up = o.up_in_robot();
@@ -44,6 +48,7 @@ pub(super) fn scale_fit(
         let row = nalgebra::Vector4::new(up.x, up.y, up.z, -d);
         normal += row * row.transpose() * w;
         rhs += row * (-o.body_height() * w);
+        rows.push((row, -o.body_height(), w));
         up_block += up * up.transpose() * w;
         up_d += up * (d * w);
         dd += d * d * w;
@@ -60,6 +65,7 @@ pub(super) fn scale_fit(
         scale_ratio: 1.0 / x[3],
         covariance,
         leverage,
+        jackknife: super::jackknife::joint_covariance(&rows, &normal, &rhs),
     })
 }
 
