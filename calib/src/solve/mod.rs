@@ -582,14 +582,17 @@ fn solve_six(
     // The position's covariance by leaving each pose out ([`jackknife`]),
     // once the poses are enough to say: the formula's holds only when the
     // weights match each pose's noise, which a Kinect's held noise does not
-    // let them. Never below the plane fits' own share.
+    // let them. Never below the plane fits' own share, when they have one.
     if jackknife_applies(used.len(), 3, settings) {
         if let Some(by_poses) = jackknife::position_covariance(&used, settings) {
-            let formula = covariance.fixed_view::<3, 3>(3, 3).into_owned();
-            let fit_share = formula * (floor_offsets / variance_factors.1).min(1.0);
-            covariance
-                .fixed_view_mut::<3, 3>(3, 3)
-                .copy_from(&jackknife::at_least(&by_poses, &fit_share));
+            let position = if with_fit_covariance {
+                let formula = covariance.fixed_view::<3, 3>(3, 3).into_owned();
+                let fit_share = formula * (floor_offsets / variance_factors.1).min(1.0);
+                jackknife::at_least(&by_poses, &fit_share)
+            } else {
+                by_poses
+            };
+            covariance.fixed_view_mut::<3, 3>(3, 3).copy_from(&position);
         }
     }
 
