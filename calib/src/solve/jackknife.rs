@@ -22,7 +22,7 @@
 
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
-use super::{median, Observation, SolveSettings, Weights};
+use super::{Observation, SolveSettings, Weights};
 
 /// One pose's offset equation: `up · p + height = d`, whitened by `whitener`.
 #[derive(Debug, Clone, Copy)]
@@ -34,11 +34,12 @@ struct OffsetRow {
 }
 
 impl OffsetRow {
-    fn of(observation: &Observation, settings: &SolveSettings) -> Self {
+    /// The pose's equation with its distance read at the depth scale `scale`.
+    fn of(observation: &Observation, settings: &SolveSettings, scale: f64) -> Self {
         Self {
             up: observation.up_in_robot(),
             height: observation.body_height(),
-            d: observation.plane.d,
+            d: observation.plane.d / scale,
             whitener: Weights::of(observation, settings).offset_whitener,
         }
     }
@@ -52,35 +53,66 @@ impl OffsetRow {
 /// The rounds of reweighting, as in [`super::refine`].
 const ROUNDS: usize = 50;
 
-/// The position that the rows' offsets give, with Cauchy weights found by
-/// iterated reweighting at the same scale as the solve's (2.385 robust σ of
-/// the whitened residuals, never less than the assumed noise).
-fn position_from_offsets(rows: &[&OffsetRow]) -> Option<Vector3<f64>> {
+/// The position that the rows' offsets give (all but `left_out`), with
+/// Cauchy weights found by iterated reweighting at the same scale as the
+/// solve's (2.385 robust σ of the whitened residuals, never less than the
+/// assumed noise), starting from `robust` and leaving the last ones there.
+/// `sizes` is room for the residuals' sizes (no allocation per round).
+fn position_from_offsets(
+    rows: &[OffsetRow],
+    left_out: Option<usize>,
+    robust: &mut [f64],
+    sizes: &mut Vec<f64>,
+) -> Option<Vector3<f64>> {
     const CAUCHY: f64 = 2.385;
-    let mut robust = vec![1.0; rows.len()];
+    let kept = |k: usize| Some(k) != left_out;
     let mut position = None;
     for _ in 0..ROUNDS {
         let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
-        for (row, r) in rows.iter().zip(&robust) {
-            let w = r * row.whitener * row.whitener;
-            normal += row.up * row.up.transpose() * w;
-            rhs += row.up * ((row.d - row.height) * w);
+        for (k, (row, r)) in rows.iter().zip(robust.iter()).enumerate() {
+            if kept(k) {
+                let w = r * row.whitener * row.whitener;
+                normal += row.up * row.up.transpose() * w;
+                rhs += row.up * ((row.d - row.height) * w);
+            }
         }
         let p = normal.try_inverse()? * rhs;
         position = Some(p);
-        let sizes: Vec<f64> = rows.iter().map(|row| row.residual(&p).abs()).collect();
-        let c = CAUCHY * (median(&sizes) / 0.6745).max(1.0);
+        sizes.clear();
+        sizes.extend(
+            rows.iter()
+                .enumerate()
+                .filter(|(k, _)| kept(*k))
+                .map(|(_, row)| row.residual(&p).abs()),
+        );
+        let c = CAUCHY * (median_in_place(sizes) / 0.6745).max(1.0);
         let mut change: f64 = 0.0;
-        for (w, size) in robust.iter_mut().zip(&sizes) {
-            let next = 1.0 / (1.0 + (size / c).powi(2));
-            change = change.max((next - *w).abs());
-            *w = next;
+        for (k, (row, w)) in rows.iter().zip(robust.iter_mut()).enumerate() {
+            if kept(k) {
+                let next = 1.0 / (1.0 + (row.residual(&p).abs() / c).powi(2));
+                change = change.max((next - *w).abs());
+                *w = next;
+            }
         }
         if change < 1e-9 {
             break;
         }
     }
     position
+}
+
+/// The median of `values`, which it reorders (0 when empty).
+fn median_in_place(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_unstable_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len().is_multiple_of(2) {
+        0.5 * (values[mid - 1] + values[mid])
+    } else {
+        values[mid]
+    }
 }
 
 /// The delete-one jackknife's covariance of estimates made without each
@@ -102,22 +134,27 @@ fn jackknife_covariance<const N: usize>(
 }
 
 /// The covariance of the position (metres²) by leaving each used pose out,
-/// or `None` when a replicate cannot be solved (the poses left do not pin
-/// the position).
+/// the distances read at the depth scale `scale`, or `None` when a
+/// replicate cannot be solved (the poses left do not pin the position).
 pub(super) fn position_covariance(
     used: &[&Observation],
     settings: &SolveSettings,
+    scale: f64,
 ) -> Option<Matrix3<f64>> {
-    let rows: Vec<OffsetRow> = used.iter().map(|o| OffsetRow::of(o, settings)).collect();
+    let rows: Vec<OffsetRow> = used
+        .iter()
+        .map(|o| OffsetRow::of(o, settings, scale))
+        .collect();
+    let mut sizes = Vec::with_capacity(rows.len());
+    // Each replicate starts from the weights of all the poses: a few
+    // rounds from there instead of tens from equal weights.
+    let mut all = vec![1.0; rows.len()];
+    position_from_offsets(&rows, None, &mut all, &mut sizes)?;
+    let mut robust = all.clone();
     let replicates = (0..rows.len())
         .map(|left_out| {
-            let kept: Vec<&OffsetRow> = rows
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| *k != left_out)
-                .map(|(_, row)| row)
-                .collect();
-            position_from_offsets(&kept)
+            robust.copy_from_slice(&all);
+            position_from_offsets(&rows, Some(left_out), &mut robust, &mut sizes)
         })
         .collect::<Option<Vec<_>>>()?;
     Some(jackknife_covariance(&replicates))
@@ -227,15 +264,18 @@ mod tests {
                 })
                 .collect();
             let used: Vec<&Observation> = observations.iter().collect();
-            let rows: Vec<OffsetRow> = used.iter().map(|o| OffsetRow::of(o, &settings)).collect();
-            let all: Vec<&OffsetRow> = rows.iter().collect();
-            let p = position_from_offsets(&all).unwrap();
+            let rows: Vec<OffsetRow> = used
+                .iter()
+                .map(|o| OffsetRow::of(o, &settings, 1.0))
+                .collect();
+            let mut robust = vec![1.0; rows.len()];
+            let p = position_from_offsets(&rows, None, &mut robust, &mut vec![]).unwrap();
             errors.push(p - truth.translation);
-            jackknife.push(position_covariance(&used, &settings).unwrap());
+            jackknife.push(position_covariance(&used, &settings, 1.0).unwrap());
             // The formula: (UᵀWU)⁻¹ × the weighted mean square.
             let (mut information, mut chi2, mut weight) = (Matrix3::zeros(), 0.0, 0.0);
             let sizes: Vec<f64> = rows.iter().map(|r| r.residual(&p).abs()).collect();
-            let c = 2.385 * (median(&sizes) / 0.6745).max(1.0);
+            let c = 2.385 * (median_in_place(&mut sizes.clone()) / 0.6745).max(1.0);
             for (row, size) in rows.iter().zip(&sizes) {
                 let w = 1.0 / (1.0 + (size / c).powi(2));
                 information += row.up * row.up.transpose() * (w * row.whitener * row.whitener);

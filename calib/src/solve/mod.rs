@@ -383,6 +383,55 @@ pub fn solve(
     observations: &[Observation],
     settings: &SolveSettings,
 ) -> Result<Solution, SolveError> {
+    let mut solution = solve_with_scale(observations, settings)?;
+    if !solution.depth_scale.estimated {
+        position_by_the_poses(&mut solution, observations, settings);
+    }
+    Ok(solution)
+}
+
+/// The position's covariance by leaving each pose out ([`jackknife`]),
+/// once the poses are enough to say: the formula's holds only when the
+/// weights match each pose's noise, which a Kinect's held noise does not
+/// let them. Never below the plane fits' own share, when they have one.
+/// Made once, for the solution returned (a scale estimated has the joint
+/// fit's own, [`scale::scale_fit`]).
+fn position_by_the_poses(
+    solution: &mut Solution,
+    observations: &[Observation],
+    settings: &SolveSettings,
+) {
+    let used: Vec<&Observation> = observations
+        .iter()
+        .filter(|o| solution.poses.iter().any(|p| p.index == o.index && p.used))
+        .collect();
+    if !jackknife_applies(used.len(), 3, settings) {
+        return;
+    }
+    let scale = solution.depth_scale.value;
+    let Some(by_poses) = jackknife::position_covariance(&used, settings, scale) else {
+        return;
+    };
+    let position = if used.iter().all(|o| o.plane_covariance.is_some()) {
+        let formula = solution.covariance.fixed_view::<3, 3>(3, 3).into_owned();
+        let fit_share = assumed_noise(&used, settings).fit_share.1;
+        let floor = formula * (fit_share / solution.variance_factors.1).min(1.0);
+        jackknife::at_least(&by_poses, &floor)
+    } else {
+        by_poses
+    };
+    solution
+        .covariance
+        .fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&position);
+}
+
+/// The six parameters and the depth scale (the position's covariance by
+/// the formula).
+fn solve_with_scale(
+    observations: &[Observation],
+    settings: &SolveSettings,
+) -> Result<Solution, SolveError> {
     let (mut scale, estimate) = match settings.depth_scale {
         DepthScaleSetting::Fixed(s) => (s, false),
         DepthScaleSetting::Estimate { fallback } => (fallback, true),
@@ -577,23 +626,6 @@ fn solve_six(
         covariance
             .fixed_view_mut::<3, 3>(block, block)
             .copy_from(&(inverse * factor));
-    }
-
-    // The position's covariance by leaving each pose out ([`jackknife`]),
-    // once the poses are enough to say: the formula's holds only when the
-    // weights match each pose's noise, which a Kinect's held noise does not
-    // let them. Never below the plane fits' own share, when they have one.
-    if jackknife_applies(used.len(), 3, settings) {
-        if let Some(by_poses) = jackknife::position_covariance(&used, settings) {
-            let position = if with_fit_covariance {
-                let formula = covariance.fixed_view::<3, 3>(3, 3).into_owned();
-                let fit_share = formula * (floor_offsets / variance_factors.1).min(1.0);
-                jackknife::at_least(&by_poses, &fit_share)
-            } else {
-                by_poses
-            };
-            covariance.fixed_view_mut::<3, 3>(3, 3).copy_from(&position);
-        }
     }
 
     let observability = observability(&used, settings);
