@@ -390,8 +390,8 @@ pub enum Phase {
 /// What `GET /api/status` shows.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Status {
-    /// This run of the service (its start, in milliseconds since the Unix
-    /// epoch): revisions count anew when it starts again.
+    /// A number that names this run of the service (from its start time and
+    /// process id): revisions count anew when it starts again.
     pub instance: u64,
     /// Counts the status's changes within `instance`. A page shows an
     /// answer only if it is no older than the one it shows: answers on two

@@ -22,7 +22,7 @@
 
 use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 
-use super::{Observation, SolveSettings, Weights};
+use super::{Observation, SolveSettings, Weights, MIN_EVIDENCE_DOF};
 
 /// One pose's offset equation: `up · p + height = d`, whitened by `whitener`.
 #[derive(Debug, Clone, Copy)]
@@ -34,12 +34,11 @@ struct OffsetRow {
 }
 
 impl OffsetRow {
-    /// The pose's equation with its distance read at the depth scale `scale`.
-    fn of(observation: &Observation, settings: &SolveSettings, scale: f64) -> Self {
+    fn of(observation: &Observation, settings: &SolveSettings) -> Self {
         Self {
             up: observation.up_in_robot(),
             height: observation.body_height(),
-            d: observation.plane.d / scale,
+            d: observation.plane.d,
             whitener: Weights::of(observation, settings).offset_whitener,
         }
     }
@@ -133,23 +132,24 @@ fn jackknife_covariance<const N: usize>(
     spread * ((n - 1.0) / n)
 }
 
-/// The covariance of the position (metres²) by leaving each used pose out,
-/// the distances read at the depth scale `scale`, or `None` when a
-/// replicate cannot be solved (the poses left do not pin the position).
+/// The covariance of the position (metres²) by leaving each used pose out;
+/// `None` when the poses, as their Cauchy weights count them, leave fewer
+/// than [`MIN_EVIDENCE_DOF`] residual degrees of freedom (the solve's own
+/// test: a short schedule cannot vouch for itself), or a replicate cannot
+/// be solved (the poses left do not pin the position).
 pub(super) fn position_covariance(
     used: &[&Observation],
     settings: &SolveSettings,
-    scale: f64,
 ) -> Option<Matrix3<f64>> {
-    let rows: Vec<OffsetRow> = used
-        .iter()
-        .map(|o| OffsetRow::of(o, settings, scale))
-        .collect();
+    let rows: Vec<OffsetRow> = used.iter().map(|o| OffsetRow::of(o, settings)).collect();
     let mut sizes = Vec::with_capacity(rows.len());
     // Each replicate starts from the weights of all the poses: a few
     // rounds from there instead of tens from equal weights.
     let mut all = vec![1.0; rows.len()];
     position_from_offsets(&rows, None, &mut all, &mut sizes)?;
+    if all.iter().sum::<f64>() - 3.0 < MIN_EVIDENCE_DOF {
+        return None;
+    }
     let mut robust = all.clone();
     let replicates = (0..rows.len())
         .map(|left_out| {
@@ -162,8 +162,11 @@ pub(super) fn position_covariance(
 
 /// `covariance` with each σ raised to `floor`'s where it is smaller, its
 /// correlations kept.
-pub(super) fn at_least(covariance: &Matrix3<f64>, floor: &Matrix3<f64>) -> Matrix3<f64> {
-    let sigma = |m: &Matrix3<f64>, i: usize| m[(i, i)].max(0.0).sqrt();
+pub(super) fn at_least<const N: usize>(
+    covariance: &nalgebra::SMatrix<f64, N, N>,
+    floor: &nalgebra::SMatrix<f64, N, N>,
+) -> nalgebra::SMatrix<f64, N, N> {
+    let sigma = |m: &nalgebra::SMatrix<f64, N, N>, i: usize| m[(i, i)].max(0.0).sqrt();
     let raise = |i: usize| {
         let (own, least) = (sigma(covariance, i), sigma(floor, i));
         if own > 0.0 && own < least {
@@ -172,7 +175,7 @@ pub(super) fn at_least(covariance: &Matrix3<f64>, floor: &Matrix3<f64>) -> Matri
             1.0
         }
     };
-    Matrix3::from_fn(|i, j| {
+    nalgebra::SMatrix::<f64, N, N>::from_fn(|i, j| {
         let raised = covariance[(i, j)] * raise(i) * raise(j);
         if i == j {
             raised.max(floor[(i, i)])
@@ -264,14 +267,11 @@ mod tests {
                 })
                 .collect();
             let used: Vec<&Observation> = observations.iter().collect();
-            let rows: Vec<OffsetRow> = used
-                .iter()
-                .map(|o| OffsetRow::of(o, &settings, 1.0))
-                .collect();
+            let rows: Vec<OffsetRow> = used.iter().map(|o| OffsetRow::of(o, &settings)).collect();
             let mut robust = vec![1.0; rows.len()];
             let p = position_from_offsets(&rows, None, &mut robust, &mut vec![]).unwrap();
             errors.push(p - truth.translation);
-            jackknife.push(position_covariance(&used, &settings, 1.0).unwrap());
+            jackknife.push(position_covariance(&used, &settings).unwrap());
             // The formula: (UᵀWU)⁻¹ × the weighted mean square.
             let (mut information, mut chi2, mut weight) = (Matrix3::zeros(), 0.0, 0.0);
             let sizes: Vec<f64> = rows.iter().map(|r| r.residual(&p).abs()).collect();

@@ -401,15 +401,16 @@ fn position_by_the_poses(
     observations: &[Observation],
     settings: &SolveSettings,
 ) {
-    let used: Vec<&Observation> = observations
+    if !settings.noise_from_residuals {
+        return;
+    }
+    // The poses as the solution was solved: at its depth scale.
+    let scaled = at_scale(observations, solution.depth_scale.value);
+    let used: Vec<&Observation> = scaled
         .iter()
         .filter(|o| solution.poses.iter().any(|p| p.index == o.index && p.used))
         .collect();
-    if !jackknife_applies(used.len(), 3, settings) {
-        return;
-    }
-    let scale = solution.depth_scale.value;
-    let Some(by_poses) = jackknife::position_covariance(&used, settings, scale) else {
+    let Some(by_poses) = jackknife::position_covariance(&used, settings) else {
         return;
     };
     let position = if used.iter().all(|o| o.plane_covariance.is_some()) {
@@ -479,9 +480,15 @@ fn solve_with_scale(
             // from the joint fit: by leaving each pose out when the poses
             // are enough to say (as the position's alone, `jackknife`),
             // else the formula's with the offsets' variance factor.
+            let formula = joint.covariance * solution.variance_factors.1;
             let joint_covariance = match &joint.jackknife {
-                Some(by_poses) if jackknife_applies(used.len(), 4, settings) => *by_poses,
-                _ => joint.covariance * solution.variance_factors.1,
+                Some(by_poses) if jackknife_applies(used.len(), 4, settings) => {
+                    // Never below the plane fits' own share.
+                    let fit_share = assumed_noise(&used, settings).fit_share.1;
+                    let floor = formula * (fit_share / solution.variance_factors.1).min(1.0);
+                    jackknife::at_least(by_poses, &floor)
+                }
+                _ => formula,
             };
             for i in 0..3 {
                 for j in 0..3 {

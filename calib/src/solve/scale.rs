@@ -75,8 +75,20 @@ pub(super) fn solve_at_scale(
     settings: &SolveSettings,
     scale: f64,
 ) -> Result<Solution, SolveError> {
-    if scale != 1.0 {
-        let scaled: Vec<Observation> = observations
+    solve_six(&at_scale(observations, scale), settings)
+}
+
+/// The observations with their distances, and the distances' covariance,
+/// read at the depth scale `scale` (divided by it).
+pub(super) fn at_scale(
+    observations: &[Observation],
+    scale: f64,
+) -> std::borrow::Cow<'_, [Observation]> {
+    if scale == 1.0 {
+        return std::borrow::Cow::Borrowed(observations);
+    }
+    std::borrow::Cow::Owned(
+        observations
             .iter()
             .map(|o| {
                 let mut o = o.clone();
@@ -89,8 +101,6 @@ pub(super) fn solve_at_scale(
                 }
                 o
             })
-            .collect();
-        return solve_six(&scaled, settings);
-    }
-    solve_six(observations, settings)
+            .collect(),
+    )
 }
