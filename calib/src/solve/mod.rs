@@ -413,18 +413,36 @@ fn position_by_the_poses(
     let Some(by_poses) = jackknife::position_covariance(&used, settings) else {
         return;
     };
-    let position = if used.iter().all(|o| o.plane_covariance.is_some()) {
-        let formula = solution.covariance.fixed_view::<3, 3>(3, 3).into_owned();
-        let fit_share = assumed_noise(&used, settings).fit_share.1;
-        let floor = formula * (fit_share / solution.variance_factors.1).min(1.0);
-        jackknife::at_least(&by_poses, &floor)
-    } else {
-        by_poses
-    };
+    let formula = solution.covariance.fixed_view::<3, 3>(3, 3).into_owned();
+    let position = not_below_the_fits(
+        &by_poses,
+        &formula,
+        solution.variance_factors.1,
+        &used,
+        settings,
+    );
     solution
         .covariance
         .fixed_view_mut::<3, 3>(3, 3)
         .copy_from(&position);
+}
+
+/// A covariance the poses gave (the jackknife's), never below the plane
+/// fits' own share of the formula's (`formula`, made with the offsets'
+/// variance factor `factor`), when the planes carry a fit covariance: the
+/// poses cannot be less noisy than their pixels.
+fn not_below_the_fits<const N: usize>(
+    by_poses: &nalgebra::SMatrix<f64, N, N>,
+    formula: &nalgebra::SMatrix<f64, N, N>,
+    factor: f64,
+    used: &[&Observation],
+    settings: &SolveSettings,
+) -> nalgebra::SMatrix<f64, N, N> {
+    if !used.iter().all(|o| o.plane_covariance.is_some()) {
+        return *by_poses;
+    }
+    let fit_share = assumed_noise(used, settings).fit_share.1;
+    jackknife::at_least(by_poses, &(formula * (fit_share / factor).min(1.0)))
 }
 
 /// The six parameters and the depth scale (the position's covariance by
@@ -482,12 +500,13 @@ fn solve_with_scale(
             // else the formula's with the offsets' variance factor.
             let formula = joint.covariance * solution.variance_factors.1;
             let joint_covariance = match &joint.jackknife {
-                Some(by_poses) if jackknife_applies(used.len(), 4, settings) => {
-                    // Never below the plane fits' own share.
-                    let fit_share = assumed_noise(&used, settings).fit_share.1;
-                    let floor = formula * (fit_share / solution.variance_factors.1).min(1.0);
-                    jackknife::at_least(by_poses, &floor)
-                }
+                Some(by_poses) if jackknife_applies(used.len(), 4, settings) => not_below_the_fits(
+                    by_poses,
+                    &formula,
+                    solution.variance_factors.1,
+                    &used,
+                    settings,
+                ),
                 _ => formula,
             };
             for i in 0..3 {
@@ -718,8 +737,6 @@ fn refine<'a>(
     start: PoseParams,
     settings: &SolveSettings,
 ) -> (PoseParams, IdentificationProblem<'a>, usize) {
-    const CAUCHY: f64 = 2.385;
-    const ROUNDS: usize = 50;
     let weights: Vec<Weights> = used.iter().map(|o| Weights::of(o, settings)).collect();
     let mut problem = IdentificationProblem {
         observations: used.to_vec(),
@@ -777,17 +794,28 @@ fn refine<'a>(
     (robot_from_sensor, problem, evaluations)
 }
 
+/// The Cauchy weights' scale, in robust standard deviations of the
+/// whitened residuals (95 % efficiency on Gaussian noise).
+const CAUCHY: f64 = 2.385;
+
+/// Rounds of reweighting at most.
+const ROUNDS: usize = 50;
+
 fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    if v.is_empty() {
+    median_in_place(&mut values.to_vec())
+}
+
+/// The median of `values`, which it reorders (0 when empty).
+fn median_in_place(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
         return 0.0;
     }
-    v.sort_by(f64::total_cmp);
-    let mid = v.len() / 2;
-    if v.len().is_multiple_of(2) {
-        0.5 * (v[mid - 1] + v[mid])
+    values.sort_unstable_by(f64::total_cmp);
+    let mid = values.len() / 2;
+    if values.len().is_multiple_of(2) {
+        0.5 * (values[mid - 1] + values[mid])
     } else {
-        v[mid]
+        values[mid]
     }
 }
 
