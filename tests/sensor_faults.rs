@@ -6,6 +6,8 @@
 //! reason, the robot halted and sent home. Nothing hangs: the stalled stream
 //! fails after the sensor timeout.
 
+mod common;
+
 use std::time::{Duration, Instant};
 
 use groundcal::hardware::{self, HardwareError, Selection};
@@ -211,4 +213,72 @@ async fn a_pose_whose_frames_are_all_invalid_is_set_aside_with_why() {
     let why = pose.reason.as_deref().unwrap_or_default();
     assert!(why.contains("no ground found"), "{why}");
     assert!(result.accepted(), "{:?}", result.reasons);
+}
+
+/// A played-back frame is read off the session's thread: a read that waits
+/// on a busy disk must not hold it up, or its stall watch stops ticking (and
+/// an Abort could not arrive). On one thread, as `serve`'s session has the
+/// runtime's attention, with one blocking worker kept busy until a task on
+/// that thread lets it go: a read made on the blocking pool waits for it and
+/// so lets the task run; a read made on the thread itself never does (CI of
+/// f31804b1: a live calibration of the sample ended "the service stalled
+/// for 2.0 s" while a release build wrote to the disk).
+#[test]
+fn recorded_frames_are_read_off_the_sessions_thread() {
+    use groundcal::formats::recording::Recording;
+    use groundcal::hardware::playback_sensor::PlaybackSensor;
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    use std::sync::{mpsc, Arc, Mutex};
+
+    let sample = common::shared().join("data/sample-12");
+    let expected = Recording::open(&sample).unwrap();
+    let mut sensor = PlaybackSensor::new(Recording::open(&sample).unwrap());
+    let pose = sensor.first_pose().unwrap();
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .max_blocking_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (release, gate) = mpsc::channel::<()>();
+    let gate = Arc::new(Mutex::new(gate));
+    let armed = Arc::new(AtomicBool::new(false));
+    let turns = Arc::new(AtomicUsize::new(0));
+    runtime.block_on(async {
+        let (counted, armed_beside) = (Arc::clone(&turns), Arc::clone(&armed));
+        tokio::spawn(async move {
+            loop {
+                if armed_beside.swap(false, Ordering::SeqCst) {
+                    counted.fetch_add(1, Ordering::SeqCst);
+                    let _ = release.send(());
+                }
+                tokio::task::yield_now().await;
+            }
+        });
+        sensor.begin_pose(pose);
+        for name in &expected.poses[0].depth_frames {
+            // The one blocking worker, busy until the task beside lets it go.
+            let held = Arc::clone(&gate);
+            let busy = tokio::task::spawn_blocking(move || {
+                let _ = held.lock().unwrap().recv();
+            });
+            let before = turns.load(Ordering::SeqCst);
+            armed.store(true, Ordering::SeqCst);
+            let frame = tokio::time::timeout(Duration::from_secs(30), sensor.next_frame())
+                .await
+                .expect("the read waits for the worker, which the task lets go")
+                .expect("a frame");
+            assert!(
+                turns.load(Ordering::SeqCst) > before,
+                "{name}: nothing else ran on the thread during its read"
+            );
+            // A read on the thread itself left the worker waiting.
+            armed.store(true, Ordering::SeqCst);
+            busy.await.unwrap();
+            assert_eq!(
+                frame.raw,
+                expected.read_depth_frame(name).unwrap().0.pixels,
+                "{name}"
+            );
+        }
+    });
 }

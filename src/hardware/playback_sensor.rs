@@ -4,6 +4,7 @@
 //! the recording format, which is this crate's.
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use groundcal_hal::{DepthFrame, DepthSensor, Error, ErrorKind, Led, SensorInfo, TiltState};
 
@@ -23,6 +24,8 @@ pub enum PlaybackSensorError {
     NoPose,
     #[error("the recording has {recorded} accelerometer readings for pose {pose}")]
     OutOfReadings { pose: u16, recorded: usize },
+    #[error("the recording's reader failed: {0}")]
+    Reader(String),
 }
 
 impl Error for PlaybackSensorError {
@@ -34,9 +37,12 @@ impl Error for PlaybackSensorError {
     }
 }
 
-/// A recording played back as a sensor.
+/// A recording played back as a sensor. Its files are read on tokio's
+/// blocking pool: a read that waits on a busy disk must not hold up the
+/// session's thread, whose stall watch would end the run (and which also
+/// waits for an Abort), as the simulated Kinect renders off it too.
 pub struct PlaybackSensor {
-    recording: Recording,
+    recording: Arc<Recording>,
     /// Pose id → its line in the recording.
     poses: HashMap<u16, usize>,
     /// Dump file name → (Kinect timestamp, seconds), from the INDEX.
@@ -63,7 +69,7 @@ impl PlaybackSensor {
             .collect();
         let tilt_deg = recording.session.kinect.tilt_deg;
         Self {
-            recording,
+            recording: Arc::new(recording),
             poses,
             times,
             current: None,
@@ -81,6 +87,18 @@ impl PlaybackSensor {
     /// The recording served.
     pub fn recording(&self) -> &Recording {
         &self.recording
+    }
+
+    /// `read` of the recording, on tokio's blocking pool.
+    async fn read_off_thread<T: Send + 'static>(
+        &self,
+        read: impl FnOnce(&Recording) -> Result<T, InputError> + Send + 'static,
+    ) -> Result<T, PlaybackSensorError> {
+        let recording = Arc::clone(&self.recording);
+        tokio::task::spawn_blocking(move || read(&recording))
+            .await
+            .map_err(|e| PlaybackSensorError::Reader(e.to_string()))?
+            .map_err(PlaybackSensorError::Input)
     }
 }
 
@@ -128,7 +146,10 @@ impl DepthSensor for PlaybackSensor {
                 recorded: record.accelerometer.len(),
             },
         )?;
-        let raw = self.recording.read_tilt_state(name)?;
+        let name = name.clone();
+        let raw = self
+            .read_off_thread(move |recording| recording.read_tilt_state(&name))
+            .await?;
         self.readings_served += 1;
         Ok(raw.state())
     }
@@ -157,7 +178,10 @@ impl DepthSensor for PlaybackSensor {
                 recorded: record.depth_frames.len(),
             })?;
         let (timestamp, time_s) = self.times.get(name).copied().unwrap_or((0, 0.0));
-        let (image, _) = self.recording.read_depth_frame(name)?;
+        let name = name.clone();
+        let (image, _) = self
+            .read_off_thread(move |recording| recording.read_depth_frame(&name))
+            .await?;
         self.current = Some((pose_id, served + 1));
         Ok(DepthFrame {
             timestamp,

@@ -75,9 +75,11 @@ pub(super) fn fit_pose(
 pub(super) const PROVISIONAL_MIN_POSES: usize = 6;
 
 /// Solves over the poses fitted so far and reports θ and e_d per pose (about
-/// a millisecond for 52 poses; a schedule that does not pin every parameter
-/// down yet gives nothing).
-pub(super) fn report_provisional(
+/// a millisecond for 52 poses, more on a busy robot computer; a schedule
+/// that does not pin every parameter down yet gives nothing). The solve runs
+/// on tokio's blocking pool: the session's thread keeps its stall watch
+/// ticking and stays free for an Abort.
+pub(super) async fn report_provisional(
     pending: &[PendingFit],
     plan: &Plan,
     events: &UnboundedSender<Event>,
@@ -89,20 +91,28 @@ pub(super) fn report_provisional(
     if observations.len() < PROVISIONAL_MIN_POSES {
         return;
     }
-    let Ok(calibration) = crate::calib::solve::solve(&observations, &plan.calibration.solve) else {
-        return;
-    };
-    let poses = calibration
-        .poses
-        .iter()
-        .map(|p| ProvisionalPose {
-            index: u16::try_from(p.index).unwrap_or(u16::MAX),
-            theta_deg: p.theta.to_degrees(),
-            e_d_mm: p.e_d * 1000.0,
-            used: p.used,
-        })
-        .collect();
-    send(events, Event::Provisional { poses });
+    let settings = plan.calibration.solve;
+    let events = events.clone();
+    let solved = tokio::task::spawn_blocking(move || {
+        let Ok(calibration) = crate::calib::solve::solve(&observations, &settings) else {
+            return;
+        };
+        let poses = calibration
+            .poses
+            .iter()
+            .map(|p| ProvisionalPose {
+                index: u16::try_from(p.index).unwrap_or(u16::MAX),
+                theta_deg: p.theta.to_degrees(),
+                e_d_mm: p.e_d * 1000.0,
+                used: p.used,
+            })
+            .collect();
+        send(&events, Event::Provisional { poses });
+    })
+    .await;
+    if let Err(e) = solved {
+        tracing::warn!("the provisional solve failed: {e}");
+    }
 }
 
 /// Reports the fits that have finished, in pose order; after new ones
@@ -143,7 +153,7 @@ pub(super) async fn report_finished(
         *reported += 1;
     }
     if !all && *reported > before && plan.calibrating {
-        report_provisional(pending, plan, events);
+        report_provisional(pending, plan, events).await;
     }
 }
 
