@@ -64,6 +64,10 @@ pub struct BodyPose {
     /// Why the feet do not fix the pose, if they do not: a second foot that
     /// moved, with how far, metres (1-based).
     pub second_slipped_foot: Option<(usize, f64)>,
+    /// The farthest any foot lies from where the others put it, metres,
+    /// whether or not it counts as a slip: the feet's own scatter, pose by
+    /// pose. None among fewer than [`MIN_FEET_TO_FIND_A_SLIP`] feet.
+    pub worst_miss: Option<f64>,
 }
 
 fn check_finite(feet: &[Vector3<f64>]) -> Result<(), BodyError> {
@@ -156,9 +160,8 @@ impl GroundFrame {
         }
         check_finite(feet_robot)?;
         let all: Vec<usize> = (0..feet_robot.len()).collect();
-        let slipped_foot = self
-            .worst_miss(feet_robot, &all)?
-            .filter(|(_, miss)| *miss > slip_threshold);
+        let worst = self.worst_miss(feet_robot, &all)?;
+        let slipped_foot = worst.filter(|(_, miss)| *miss > slip_threshold);
         let (kept, second_slipped_foot) = match slipped_foot {
             None => (all, None),
             Some((foot, _)) => {
@@ -183,6 +186,7 @@ impl GroundFrame {
             foot_residuals,
             slipped_foot: slipped_foot.map(|(f, miss)| (f + 1, miss)),
             second_slipped_foot,
+            worst_miss: worst.map(|(_, miss)| miss),
         })
     }
 

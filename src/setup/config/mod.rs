@@ -183,7 +183,9 @@ pub struct CalibrationConfig {
     pub nominal_mount: Option<NominalMount>,
     #[serde(default)]
     pub gates: Gates,
-    /// A foot farther than this from where it was planted has slipped.
+    /// A foot farther than this from where it was planted has slipped; once
+    /// the feet have shown their own agreement the limit follows it below
+    /// this (`calib::observe::SLIP_SCATTERS`).
     #[serde(default = "default_slip_mm")]
     pub slip_threshold_mm: f64,
     /// The fit that refines the ground: `disparity` (in inverse depth, the
