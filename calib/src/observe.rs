@@ -228,6 +228,15 @@ pub const SLIP_SCATTER_POSES: usize = 8;
 /// was accepted with β 0.060° off (5.4σ; docs/method.md).
 pub const SLIP_SCATTERS: f64 = 4.0;
 
+/// The fewest feet for which the limit follows their scatter. Four feet
+/// in a parallelogram explain a foot that sank straight down equally well
+/// leaving out any of them (each miss is the sink), so a small sink would
+/// name a foot at random and plant the wrong one anew (a review's model of
+/// a 500 × 300 mm quadruped: the wrong foot every time, the body then
+/// 0.45-0.91° off); from five on, the foot that sank is the one whose miss
+/// the others agree on.
+pub const MIN_FEET_TO_FOLLOW_THE_FEET: usize = MIN_FEET_TO_FIND_A_SLIP + 1;
+
 /// The least slip limit, metres: below it a foot's miss is taken for the
 /// robot's own play, whatever the feet's scatter says.
 pub const MIN_SLIP_M: f64 = 0.002;
@@ -255,8 +264,13 @@ impl SlipLimit {
     fn describe(self) -> String {
         match self {
             SlipLimit::Configured(limit) => format!("limit {:.1} mm", limit * 1e3),
+            SlipLimit::FromTheFeet { limit, median_miss } if limit <= MIN_SLIP_M => format!(
+                "limit {:.1} mm, the least, as the feet agreed to within {:.1} mm at a typical pose before",
+                limit * 1e3,
+                median_miss * 1e3
+            ),
             SlipLimit::FromTheFeet { limit, median_miss } => format!(
-                "limit {:.1} mm, from the feet's agreement at the poses before: {:.1} mm at most at a typical one",
+                "limit {:.1} mm, {SLIP_SCATTERS:.0} times the {:.1} mm within which the feet agreed at a typical pose before",
                 limit * 1e3,
                 median_miss * 1e3
             ),
@@ -324,7 +338,9 @@ impl FeetTracker {
     /// slip show the feet's scatter; then [`SLIP_SCATTERS`] times its median,
     /// within [`MIN_SLIP_M`] and the configured limit.
     fn slip_limit(&self) -> SlipLimit {
-        if self.worst_misses.len() < SLIP_SCATTER_POSES {
+        if self.worst_misses.len() < SLIP_SCATTER_POSES
+            || self.ground_frame.feet_ground.len() < MIN_FEET_TO_FOLLOW_THE_FEET
+        {
             return SlipLimit::Configured(self.slip_threshold_m);
         }
         let mut misses = self.worst_misses.clone();
@@ -522,14 +538,16 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    /// Feet tracked over `poses` body poses (tilts to 15°, heights 550-750
-    /// mm), each foot reported with `noise_mm` of noise per axis, foot 3
-    /// sunk `sink_mm` from pose 20 on: the poses at which a slip was named.
-    fn slips_named(noise_mm: f64, sink_mm: f64, poses: usize) -> Vec<(usize, String)> {
-        // Six feet on a hexagon of 800 mm radius, 600 mm below the body.
-        let home_mm: Vec<[f64; 3]> = (0..6)
+    /// `feet` feet (six: a hexagon; four: a square; 800 mm from the body's
+    /// axis, 600 mm below it) tracked over `poses` body poses (tilts to 15°,
+    /// heights 550-750 mm), each foot reported with `noise_mm` of noise per
+    /// axis, foot 3 sunk `sink_mm` from pose 20 on: the poses at which a
+    /// slip was named.
+    fn slips_named(feet: u32, noise_mm: f64, sink_mm: f64, poses: usize) -> Vec<(usize, String)> {
+        let home_mm: Vec<[f64; 3]> = (0..feet)
             .map(|k| {
-                let angle = (30.0 + 60.0 * f64::from(k)).to_radians();
+                let step = 360.0 / f64::from(feet);
+                let angle = (step / 2.0 + step * f64::from(k)).to_radians();
                 [800.0 * angle.cos(), -600.0, 800.0 * angle.sin()]
             })
             .collect();
@@ -577,24 +595,28 @@ mod tests {
     /// A foot that sinks 4 mm into soft ground, below the configured 10 mm,
     /// is named once the feet have shown how well they agree (0.1 mm of
     /// noise, as the simulator's): the configured limit alone let a 6-mm
-    /// sink move β 0.060° (docs/method.md). Feet ten times noisier raise
-    /// the limit with them and name nothing that did not move.
+    /// sink move β 0.060° (docs/method.md). Feet ten times noisier (their
+    /// limit then the configured one, four times their median miss being
+    /// more) name nothing that did not move; nor do four feet, which cannot
+    /// tell which of them sank a little (the configured limit stays).
     #[test]
     fn a_sinking_foot_is_named_at_the_feet_own_scatter() {
-        let named = slips_named(0.1, 4.0, 40);
+        let named = slips_named(6, 0.1, 4.0, 40);
         assert_eq!(named.len(), 1, "{named:?}");
         let (pose, note) = &named[0];
         assert_eq!(*pose, 20);
         assert!(
             note.starts_with("foot 3 slipped (")
-                && note.contains("limit 2.0 mm, from the feet's agreement"),
+                && note.contains("limit 2.0 mm, the least, as the feet agreed"),
             "{note}"
         );
-        assert_eq!(slips_named(0.1, 0.0, 200), Vec::new());
-        assert_eq!(slips_named(1.0, 0.0, 200), Vec::new());
+        assert_eq!(slips_named(6, 0.1, 0.0, 200), Vec::new());
+        assert_eq!(slips_named(6, 1.0, 0.0, 200), Vec::new());
         // The noisier feet's limit is above the sink: it stays unnamed,
         // as with the configured limit.
-        assert_eq!(slips_named(1.0, 4.0, 40), Vec::new());
+        assert_eq!(slips_named(6, 1.0, 4.0, 40), Vec::new());
+        assert_eq!(slips_named(4, 0.1, 4.0, 40), Vec::new());
+        assert_eq!(slips_named(4, 0.1, 12.0, 40).len(), 1);
     }
 
     #[test]
