@@ -92,12 +92,9 @@ pub(super) async fn report_provisional(
         return;
     }
     let settings = plan.calibration.solve;
-    let events = events.clone();
     let solved = tokio::task::spawn_blocking(move || {
-        let Ok(calibration) = crate::calib::solve::solve(&observations, &settings) else {
-            return;
-        };
-        let poses = calibration
+        let calibration = crate::calib::solve::solve(&observations, &settings).ok()?;
+        let poses: Vec<ProvisionalPose> = calibration
             .poses
             .iter()
             .map(|p| ProvisionalPose {
@@ -107,11 +104,15 @@ pub(super) async fn report_provisional(
                 used: p.used,
             })
             .collect();
-        send(&events, Event::Provisional { poses });
+        Some(poses)
     })
     .await;
-    if let Err(e) = solved {
-        tracing::warn!("the provisional solve failed: {e}");
+    // Sent here, not from the worker: a run that ended while it solved
+    // (a stall, an Abort) has dropped this future, and says nothing after.
+    match solved {
+        Ok(Some(poses)) => send(events, Event::Provisional { poses }),
+        Ok(None) => {}
+        Err(e) => tracing::warn!("the provisional solve failed: {e}"),
     }
 }
 

@@ -212,10 +212,11 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         })?,
     );
     let mut feet = processor.feet_tracker();
-    let mut writer = match &plan.record {
-        Some(dir) => Some(RecordingWriter::create(
-            dir,
-            &Session {
+    // Created and finished on the blocking pool (directories and fsync: a
+    // busy disk must not hold up the session's thread and its stall watch).
+    let mut writer = match plan.record.clone() {
+        Some(dir) => {
+            let session = Session {
                 format: "groundcal-recording".into(),
                 version: 1,
                 // The robot's name when it has one (recording.md's
@@ -238,8 +239,9 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
                 nominal_mount: plan.nominal_mount,
                 gates: Some(plan.calibration.gates),
                 noise: Some(plan.noise),
-            },
-        )?),
+            };
+            Some(writing(move || RecordingWriter::create(&dir, &session)).await?)
+        }
         None => None,
     };
 
@@ -379,7 +381,7 @@ async fn visit_poses<S: DepthSensor, C: BodyController>(
         "frames kept for a second fit"
     );
     let recording = match writer {
-        Some(w) => Some(w.finish()?),
+        Some(w) => Some(writing(move || w.finish()).await?),
         None => None,
     };
     Ok(Visited {
@@ -496,5 +498,15 @@ async fn guarded<S: DepthSensor, C: BodyController>(
             );
             Err(e)
         }
+    }
+}
+
+/// `write` (the recording's files) on tokio's blocking pool, awaited.
+async fn writing<T: Send + 'static>(
+    write: impl FnOnce() -> Result<T, WriteError> + Send + 'static,
+) -> Result<T, SessionError> {
+    match tokio::task::spawn_blocking(write).await {
+        Ok(written) => Ok(written?),
+        Err(e) => Err(SessionError::Recording(format!("the writer failed: {e}"))),
     }
 }
