@@ -163,6 +163,53 @@ fn without_a_measured_noise_the_scale_is_still_estimated() {
     }
 }
 
+/// A Kinect whose depth reads 1 % long under the simulator's default noise
+/// (held through a pose, spatially correlated: the poses pin the scale only
+/// to ±0.2–0.3 %, too loosely to estimate it): taken as 1, the position
+/// was 10 mm off under σ of 0.35 mm, and a calibration that passed the
+/// other gates would have been accepted so. The poses rule 1 out, and the
+/// result says so and is rejected. (Before, the rejection, when there was
+/// one, said only that the heights disagreed.)
+#[test]
+fn a_scale_the_poses_rule_out_but_cannot_pin_rejects() {
+    let dir = temp_dir("depth-scale-held");
+    let world = "world = \"flat\"\ndepth_scale = 1.01";
+    let config = common::sim_config_unmeasured(
+        &dir,
+        &[
+            ("world = \"flat\"", world),
+            ("depth_noise = \"white\"", "depth_noise = \"kinect\""),
+            ("seed = 7", "seed = 4"),
+            ("frames_per_pose = 2", "frames_per_pose = 3"),
+        ],
+    );
+    common::on_schedule(&config, "designed-52");
+    let (code, result) = run_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 3, "rejected: {result:#}");
+    assert_eq!(result["depth_scale_estimated"], false, "{result:#}");
+    let reasons: Vec<&str> = result["reasons"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    let said = reasons
+        .iter()
+        .find(|r| r.starts_with("the Kinect's depth reads"))
+        .unwrap_or_else(|| panic!("no word of the scale: {reasons:#?}"));
+    assert!(
+        said.contains("longer") && said.contains("Give the Kinect's known depth scale"),
+        "{said}"
+    );
+    // Its figure is the poses' own: within 0.5 % of the truth.
+    let found: f64 = said
+        .split_once("(depth scale ")
+        .and_then(|(_, rest)| rest.split_once(' '))
+        .and_then(|(number, _)| number.parse().ok())
+        .unwrap_or_else(|| panic!("no scale in {said}"));
+    assert!((found - 1.01).abs() < 0.005, "{said}");
+}
+
 /// The paper's tilts at one body height: `plan` says the scale will not be
 /// estimated, the calibration takes 1 and says why; a known scale given
 /// with --depth-scale is used as given.

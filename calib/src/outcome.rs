@@ -457,6 +457,10 @@ pub struct DepthScale {
     pub correlations: [f64; 6],
     /// Why it was not estimated, in words.
     pub note: Option<String>,
+    /// When not estimated because the poses pin it too loosely: where they
+    /// put it nonetheless, and its σ (what [`crate::quality`] weighs
+    /// against the scale taken).
+    pub loose_estimate: Option<(f64, f64)>,
 }
 
 impl DepthScale {
@@ -468,6 +472,7 @@ impl DepthScale {
             estimated: false,
             correlations: [0.0; 6],
             note: Some(note),
+            loose_estimate: None,
         }
     }
 }

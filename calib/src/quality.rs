@@ -223,6 +223,21 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
             checks.push(check);
         }
     }
+    // Ground that is not flat makes a scale look off too: where the ground's
+    // residuals or the normals say so, their reasons stand alone, and a
+    // calibration on flat ground will show the scale if it is the sensor's
+    // (the simulator's bumps put it at 0.987 ± 0.004). The heights' gate
+    // does not tell: a scale 1 % off fails it by itself.
+    let ground_suspect = checks
+        .iter()
+        .any(|c| !c.passed && (c.gate == "theta_max_deg" || c.gate == "warp_max_mm"));
+    if let Some(check) = scale_taken_check(&solution.depth_scale).filter(|_| !ground_suspect) {
+        if let (false, Some((found, sigma))) = (check.passed, solution.depth_scale.loose_estimate) {
+            let taken = solution.depth_scale.value;
+            reasons.push(scale_taken_reason(found, sigma, taken, check.measured));
+        }
+        checks.push(check);
+    }
     Calibration {
         verdict: if reasons.is_empty() {
             Verdict::Accepted
@@ -391,6 +406,35 @@ fn e_d_from_sensor_noise(
 /// the part known (α, β, γ in the same units), and which angle (0, 1, 2).
 pub fn angle_sigma_growth(with: [f64; 3], known: [f64; 3]) -> (usize, f64) {
     worst_of([0, 1, 2].map(|k| with[k] / known[k]))
+}
+
+/// How far, in its σ, the poses put the depth scale from the one the result
+/// took, when they pinned it too loosely to estimate it: beyond
+/// [`crate::solve::SCALE_CONTRADICTED_SIGMAS`] the scale taken is one they
+/// rule out, and the position is off by what the difference moves it.
+fn scale_taken_check(scale: &crate::outcome::DepthScale) -> Option<GateCheck> {
+    let (found, sigma) = scale.loose_estimate.filter(|_| !scale.estimated)?;
+    let apart = (found - scale.value).abs() / sigma;
+    Some(GateCheck {
+        gate: "depth_scale_taken_sigmas",
+        limit: crate::solve::SCALE_CONTRADICTED_SIGMAS,
+        measured: apart,
+        at_least: false,
+        passed: at_most(apart, crate::solve::SCALE_CONTRADICTED_SIGMAS),
+        at: Some("depth scale".into()),
+        place: Some(GatePlace::DepthScale),
+    })
+}
+
+/// [`scale_taken_check`]'s reason: the scale the poses `found` ± `sigma`,
+/// `apart` of those σ from the one `taken`.
+fn scale_taken_reason(found: f64, sigma: f64, taken: f64, apart: f64) -> String {
+    format!(
+        "the Kinect's depth reads {:.2}% {} than the poses' heights say (depth scale {found:.4} ± {sigma:.4}, {apart:.1} σ from the {:.4} the result takes), which they pin too loosely to estimate with the mount: the position is off by what that moves it. Give the Kinect's known depth scale (depth_scale under [calibration]), or calibrate with a schedule that changes the body's height more",
+        (found - 1.0).abs() * 100.0,
+        if found > 1.0 { "longer" } else { "shorter" },
+        taken,
+    )
 }
 
 /// The depth scale's gate, when it was estimated.

@@ -315,6 +315,7 @@ const TODO = {
   min_poses_used: 'todoNoGround',
   min_used_fraction: 'todoNoGround',
   depth_scale_max_deviation: 'todoScale',
+  depth_scale_taken_sigmas: 'todoScaleTaken',
   warp_max_mm: 'todoWarp',
   pattern_max_mm: 'todoPattern',
   pattern_angle_sigma_growth_max: 'todoPatternSchedule',
@@ -322,7 +323,11 @@ const TODO = {
 };
 function todoFor(result) {
   const lines = [];
+  // A depth scale the poses rule out fails the heights' gate by itself:
+  // flat ground and another run would not help (its own line says so).
+  const scaleTaken = (result.gate_checks || []).some((c) => c.gate === 'depth_scale_taken_sigmas' && !c.passed);
   for (const c of result.gate_checks || []) {
+    if (scaleTaken && c.gate === 'e_d_max_mm') continue;
     // A pattern fixed in the image that the paper's fit left uncorrected
     // needs the default fit, not flat ground.
     const fixedWarp = c.gate === 'warp_max_mm' && result.depth_pattern && result.depth_pattern.uncorrected_fixed;
@@ -437,6 +442,7 @@ const GATE_UNITS = {
   min_used_fraction: ['%', 0],
   observable: ['', 3],
   depth_scale_max_deviation: ['%', 2],
+  depth_scale_taken_sigmas: [' σ', 1],
   warp_max_mm: [' mm', 1],
   pattern_max_mm: [' mm', 1],
   pattern_angle_sigma_growth_max: ['×', 1],

@@ -79,6 +79,12 @@ pub(super) fn gate_row(check: &GateCheckJson) -> (Markup, String, String, Option
             format!("{} %", num(100.0 * m, 3)),
             "",
         ),
+        "depth_scale_taken_sigmas" => (
+            html! { "depth scale taken, from where the poses put it" },
+            format!("≤ {} σ", num(l, 1)),
+            format!("{} σ", num(m, 1)),
+            "",
+        ),
         "warp_max_mm" => (
             html! { "depth warp at 2\u{a0}m, not corrected (RMS)" },
             format!("≤ {} mm", num(l, 1)),
