@@ -223,15 +223,18 @@ pub fn assess(solution: Solution, poses_total: usize, gates: &Gates) -> Calibrat
             checks.push(check);
         }
     }
-    // Ground that is not flat makes a scale look off too: where the ground's
-    // residuals or the normals say so, their reasons stand alone, and a
-    // calibration on flat ground will show the scale if it is the sensor's
-    // (the simulator's bumps put it at 0.987 ± 0.004). The heights' gate
+    // Other causes make a scale look off too: ground that is not flat (the
+    // simulator's bumps put it at 0.987 ± 0.004), a warp of the depth the
+    // correction cannot take, a foot that sank and shifted the heights.
+    // Where the gates on the normals or the warp fail, or a used pose's
+    // feet were seen to move, their reasons stand alone. The heights' gate
     // does not tell: a scale 1 % off fails it by itself.
-    let ground_suspect = checks
-        .iter()
-        .any(|c| !c.passed && (c.gate == "theta_max_deg" || c.gate == "warp_max_mm"));
-    if let Some(check) = scale_taken_check(&solution.depth_scale).filter(|_| !ground_suspect) {
+    let feet_moved = solution.poses.iter().any(|p| p.used && p.note.is_some());
+    let other_cause = feet_moved
+        || checks
+            .iter()
+            .any(|c| !c.passed && (c.gate == "theta_max_deg" || c.gate == "warp_max_mm"));
+    if let Some(check) = scale_taken_check(&solution.depth_scale).filter(|_| !other_cause) {
         if let (false, Some((found, sigma))) = (check.passed, solution.depth_scale.loose_estimate) {
             let taken = solution.depth_scale.value;
             reasons.push(scale_taken_reason(found, sigma, taken, check.measured));

@@ -177,7 +177,7 @@ pub(super) fn gates_section(result: &ResultJson) -> Markup {
                 }
             } }
             p.note {
-                "The limits are the " code { "[calibration.gates]" } " the result was judged by (see the setup below); the observability limit is the solve's own. θ's and " (e_d()) "'s limits are drawn as red lines on their charts."
+                "The limits are the " code { "[calibration.gates]" } " the result was judged by (see the setup below); the observability limit and the depth scale taken's (3 σ) are the solve's own. θ's and " (e_d()) "'s limits are drawn as red lines on their charts."
             }
         }
     }
