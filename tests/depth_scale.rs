@@ -187,12 +187,7 @@ fn a_scale_the_poses_rule_out_but_cannot_pin_rejects() {
     let (code, result) = run_json(&["calibrate", "--config", config.to_str().unwrap(), "--json"]);
     assert_eq!(code, 3, "rejected: {result:#}");
     assert_eq!(result["depth_scale_estimated"], false, "{result:#}");
-    let reasons: Vec<&str> = result["reasons"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(Value::as_str)
-        .collect();
+    let reasons = common::reasons_of(&result);
     let said = reasons
         .iter()
         .find(|r| r.starts_with("the Kinect's depth reads"))

@@ -203,12 +203,7 @@ fn the_real_kinect_sequence_as_a_robots_bag() {
     assert!(apart.sqrt() < 0.25, "{} raw units RMS apart", apart.sqrt());
 
     // The words: the disagreement named; no σ sent to open, flat ground.
-    let reasons: Vec<&str> = result["reasons"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(Value::as_str)
-        .collect();
+    let reasons = common::reasons_of(&result);
     assert!(
         reasons
             .iter()

@@ -177,6 +177,19 @@ impl Drop for TempDir {
     }
 }
 
+/// A result's reasons, in order.
+pub fn reasons_of(result: &serde_json::Value) -> Vec<&str> {
+    result["reasons"]
+        .as_array()
+        .map(|reasons| {
+            reasons
+                .iter()
+                .filter_map(serde_json::Value::as_str)
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 /// A result's check of one gate (`gate_checks[]` by its key), or null when
 /// the result has none.
 pub fn gate_check<'a>(result: &'a serde_json::Value, gate: &str) -> &'a serde_json::Value {
