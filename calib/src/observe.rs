@@ -343,14 +343,7 @@ impl FeetTracker {
         {
             return SlipLimit::Configured(self.slip_threshold_m);
         }
-        let mut misses = self.worst_misses.clone();
-        misses.sort_by(f64::total_cmp);
-        let middle = misses.len() / 2;
-        let median = if misses.len().is_multiple_of(2) {
-            (misses[middle - 1] + misses[middle]) / 2.0
-        } else {
-            misses[middle]
-        };
+        let median = crate::solve::median(&self.worst_misses);
         let from_the_feet = (SLIP_SCATTERS * median).max(MIN_SLIP_M);
         if from_the_feet < self.slip_threshold_m {
             SlipLimit::FromTheFeet {

@@ -815,7 +815,8 @@ const CAUCHY: f64 = 2.385;
 /// Rounds of reweighting at most.
 const ROUNDS: usize = 50;
 
-fn median(values: &[f64]) -> f64 {
+/// The median of `values` (0 when empty).
+pub(crate) fn median(values: &[f64]) -> f64 {
     median_in_place(&mut values.to_vec())
 }
 
