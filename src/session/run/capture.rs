@@ -36,25 +36,29 @@ pub(super) async fn record_pose(
             (f.time_s, f.timestamp, image)
         })
         .collect();
-    let written = tokio::task::spawn_blocking(move || {
-        let result = images
+    writing(move || {
+        record.depth_frames = images
             .iter()
             .map(|(time_s, timestamp, image)| writer.write_depth_frame(*time_s, *timestamp, image))
-            .collect::<Result<Vec<String>, WriteError>>()
-            .and_then(|names| {
-                record.depth_frames = names;
-                record.accelerometer = readings
-                    .iter()
-                    .map(|(time_s, state)| writer.write_tilt_state(*time_s, last_timestamp, state))
-                    .collect::<Result<Vec<String>, WriteError>>()?;
-                writer.write_pose(&record)
-            });
-        (writer, result)
+            .collect::<Result<Vec<String>, WriteError>>()?;
+        record.accelerometer = readings
+            .iter()
+            .map(|(time_s, state)| writer.write_tilt_state(*time_s, last_timestamp, state))
+            .collect::<Result<Vec<String>, WriteError>>()?;
+        writer.write_pose(&record)?;
+        Ok(writer)
     })
-    .await;
-    match written {
-        Ok((writer, Ok(()))) => Ok(writer),
-        Ok((_, Err(e))) => Err(e.into()),
+    .await
+}
+
+/// `write` (the recording's files) on tokio's blocking pool, awaited: files
+/// and fsync are slow on an SD card, and a busy disk must not hold up the
+/// session's thread (its stall watch, the UDP link, an Abort).
+pub(super) async fn writing<T: Send + 'static>(
+    write: impl FnOnce() -> Result<T, WriteError> + Send + 'static,
+) -> Result<T, SessionError> {
+    match tokio::task::spawn_blocking(write).await {
+        Ok(written) => Ok(written?),
         Err(e) => Err(SessionError::Recording(format!("the writer failed: {e}"))),
     }
 }

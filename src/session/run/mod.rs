@@ -500,13 +500,3 @@ async fn guarded<S: DepthSensor, C: BodyController>(
         }
     }
 }
-
-/// `write` (the recording's files) on tokio's blocking pool, awaited.
-async fn writing<T: Send + 'static>(
-    write: impl FnOnce() -> Result<T, WriteError> + Send + 'static,
-) -> Result<T, SessionError> {
-    match tokio::task::spawn_blocking(write).await {
-        Ok(written) => Ok(written?),
-        Err(e) => Err(SessionError::Recording(format!("the writer failed: {e}"))),
-    }
-}
