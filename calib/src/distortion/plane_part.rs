@@ -62,7 +62,6 @@ pub(super) struct Linearised {
     pub(super) information: Matrix3<f64>,
     /// How the six parameters move with it (radians and metres per unit).
     pub(super) sensitivity: nalgebra::Matrix6x3<f64>,
-    pub(super) solution: Solution,
 }
 
 /// What estimating a pattern's plane part would add to the mount's
@@ -159,7 +158,8 @@ impl PlanePartSolve<'_> {
     }
 
     /// The whitened residuals of the pattern's poses at `part`, with the
-    /// solve there. The poses the first solve set aside stay aside, and no
+    /// solve's estimate there ([`solve::solve_estimate`]: the derivatives
+    /// read the mount and the scale, not their σ). The poses the first solve set aside stay aside, and no
     /// more are looked for: the derivatives must not jump with that choice,
     /// and the search is most of a solve's time.
     fn residuals(&self, part: &PlanePart) -> Option<(DVector<f64>, Solution)> {
@@ -173,7 +173,7 @@ impl PlanePartSolve<'_> {
             max_outlier_fraction: 0.0,
             ..*self.settings
         };
-        let solution = solve::solve(&corrected, &settings).ok()?;
+        let solution = solve::solve_estimate(&corrected, &settings).ok()?;
         let (sigma_normal, sigma_offset) = (self.noise.0.max(1e-9), self.noise.1.max(1e-9));
         let mut values = Vec::with_capacity(3 * self.indices.len());
         let scale = solution.depth_scale.value;
@@ -192,7 +192,7 @@ impl PlanePartSolve<'_> {
     }
 
     /// The whitened residuals at `part`, their derivatives by the plane
-    /// part, how the mount moves with it, and the solve at `part`.
+    /// part, and how the mount moves with it.
     fn linearise(&self, part: &PlanePart) -> Option<Linearised> {
         // The residuals at `part` and a step along each of its three
         // parameters: four solves, independent, so side by side.
@@ -206,10 +206,10 @@ impl PlanePartSolve<'_> {
                 self.residuals(&at)
             })
             .collect();
-        let (r0, solution) = solved[0].take()?;
+        let (r0, at_part) = solved[0].take()?;
         let mut jacobian = DMatrix::zeros(r0.len(), 3);
         let mut sensitivity = nalgebra::Matrix6x3::zeros();
-        let mount = solution.robot_from_sensor.to_vector();
+        let mount = at_part.robot_from_sensor.to_vector();
         for j in 0..3 {
             let (r, moved) = solved[j + 1].take()?;
             if r.len() != r0.len() {
@@ -229,7 +229,6 @@ impl PlanePartSolve<'_> {
             jacobian,
             information,
             sensitivity,
-            solution,
         })
     }
 
@@ -242,7 +241,6 @@ impl PlanePartSolve<'_> {
                 jacobian,
                 information,
                 sensitivity,
-                solution,
             } = self.linearise(&part)?;
             let covariance = information.try_inverse()?;
             let gradient = jacobian.transpose() * &r0;
@@ -259,13 +257,13 @@ impl PlanePartSolve<'_> {
                 &per_pose_sandwich(&covariance, &jacobian, &r0),
                 &(covariance * factor),
             );
-            last = Some((covariance, sensitivity, solution));
+            last = Some((covariance, sensitivity));
             part += step;
             if step.amax() < 1e-3 {
                 break;
             }
         }
-        let (covariance, sensitivity, _) = last?;
+        let (covariance, sensitivity) = last?;
         // The solve at the plane part found, with the outliers looked for.
         let solution = solve::solve(&self.corrected(&part), self.settings).ok()?;
         let chi2 = covariance
