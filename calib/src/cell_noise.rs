@@ -19,9 +19,11 @@
 //! is the same at every pose, noise is not, and a pose's residuals may carry
 //! their sign or the opposite one equally under noise alone. So the shape's
 //! size is compared with the sizes of shapes made from the same poses with
-//! their signs flipped at random, pose by pose ([`flip_test`]): whatever the
-//! noise's correlation within a pose, the flipped shapes show what noise
-//! alone makes.
+//! their signs flipped, pose by pose, over every choice of the signs
+//! ([`flip_test`]): whatever the noise's correlation within a pose, the
+//! flipped shapes show what noise alone makes.
+
+use nalgebra::{Matrix3, Vector3};
 
 /// One pose's sum of one cell, as the estimate kept it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -213,7 +215,8 @@ impl MeanWeights {
 pub struct FlipTest {
     /// The shape's weighted sum of squares, `Σ_cells R·shape²`.
     pub observed: f64,
-    /// The same for shapes of the poses with random signs: mean and σ.
+    /// The same for shapes of the poses with their signs flipped, over
+    /// every choice of the signs: mean and σ.
     pub null_mean: f64,
     pub null_sigma: f64,
 }
@@ -241,22 +244,30 @@ impl FlipTest {
     }
 }
 
-/// Flips drawn for the test: enough for the null's mean and σ to a few
-/// percent, a millisecond each for a calibration's poses.
-pub const FLIPS: usize = 40;
+/// How a test turns per-key sums `Σ n·m` (a key: a cell, or a bin of the
+/// ground) into the shape whose size it takes: each key's sum over its
+/// weight (its readings; a weight of 0 leaves the key out), less, where
+/// `plane_rows` is given, the plane `A + B·u' + C·v'` that fits the shape
+/// over the keys weighted alike (each key's row `(1, u', v')`), as the
+/// pattern's estimate makes a shape. Its size is `Σ weight·shape²`.
+#[derive(Debug, Clone, Copy)]
+pub struct ShapeOfSums<'a> {
+    pub weights: &'a [f64],
+    pub plane_rows: Option<&'a [Vector3<f64>]>,
+}
 
 /// The shape's size against the sizes of shapes made from the same poses
-/// with their signs flipped (module documentation). `weights` are each
-/// cell's readings over the poses (0 for cells left out); `shape_of` turns
-/// per-cell sums `Σ_p n·m` into a shape as the estimate does (dividing by
-/// the readings, removing the plane part). The draws are fixed by a seed:
-/// the same poses give the same verdict.
+/// with their signs flipped (module documentation): over every choice of
+/// signs, exactly. The size of the shape of `Σ_p s_p·X_p` (`X_p`, pose
+/// p's per-key sums; `s_p = ±1`) is a quadratic form `sᵀ·G·s` in the signs,
+/// so over every choice of signs (each ±1 alike) its mean is `tr G` and its variance
+/// `2·Σ_{p≠q} G_pq²`, and the shape found is the one of all signs `+1`,
+/// `1ᵀ·G·1` ([`size_gram`]). Forty draws, as the test was first made,
+/// knew the null's σ to about ±11 % only, and read the entries five times.
 pub fn flip_test(
     entries: &(impl Entries + ?Sized),
     poses: usize,
-    weights: &[f64],
-    observed: &[f64],
-    shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
+    shape: ShapeOfSums,
 ) -> FlipTest {
     flip_test_over(
         || {
@@ -265,150 +276,185 @@ pub fn flip_test(
                 .map(|e| Some((e.cell, e.pose, e.n * e.about_plane)))
         },
         poses,
-        weights,
-        observed,
-        shape_of,
+        shape,
     )
 }
 
 /// [`flip_test`] of the entries `entries()` reads in place, in order, each
-/// as its key (a cell, or a bin of the ground: below `weights.len()`), its
-/// pose and its `n·m`, or `None` to leave it out: a test of the entries
+/// as its key (a cell, or a bin of the ground: below `shape.weights.len()`),
+/// its pose and its `n·m`, or `None` to leave it out: a test of the entries
 /// binned another way, or less something, where a copy of a calibration's
 /// entries was 6 MB at the peak.
-///
-/// The flips are made [`FLIP_BLOCK`] at a time: each entry, read once a
-/// block, adds its value times each of the block's signs of its pose to
-/// its key's sums, where a flip at a time read all the entries forty times
-/// (docs/performance.md). Each flip's sum of a key adds the same products
-/// in the same order as one flip at a time would, so the sizes are the
-/// same, bit for bit (a sign is ±1, its product exact). Every flip at
-/// once, key by key, was slower (an index of the entries by key, and
-/// forty sums a key: 3 MB more at the peak).
 pub fn flip_test_over<I: Iterator<Item = FlipEntry>>(
     entries: impl Fn() -> I + Sync,
     poses: usize,
-    weights: &[f64],
-    observed: &[f64],
-    shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
+    shape: ShapeOfSums,
 ) -> FlipTest {
-    use rayon::prelude::*;
-    let size = |shape: &[f64]| -> f64 { shape.iter().zip(weights).map(|(s, w)| w * s * s).sum() };
-    // A block of flips at a time, on every core: each block reads the
-    // entries once, in their order, adding each to its key's sums of the
-    // block's flips (one cache line).
-    let sizes: Vec<f64> = (0..FLIP_BLOCK_COUNT)
-        .into_par_iter()
-        .flat_map_iter(|block| {
-            let signs = block_signs(block, poses);
-            let mut sums = vec![[0.0; FLIP_BLOCK]; weights.len()];
-            add_flipped(&mut sums, &signs, entries());
-            (0..FLIP_BLOCK)
-                .map(|j| {
-                    let column: Vec<f64> = sums.iter().map(|row| row[j]).collect();
-                    size(&shape_of(&column))
-                })
-                .collect::<Vec<f64>>()
-        })
-        .collect();
-    let n = sizes.len() as f64;
-    let mean = sizes.iter().sum::<f64>() / n;
-    let sigma = (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
-    FlipTest {
-        observed: size(observed),
-        null_mean: mean,
-        null_sigma: sigma,
-    }
-}
-
-/// Flips made together: one cache line of sums a key.
-const FLIP_BLOCK: usize = 8;
-const FLIP_BLOCK_COUNT: usize = FLIPS / FLIP_BLOCK;
-const _: () = assert!(FLIPS.is_multiple_of(FLIP_BLOCK), "whole blocks of flips");
-
-/// The seed of the flips' signs: the same poses give the same verdict.
-const FLIP_SEED: u64 = 0x666c_6970;
-
-/// The signs of block `block`'s flips, pose by pose: flip by flip, each
-/// pose's sign in turn, from one sequence drawn from [`FLIP_SEED`]. A
-/// block's draws follow the blocks before it in that sequence, and
-/// [`splitmix64`]'s state moves by one constant a draw, so each block
-/// starts where they end without drawing them.
-fn block_signs(block: usize, poses: usize) -> Vec<[f64; FLIP_BLOCK]> {
-    let before = (block * FLIP_BLOCK * poses) as u64;
-    let mut state = FLIP_SEED.wrapping_add(before.wrapping_mul(SPLITMIX_STEP));
-    let mut signs = vec![[0.0; FLIP_BLOCK]; poses];
-    for flip in 0..FLIP_BLOCK {
-        for pose in signs.iter_mut() {
-            pose[flip] = if splitmix64(&mut state) >> 63 == 1 {
-                1.0
+    let gram = size_gram(entries, poses, shape);
+    let (mut observed, mut null_mean, mut off_diagonal) = (0.0, 0.0, 0.0);
+    for p in 0..poses {
+        for q in 0..poses {
+            let g = gram[p * poses + q];
+            observed += g;
+            if p == q {
+                null_mean += g;
             } else {
-                -1.0
-            };
+                off_diagonal += g * g;
+            }
         }
     }
-    signs
+    FlipTest {
+        observed,
+        null_mean,
+        null_sigma: (2.0 * off_diagonal).sqrt(),
+    }
 }
 
 /// One entry as a flip test reads it: its key, its pose and its `n·m`, or
 /// `None` to leave it out.
 type FlipEntry = Option<(u32, u32, f64)>;
 
-/// Adds each of `entries`, in order, times each flip's sign of its pose to
-/// its key's `sums`. Where the processor has AVX2, the same loop
-/// four lanes at a time: the same products and sums (a multiply, then an
-/// add), bit for bit.
-fn add_flipped(
-    sums: &mut [[f64; FLIP_BLOCK]],
-    signs: &[[f64; FLIP_BLOCK]],
-    entries: impl Iterator<Item = FlipEntry>,
-) {
+/// Values of the poses' per-key sums held at once: keys are taken in
+/// blocks of `GRAM_BLOCK_VALUES / poses` (1,260 of a 52-pose calibration's
+/// 4,800 cells, 0.5 MB), each block's sums made in a read of the entries.
+const GRAM_BLOCK_VALUES: usize = 1 << 16;
+
+/// Keys added to the Gram matrix together: one load of its row a group.
+const KEY_LANES: usize = 4;
+
+/// The size's Gram matrix over the poses (row-major, `poses × poses`): with
+/// `X_p` pose p's per-key sums, the size of the shape of `Σ_p s_p·X_p` is
+/// `sᵀ·G·s` for any signs. The shape is linear in the sums; with `w` the
+/// weights, `R` the plane rows and `M = Σ_k w_k·R_k·R_kᵀ`,
+/// `G_pq = Σ_k X_pk·X_qk / w_k − b_pᵀ·M⁻¹·b_q`, `b_p = Σ_k R_k·X_pk`.
+/// The blocks of keys run on every core, and their matrices are added in
+/// the blocks' order: the same numbers for any count of threads, and on
+/// any processor (each element's products and sums in the same order).
+fn size_gram<I: Iterator<Item = FlipEntry>>(
+    entries: impl Fn() -> I + Sync,
+    poses: usize,
+    shape: ShapeOfSums,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    let keys = shape.weights.len();
+    let block = (GRAM_BLOCK_VALUES / poses.max(1)).max(KEY_LANES) / KEY_LANES * KEY_LANES;
+    let blocks: Vec<(Vec<f64>, Vec<Vector3<f64>>)> = (0..keys.div_ceil(block))
+        .into_par_iter()
+        .map(|b| {
+            let first = b * block;
+            let end = (first + block).min(keys);
+            // Key by key, its sums over the poses.
+            let mut sums = vec![0.0; (end - first) * poses];
+            for (key, pose, value) in entries().flatten() {
+                let (key, pose) = (key as usize, pose as usize);
+                if (first..end).contains(&key) && pose < poses {
+                    sums[(key - first) * poses + pose] += value;
+                }
+            }
+            let mut plane_sums = vec![Vector3::zeros(); poses];
+            for (key, column) in (first..end).zip(sums.chunks_exact_mut(poses)) {
+                let weight = shape.weights[key];
+                if weight.is_nan() || weight <= 0.0 {
+                    column.fill(0.0);
+                    continue;
+                }
+                if let Some(rows) = shape.plane_rows {
+                    for (sum, x) in plane_sums.iter_mut().zip(column.iter()) {
+                        *sum += rows[key] * *x;
+                    }
+                }
+                let scale = 1.0 / weight.sqrt();
+                for x in column.iter_mut() {
+                    *x *= scale;
+                }
+            }
+            let mut gram = vec![0.0; poses * poses];
+            add_outer_products(&mut gram, &sums, poses);
+            (gram, plane_sums)
+        })
+        .collect();
+    let mut gram = vec![0.0; poses * poses];
+    let mut plane_sums = vec![Vector3::zeros(); poses];
+    for (block_gram, block_sums) in &blocks {
+        for (g, b) in gram.iter_mut().zip(block_gram) {
+            *g += b;
+        }
+        for (s, b) in plane_sums.iter_mut().zip(block_sums) {
+            *s += b;
+        }
+    }
+    // Only the upper triangle was summed: the lower is its mirror.
+    for p in 0..poses {
+        for q in 0..p {
+            gram[p * poses + q] = gram[q * poses + p];
+        }
+    }
+    let Some(rows) = shape.plane_rows else {
+        return gram;
+    };
+    let mut normal = Matrix3::zeros();
+    for (row, weight) in rows.iter().zip(shape.weights) {
+        if *weight > 0.0 {
+            normal += row * row.transpose() * *weight;
+        }
+    }
+    // A plane the keys cannot carry is not removed (as the estimate's
+    // shapes keep it).
+    if let Some(inverse) = normal.try_inverse() {
+        let solved: Vec<Vector3<f64>> = plane_sums.iter().map(|b| inverse * b).collect();
+        for p in 0..poses {
+            for q in 0..poses {
+                gram[p * poses + q] -= plane_sums[p].dot(&solved[q]);
+            }
+        }
+    }
+    gram
+}
+
+/// Adds `Σ_k c_k·c_kᵀ` over the columns `c_k` of `columns` (each `poses`
+/// long, one after the other) to the upper triangle of `gram`, four
+/// columns at a time. Where the processor has AVX2, the same loop four
+/// lanes at a time: the same products and sums, bit for bit.
+fn add_outer_products(gram: &mut [f64], columns: &[f64], poses: usize) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
         #[allow(unsafe_code)]
         unsafe {
-            add_flipped_avx2(sums, signs, entries)
+            add_outer_products_avx2(gram, columns, poses)
         };
         return;
     }
-    add_flipped_lanes(sums, signs, entries);
+    add_outer_products_lanes(gram, columns, poses);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn add_flipped_avx2(
-    sums: &mut [[f64; FLIP_BLOCK]],
-    signs: &[[f64; FLIP_BLOCK]],
-    entries: impl Iterator<Item = FlipEntry>,
-) {
-    add_flipped_lanes(sums, signs, entries);
+fn add_outer_products_avx2(gram: &mut [f64], columns: &[f64], poses: usize) {
+    add_outer_products_lanes(gram, columns, poses);
 }
 
 #[inline(always)]
-fn add_flipped_lanes(
-    sums: &mut [[f64; FLIP_BLOCK]],
-    signs: &[[f64; FLIP_BLOCK]],
-    entries: impl Iterator<Item = FlipEntry>,
-) {
-    for (key, pose, value) in entries.flatten() {
-        let row = &mut sums[key as usize];
-        for (sum, sign) in row.iter_mut().zip(&signs[pose as usize]) {
-            *sum += sign * value;
+fn add_outer_products_lanes(gram: &mut [f64], columns: &[f64], poses: usize) {
+    if poses == 0 {
+        return;
+    }
+    let none = vec![0.0; poses];
+    for group in columns.chunks(KEY_LANES * poses) {
+        let mut c: [&[f64]; KEY_LANES] = [&none; KEY_LANES];
+        for (lane, column) in group.chunks_exact(poses).enumerate() {
+            c[lane] = column;
+        }
+        for p in 0..poses {
+            let a = [c[0][p], c[1][p], c[2][p], c[3][p]];
+            let row = &mut gram[p * poses + p..(p + 1) * poses];
+            let tails = [&c[0][p..], &c[1][p..], &c[2][p..], &c[3][p..]];
+            for (q, g) in row.iter_mut().enumerate() {
+                *g += (a[0] * tails[0][q] + a[1] * tails[1][q])
+                    + (a[2] * tails[2][q] + a[3] * tails[3][q]);
+            }
         }
     }
-}
-
-/// How far [`splitmix64`]'s state moves a draw.
-const SPLITMIX_STEP: u64 = 0x9e37_79b9_7f4a_7c15;
-
-/// SplitMix64: the signs' generator (a fixed sequence; no crate needed).
-fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(SPLITMIX_STEP);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 #[cfg(test)]
@@ -478,15 +524,11 @@ mod tests {
                 }
             }
             let weights = vec![10.0 * poses as f64; cells];
-            let shape_of = |sums: &[f64]| -> Vec<f64> {
-                sums.iter().zip(&weights).map(|(s, w)| s / w).collect()
+            let shape = ShapeOfSums {
+                weights: &weights,
+                plane_rows: None,
             };
-            let mut sums = vec![0.0; cells];
-            for e in &entries {
-                sums[e.cell as usize] += e.n * e.about_plane;
-            }
-            let observed = shape_of(&sums);
-            flip_test(&entries, poses, &weights, &observed, shape_of)
+            flip_test(&entries, poses, shape)
         };
         let noise = run(false, &mut rng);
         assert!(noise.sigmas().abs() < 3.0, "{noise:?}");
@@ -494,63 +536,80 @@ mod tests {
         assert!(fixed.sigmas() > 8.0, "{fixed:?}");
     }
 
-    /// The flips made a block at a time give the sizes one flip at a
-    /// time gives, bit for bit: keys met in any order, several entries of
-    /// a pose on one key (a bin of the ground), entries left out.
+    /// The null's mean and σ are those of the sizes over every choice of
+    /// the poses' signs, and the shape's size that of all signs `+1`:
+    /// counted here sign by sign over 2⁹ choices, the shape made as the
+    /// estimate makes it (sums over readings, a plane removed). Keys met
+    /// in any order, several entries of a pose on one key (a bin of the
+    /// ground), entries left out, keys of no weight, more keys than one
+    /// block holds.
     #[test]
-    fn flips_made_in_blocks_are_the_flips_one_at_a_time() {
+    fn the_null_is_the_sizes_over_every_choice_of_signs() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let (poses, keys) = (23usize, 301usize);
+        let (poses, keys) = (9usize, 9_001usize);
         let entries: Vec<(u32, u32, f64)> = (0..poses)
-            .flat_map(|pose| (0..500).map(move |k| (pose, k)))
-            .map(|(pose, _)| (rng.gen_range(0..keys) as u32, pose as u32, normal(&mut rng)))
+            .flat_map(|pose| (0..3_000).map(move |k| (pose, k)))
+            .map(|(pose, _)| {
+                let key = rng.gen_range(0..keys) as u32;
+                // A share fixed in the keys, so that the shape stands out.
+                let value = normal(&mut rng) + 0.3 * (f64::from(key) / 50.0).sin();
+                (key, pose as u32, value)
+            })
             .collect();
         let left_out = |k: usize| k.is_multiple_of(11);
         let entry = |k: usize| (!left_out(k)).then_some(entries[k]);
-        let weights: Vec<f64> = (0..keys).map(|k| 1.0 + k as f64 % 7.0).collect();
-        let shape_of = |sums: &[f64]| -> Vec<f64> {
-            let mean = sums.iter().sum::<f64>() / sums.len() as f64;
-            sums.iter()
+        let weights: Vec<f64> = (0..keys)
+            .map(|k| if k % 13 == 0 { 0.0 } else { 1.0 + k as f64 % 7.0 })
+            .collect();
+        let rows: Vec<Vector3<f64>> = (0..keys)
+            .map(|k| Vector3::new(1.0, (k % 97) as f64 - 48.0, (k / 97) as f64 - 46.0))
+            .collect();
+        // The shape as the estimate makes it: over the weights, less the
+        // weighted plane.
+        let size_of_sums = |sums: &[f64]| -> f64 {
+            let shape: Vec<f64> = sums
+                .iter()
                 .zip(&weights)
-                .map(|(s, w)| (s - mean) / w)
-                .collect()
+                .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+                .collect();
+            let (mut normal, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
+            for ((row, w), v) in rows.iter().zip(&weights).zip(&shape) {
+                normal += row * row.transpose() * *w;
+                rhs += row * (v * w);
+            }
+            let plane = normal.try_inverse().unwrap() * rhs;
+            shape
+                .iter()
+                .zip(&weights)
+                .zip(&rows)
+                .map(|((v, w), row)| w * (v - plane.dot(row)).powi(2))
+                .sum()
         };
-        let observed = shape_of(&vec![0.5; keys]);
+        let sizes: Vec<f64> = (0..1u32 << poses)
+            .map(|signs| {
+                let mut sums = vec![0.0; keys];
+                for (key, pose, value) in (0..entries.len()).filter_map(entry) {
+                    let sign = if signs >> pose & 1 == 1 { -1.0 } else { 1.0 };
+                    sums[key as usize] += sign * value;
+                }
+                size_of_sums(&sums)
+            })
+            .collect();
+        let count = sizes.len() as f64;
+        let mean = sizes.iter().sum::<f64>() / count;
+        let sigma = (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / count).sqrt();
         let found = flip_test_over(
             || (0..entries.len()).map(entry),
             poses,
-            &weights,
-            &observed,
-            shape_of,
+            ShapeOfSums {
+                weights: &weights,
+                plane_rows: Some(&rows),
+            },
         );
-        // One flip at a time, over the entries in their order.
-        let mut state = FLIP_SEED;
-        let sizes: Vec<f64> = (0..FLIPS)
-            .map(|_| {
-                let signs: Vec<f64> = (0..poses)
-                    .map(|_| {
-                        if splitmix64(&mut state) >> 63 == 1 {
-                            1.0
-                        } else {
-                            -1.0
-                        }
-                    })
-                    .collect();
-                let mut sums = vec![0.0; keys];
-                for (key, pose, value) in (0..entries.len()).filter_map(entry) {
-                    sums[key as usize] += signs[pose as usize] * value;
-                }
-                shape_of(&sums)
-                    .iter()
-                    .zip(&weights)
-                    .map(|(s, w)| w * s * s)
-                    .sum()
-            })
-            .collect();
-        let mean = sizes.iter().sum::<f64>() / FLIPS as f64;
-        let sigma =
-            (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / (FLIPS as f64 - 1.0)).sqrt();
-        assert_eq!(found.null_mean.to_bits(), mean.to_bits());
-        assert_eq!(found.null_sigma.to_bits(), sigma.to_bits());
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs();
+        assert!(close(found.null_mean, mean), "{found:?} against {mean}");
+        assert!(close(found.null_sigma, sigma), "{found:?} against {sigma}");
+        assert!(close(found.observed, sizes[0]), "{found:?} against {}", sizes[0]);
+        assert!(found.sigmas() > 3.0, "{found:?}");
     }
 }

@@ -234,7 +234,7 @@ pub(super) fn ground_bins(
 /// Whether the residuals left by pattern and planes stay with the ground:
 /// the entries' means in the bins of the ground ([`ground_bins`]: `bins`
 /// of them, `bin_of` each entry's) over the poses, compared with those the
-/// poses make with random signs. `entries` are those binned, or the same
+/// poses make with their signs flipped ([`flip_test_over`]). `entries` are those binned, or the same
 /// less what a pattern changing with depth accounts for.
 pub(super) fn ground_fixed(
     poses: usize,
@@ -242,24 +242,13 @@ pub(super) fn ground_fixed(
     bins: usize,
     bin_of: &[Bin],
 ) -> FlipTest {
-    let binned = || {
-        entries
-            .each()
-            .zip(bin_of)
-            .filter_map(|(e, bin)| bin.number().map(|bin| (bin, e)))
-    };
+    // Each bin's readings: its shape is the mean residual there.
     let mut weights = vec![0.0; bins];
-    let mut sums = vec![0.0; bins];
-    for (bin, e) in binned() {
-        weights[bin as usize] += e.n;
-        sums[bin as usize] += e.n * e.residual;
+    for (e, bin) in entries.each().zip(bin_of) {
+        if let Some(bin) = bin.number() {
+            weights[bin as usize] += e.n;
+        }
     }
-    let mean = |sums: &[f64]| -> Vec<f64> {
-        sums.iter()
-            .zip(&weights)
-            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
-            .collect()
-    };
     flip_test_over(
         || {
             entries
@@ -268,9 +257,10 @@ pub(super) fn ground_fixed(
                 .map(|(e, bin)| bin.number().map(|bin| (bin, e.pose, e.n * e.residual)))
         },
         poses,
-        &weights,
-        &mean(&sums),
-        mean,
+        ShapeOfSums {
+            weights: &weights,
+            plane_rows: None,
+        },
     )
 }
 
@@ -426,14 +416,16 @@ impl BinNumbers {
 /// shape's alone. What stays with the ground at obstacles' feet is local,
 /// and a sensor's pattern stands beside it; bumps all over the ground take
 /// the shape with them. A bin seen by fewer than three poses has no relief
-/// (it would take in those poses' cells whole).
+/// (it would take in those poses' cells whole). `shape_of` makes a shape
+/// of per-cell sums as `shape_of_sums` describes it for the flip test.
 pub(super) fn shape_beside_relief(
     entries: &impl Entries,
     bin_of: &[Bin],
     poses: usize,
-    weights: &[f64],
+    shape_of_sums: ShapeOfSums,
     shape_of: impl Fn(&[f64]) -> Vec<f64> + Sync,
 ) -> ReliefTest {
+    let weights = shape_of_sums.weights;
     let bins = bin_of
         .iter()
         .filter_map(|b| b.number())
@@ -488,7 +480,7 @@ pub(super) fn shape_beside_relief(
         }
     }
     ReliefTest {
-        shape_sigmas: flip_test_over(beside, poses, weights, &shape, &shape_of).sigmas(),
+        shape_sigmas: flip_test_over(beside, poses, shape_of_sums).sigmas(),
         shape_share: (size(&shape) / size(&alone).max(f64::MIN_POSITIVE)).sqrt(),
         relief_rms: (relief_sum / readings.max(f64::MIN_POSITIVE)).sqrt(),
     }

@@ -41,7 +41,7 @@ mod plane_part;
 mod shape;
 
 use crate::cell_noise::{
-    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, WithResiduals,
+    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, ShapeOfSums, WithResiduals,
 };
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;

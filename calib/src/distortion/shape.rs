@@ -27,7 +27,8 @@ pub struct ShapeEstimate {
     /// of freedom (the cells are correlated: [`ShapeEstimate::flips`] judges).
     pub shape_chi2: f64,
     pub shape_dof: f64,
-    /// The shape's size against the sizes the poses make with random signs.
+    /// The shape's size against the sizes the poses make with their signs
+    /// flipped ([`crate::cell_noise::flip_test`]).
     pub flips: FlipTest,
     /// The residuals left by pattern and planes, cell by cell and pose by
     /// pose, against the readings' noise: about 1 per degree of freedom
@@ -310,10 +311,10 @@ pub fn estimate_shape_seen_from(
         plane_part.remove(&mut shape);
         shape
     };
-    let mut plain = vec![0.0; cells];
-    for e in sums.each() {
-        plain[e.cell as usize] += e.n * e.about_plane;
-    }
+    let shape_of_sums = ShapeOfSums {
+        weights: &weights,
+        plane_rows: plane_part.rows(),
+    };
     // The test that there is a shape beside the tests of its alternatives
     // (the pattern's change with depth, and residuals that stay with the
     // ground): each reads the entries only, and the ground's tests, which
@@ -321,7 +322,7 @@ pub fn estimate_shape_seen_from(
     // they were 11 ms of a 95-ms replay on one core).
     let ground_from_sensor = ground_from_sensor.filter(|g| g.len() == poses.len());
     let (flips, (depth, ground_tests)) = rayon::join(
-        || flip_test(&sums, poses.len(), &weights, &shape_of(&plain), shape_of),
+        || flip_test(&sums, poses.len(), shape_of_sums),
         || {
             let (depth, ground_bins) = rayon::join(
                 || depth_dependence(poses, &sums, shape, &noise),
@@ -350,7 +351,7 @@ pub fn estimate_shape_seen_from(
                 };
                 // Only asked when the ground's test finds something.
                 let beside = (test.sigmas() > ALTERNATIVE_SIGMAS)
-                    .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), &weights, shape_of));
+                    .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), shape_of_sums, shape_of));
                 (test, beside)
             });
             (depth, ground_tests)
@@ -882,7 +883,7 @@ pub(super) fn weighted_rms(values: &[f64], readings: &[f64], seen: &[bool]) -> f
 /// Subtracts from a shape the plane `A + B·u' + C·v'` that fits the cells
 /// seen, weighted by their readings. Made once for shapes over the same
 /// cells and readings: the plane's normal equations are the same for all
-/// (the flip tests' 40 draws and the pattern's steps made them for every
+/// (the flip tests' draws, when there were forty, and the pattern's steps made them for every
 /// shape, a quarter of a millisecond each).
 pub(super) struct PlanePartRemover<'a> {
     seen: &'a [bool],
@@ -913,6 +914,12 @@ impl<'a> PlanePartRemover<'a> {
             readings,
             inverse: normal.try_inverse(),
         }
+    }
+
+    /// Each cell's row `(1, u', v')` of the plane it removes, as a flip
+    /// test sizes shapes ([`ShapeOfSums`]); none when it removes nothing.
+    pub(super) fn rows(&self) -> Option<&[Vector3<f64>]> {
+        self.inverse.map(|_| self.centres.as_slice())
     }
 
     pub(super) fn remove(&self, shape: &mut [f64]) {
