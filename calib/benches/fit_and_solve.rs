@@ -278,7 +278,13 @@ fn pattern_flip_test(c: &mut Criterion) {
         weights[e.cell as usize] += e.n;
     }
     let rows: Vec<Vector3<f64>> = (0..cells)
-        .map(|k| Vector3::new(1.0, (k % 80) as f64 * 8.0 - 316.0, (k / 80) as f64 * 8.0 - 236.0))
+        .map(|k| {
+            Vector3::new(
+                1.0,
+                (k % 80) as f64 * 8.0 - 316.0,
+                (k / 80) as f64 * 8.0 - 236.0,
+            )
+        })
         .collect();
     let shape = ShapeOfSums {
         weights: &weights,

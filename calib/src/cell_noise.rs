@@ -264,11 +264,7 @@ pub struct ShapeOfSums<'a> {
 /// `2·Σ_{p≠q} G_pq²`, and the shape found is the one of all signs `+1`,
 /// `1ᵀ·G·1` ([`size_gram`]). Forty draws, as the test was first made,
 /// knew the null's σ to about ±11 % only, and read the entries five times.
-pub fn flip_test(
-    entries: &(impl Entries + ?Sized),
-    poses: usize,
-    shape: ShapeOfSums,
-) -> FlipTest {
+pub fn flip_test(entries: &(impl Entries + ?Sized), poses: usize, shape: ShapeOfSums) -> FlipTest {
     flip_test_over(
         || {
             entries
@@ -559,7 +555,13 @@ mod tests {
         let left_out = |k: usize| k.is_multiple_of(11);
         let entry = |k: usize| (!left_out(k)).then_some(entries[k]);
         let weights: Vec<f64> = (0..keys)
-            .map(|k| if k % 13 == 0 { 0.0 } else { 1.0 + k as f64 % 7.0 })
+            .map(|k| {
+                if k % 13 == 0 {
+                    0.0
+                } else {
+                    1.0 + k as f64 % 7.0
+                }
+            })
             .collect();
         let rows: Vec<Vector3<f64>> = (0..keys)
             .map(|k| Vector3::new(1.0, (k % 97) as f64 - 48.0, (k / 97) as f64 - 46.0))
@@ -609,7 +611,11 @@ mod tests {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs();
         assert!(close(found.null_mean, mean), "{found:?} against {mean}");
         assert!(close(found.null_sigma, sigma), "{found:?} against {sigma}");
-        assert!(close(found.observed, sizes[0]), "{found:?} against {}", sizes[0]);
+        assert!(
+            close(found.observed, sizes[0]),
+            "{found:?} against {}",
+            sizes[0]
+        );
         assert!(found.sigmas() > 3.0, "{found:?}");
     }
 }

@@ -249,25 +249,28 @@ pub fn solve_with_pattern_taken_out(
         noise: shaped.noise_per_pose,
     };
     let estimate = plane.estimate();
+    let taken = |found: &PlanePartEstimate| {
+        shape_taken || taken_out.is_some() || (consistent && found.chi2 > PLANE_PART_CHI2)
+    };
     let (solution, plane_part, angle_sigma_known_part, growth_by_geometry) = match estimate {
-        Some(found)
-            if shape_taken
-                || taken_out.is_some()
-                || (consistent && found.chi2 > PLANE_PART_CHI2) =>
-        {
-            let mut solution = found.solution.clone();
-            let known = [0, 1, 2].map(|k| solution.covariance[(k, k)].max(0.0).sqrt());
-            let by_geometry = angle_sigma_growth_by_geometry(
-                &corrected,
-                &solution,
-                settings,
-                shaped.noise_per_pose,
-            );
-            // The mount's σ with the plane part's own uncertainty.
-            solution.covariance +=
-                found.sensitivity * found.covariance * found.sensitivity.transpose();
-            (solution, Some(found), Some(known), by_geometry)
-        }
+        // The solve at a part taken (a part found and left is only reported).
+        Some(found) if taken(&found) => match plane.solve_at(&found.value) {
+            Some(mut solution) => {
+                let known = [0, 1, 2].map(|k| solution.covariance[(k, k)].max(0.0).sqrt());
+                let by_geometry = angle_sigma_growth_by_geometry(
+                    &corrected,
+                    &solution,
+                    settings,
+                    shaped.noise_per_pose,
+                );
+                // The mount's σ with the plane part's own uncertainty.
+                solution.covariance +=
+                    found.sensitivity * found.covariance * found.sensitivity.transpose();
+                (solution, Some(found), Some(known), by_geometry)
+            }
+            // Its solve failed: as when no part was found.
+            None => (shaped, None, None, None),
+        },
         other => (
             shaped,
             other.map(|found| PlanePartEstimate {

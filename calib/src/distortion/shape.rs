@@ -350,8 +350,9 @@ pub fn estimate_shape_seen_from(
                     None => ground_fixed(poses.len(), &sums, bins, &bin_of),
                 };
                 // Only asked when the ground's test finds something.
-                let beside = (test.sigmas() > ALTERNATIVE_SIGMAS)
-                    .then(|| shape_beside_relief(&sums, &bin_of, poses.len(), shape_of_sums, shape_of));
+                let beside = (test.sigmas() > ALTERNATIVE_SIGMAS).then(|| {
+                    shape_beside_relief(&sums, &bin_of, poses.len(), shape_of_sums, shape_of)
+                });
                 (test, beside)
             });
             (depth, ground_tests)
