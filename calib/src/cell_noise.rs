@@ -159,12 +159,17 @@ impl CellNoise {
         entries: impl Iterator<Item = (f64, f64)>,
         parameters: f64,
     ) -> Self {
-        let (mut count, mut squares, mut averaged) = (0usize, 0.0, 0.0);
-        for (n, residual) in entries {
-            count += 1;
-            squares += residual * residual;
-            averaged += within / n.max(1.0);
-        }
+        Self::from_scatter(within, Scatter::of(within, entries), parameters)
+    }
+
+    /// [`Self::estimate`] from the entries' [`Scatter`], summed in parts
+    /// (a pose's entries each, on every core) and added in order.
+    pub fn from_scatter(within: f64, scatter: Scatter, parameters: f64) -> Self {
+        let Scatter {
+            count,
+            squares,
+            averaged,
+        } = scatter;
         let count = count as f64;
         if count <= parameters + 1.0 {
             return Self::independent(within);
@@ -184,6 +189,39 @@ impl CellNoise {
             .map(|e| e.residual * e.residual / self.of_mean(e.n))
             .sum();
         (chi2, entries.count() as f64 - parameters)
+    }
+}
+
+/// Entries' scatter about pattern and plane as [`CellNoise::from_scatter`]
+/// reads it: their count, `Σ residual²`, and `Σ within/n` (what the
+/// readings' own scatter accounts for).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Scatter {
+    pub count: usize,
+    pub squares: f64,
+    pub averaged: f64,
+}
+
+impl Scatter {
+    /// Of the entries' `(n, residual)`, in order, under a reading's
+    /// variance `within`.
+    pub fn of(within: f64, entries: impl Iterator<Item = (f64, f64)>) -> Self {
+        let mut scatter = Self::default();
+        for (n, residual) in entries {
+            scatter.count += 1;
+            scatter.squares += residual * residual;
+            scatter.averaged += within / n.max(1.0);
+        }
+        scatter
+    }
+
+    /// Both parts' entries.
+    pub fn add(self, other: Self) -> Self {
+        Self {
+            count: self.count + other.count,
+            squares: self.squares + other.squares,
+            averaged: self.averaged + other.averaged,
+        }
     }
 }
 

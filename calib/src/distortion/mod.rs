@@ -41,7 +41,8 @@ mod plane_part;
 mod shape;
 
 use crate::cell_noise::{
-    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, ShapeOfSums, WithResiduals,
+    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, Scatter, ShapeOfSums,
+    WithResiduals,
 };
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;

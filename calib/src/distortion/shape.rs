@@ -533,16 +533,27 @@ impl Kept {
 
     fn from_out(poses: &[&GroundResiduals], out: Vec<CellSet>, among: Option<&[bool]>) -> Self {
         let cells = poses[0].cell_count();
+        // A block of cells on each core, each cell's poses in their order.
         let mut readings = vec![0.0; cells];
         let mut poses_seen = vec![0usize; cells];
-        for (pose, out) in poses.iter().zip(&out) {
-            for (k, n) in pose.each_readings().enumerate() {
-                if n > 0.0 && !out.contains(k) {
-                    readings[k] += n;
-                    poses_seen[k] += 1;
+        readings
+            .par_chunks_mut(CELL_BLOCK)
+            .zip(poses_seen.par_chunks_mut(CELL_BLOCK))
+            .enumerate()
+            .for_each(|(block, (readings, poses_seen))| {
+                let first = block * CELL_BLOCK;
+                for (pose, out) in poses.iter().zip(&out) {
+                    for (j, (sum, seen_by)) in
+                        readings.iter_mut().zip(poses_seen.iter_mut()).enumerate()
+                    {
+                        let n = pose.readings(first + j);
+                        if n > 0.0 && !out.contains(first + j) {
+                            *sum += n;
+                            *seen_by += 1;
+                        }
+                    }
                 }
-            }
-        }
+            });
         let seen: Vec<bool> = (0..cells)
             .map(|k| {
                 among.is_none_or(|a| a[k]) && readings[k] >= MIN_CELL_READINGS && poses_seen[k] >= 2
@@ -812,24 +823,35 @@ pub(super) fn entries_of<'a>(
     kept: &'a Kept,
     fitted: &'a Fitted,
 ) -> impl Iterator<Item = Entry> + 'a {
-    poses.iter().enumerate().flat_map(move |(i, pose)| {
-        let c = fitted.planes[i];
-        kept.taken[i].iter().map(move |k| {
-            let cell = pose.cell_centred(k, kept.centres[k]);
-            let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
-            let about_plane = (cell.r - plane) / cell.n;
-            Entry {
-                pose: i as u32,
-                cell: k as u32,
-                n: cell.n,
-                residual: about_plane - fitted.shape[k],
-                about_plane,
-            }
-        })
+    (0..poses.len()).flat_map(move |i| entries_of_pose(poses, kept, fitted, i))
+}
+
+/// Pose `i`'s share of [`entries_of`].
+fn entries_of_pose<'a>(
+    poses: &'a [&GroundResiduals],
+    kept: &'a Kept,
+    fitted: &'a Fitted,
+    i: usize,
+) -> impl Iterator<Item = Entry> + 'a {
+    let (pose, c) = (poses[i], fitted.planes[i]);
+    kept.taken[i].iter().map(move |k| {
+        let cell = pose.cell_centred(k, kept.centres[k]);
+        let plane = c.x * cell.n + c.y * cell.u + c.z * cell.v;
+        let about_plane = (cell.r - plane) / cell.n;
+        Entry {
+            pose: i as u32,
+            cell: k as u32,
+            n: cell.n,
+            residual: about_plane - fitted.shape[k],
+            about_plane,
+        }
     })
 }
 
-/// The noise of a cell's mean, from the sums kept about pattern and plane.
+/// The noise of a cell's mean, from the sums kept about pattern and plane:
+/// each pose's scatter on every core, added in the poses' order (the same
+/// number for any count of threads; one pass after the other, it was a
+/// tenth of the estimate's time).
 pub(super) fn estimate_noise(
     poses: &[&GroundResiduals],
     kept: &Kept,
@@ -837,15 +859,22 @@ pub(super) fn estimate_noise(
     within: f64,
 ) -> CellNoise {
     let observed = kept.seen.iter().filter(|s| **s).count() as f64;
-    CellNoise::estimate_from(
-        within,
-        entries_of(poses, kept, fitted).map(|e| (e.n, e.residual)),
-        observed + 3.0 * poses.len() as f64,
-    )
+    let by_pose: Vec<Scatter> = (0..poses.len())
+        .into_par_iter()
+        .map(|i| {
+            Scatter::of(
+                within,
+                entries_of_pose(poses, kept, fitted, i).map(|e| (e.n, e.residual)),
+            )
+        })
+        .collect();
+    let scatter = by_pose.into_iter().fold(Scatter::default(), Scatter::add);
+    CellNoise::from_scatter(within, scatter, observed + 3.0 * poses.len() as f64)
 }
 
 /// Each cell's shape variance under `noise`: one over the sum of its sums'
-/// information, pose by pose (0 where not seen).
+/// information, pose by pose (0 where not seen). A block of cells on each
+/// core, each cell's poses in their order.
 pub(super) fn cell_variances(
     poses: &[&GroundResiduals],
     kept: &Kept,
@@ -854,11 +883,18 @@ pub(super) fn cell_variances(
     let cells = kept.seen.len();
     let weights = noise.weights();
     let mut information = vec![0.0; cells];
-    for (i, pose) in poses.iter().enumerate() {
-        kept.taken[i].for_each_in(0..cells, |k| {
-            information[k] += weights.of(pose.readings(k));
+    information
+        .par_chunks_mut(CELL_BLOCK)
+        .enumerate()
+        .for_each(|(block, information)| {
+            let first = block * CELL_BLOCK;
+            let end = first + information.len();
+            for (i, pose) in poses.iter().enumerate() {
+                kept.taken[i].for_each_in(first..end, |k| {
+                    information[k - first] += weights.of(pose.readings(k));
+                });
+            }
         });
-    }
     information
         .iter()
         .map(|&info| if info > 0.0 { 1.0 / info } else { 0.0 })
