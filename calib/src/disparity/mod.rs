@@ -500,8 +500,12 @@ mod tests {
 
     /// Random rows for the lane loops: raw readings around a plane (some far
     /// off, some untrusted), of a length that leaves a remainder.
-    #[cfg(target_arch = "aarch64")]
-    fn random_rows(seed: u64) -> Vec<(Vec<u16>, Vec<u16>, Vec<f32>, RowTest)> {
+    /// A row's readings, the readings above them, `du`, and its test.
+    #[cfg(any(target_arch = "aarch64", target_arch = "x86_64"))]
+    type RandomRow = (Vec<u16>, Vec<u16>, Vec<f32>, RowTest);
+
+    #[cfg(any(target_arch = "aarch64", target_arch = "x86_64"))]
+    fn random_rows(seed: u64) -> Vec<RandomRow> {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         (0..200)
@@ -531,11 +535,36 @@ mod tests {
             .collect()
     }
 
-    /// The NEON loop gives the reference loop's sums bit for bit, guarded
-    /// and not, on raw readings and on metric ones with infinities and NaN.
-    #[cfg(target_arch = "aarch64")]
+    /// The processor's own loop (NEON on arm64, AVX2 on x86-64 where the
+    /// processor has it) gives the reference loop's sums bit for bit,
+    /// guarded and not, on raw readings and on metric ones with infinities
+    /// and NaN.
+    #[cfg(any(target_arch = "aarch64", target_arch = "x86_64"))]
     #[test]
-    fn the_neon_loop_matches_the_reference_bit_for_bit() {
+    fn the_vector_loop_matches_the_reference_bit_for_bit() {
+        #[cfg(target_arch = "aarch64")]
+        fn vector_loop<T: FitValue, const GUARDED: bool>(
+            pixels: RowPixels<'_, T>,
+            test: &RowTest,
+        ) -> LaneSums {
+            lane_sums_neon::<T, GUARDED>(pixels, test)
+        }
+        #[cfg(target_arch = "x86_64")]
+        fn vector_loop<T: FitValue, const GUARDED: bool>(
+            pixels: RowPixels<'_, T>,
+            test: &RowTest,
+        ) -> LaneSums {
+            // SAFETY: only called where the processor has AVX2 (below).
+            #[allow(unsafe_code)]
+            unsafe {
+                lane_sums_avx2::<T, GUARDED>(pixels, test)
+            }
+        }
+        #[cfg(target_arch = "x86_64")]
+        if !std::is_x86_feature_detected!("avx2") {
+            // Without AVX2 the reference loop is the one that runs.
+            return;
+        }
         fn same<T: FitValue>(pixels: RowPixels<'_, T>, test: &RowTest) {
             let full = pixels.values.len() / LANES * LANES;
             let pixels = RowPixels {
@@ -547,11 +576,11 @@ mod tests {
             let bits = |sums: LaneSums| sums.map(|lane| lane.map(f32::to_bits));
             assert_eq!(
                 bits(lane_sums::<T, true>(pixels, test)),
-                bits(lane_sums_neon::<T, true>(pixels, test))
+                bits(vector_loop::<T, true>(pixels, test))
             );
             assert_eq!(
                 bits(lane_sums::<T, false>(pixels, test)),
-                bits(lane_sums_neon::<T, false>(pixels, test))
+                bits(vector_loop::<T, false>(pixels, test))
             );
         }
         let mut compared = 0;
