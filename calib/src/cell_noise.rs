@@ -50,6 +50,17 @@ pub trait Entries: Sync {
     fn count(&self) -> usize;
     /// Every entry, in order.
     fn each(&self) -> impl Iterator<Item = Entry> + '_;
+    /// Every entry with its index in [`Entries::each`]'s order, or only
+    /// those whose cell lies in `cells` and others besides: a source whose
+    /// cells ascend within each pose skips to them (a flip test reads the
+    /// cells a block at a time).
+    fn each_indexed_among(
+        &self,
+        cells: std::ops::Range<u32>,
+    ) -> impl Iterator<Item = (usize, Entry)> + '_ {
+        let _ = cells;
+        self.each().enumerate()
+    }
 }
 
 impl Entries for [Entry] {
@@ -215,8 +226,13 @@ impl Scatter {
         scatter
     }
 
-    /// Both parts' entries.
-    pub fn add(self, other: Self) -> Self {
+}
+
+/// Both parts' entries.
+impl std::ops::Add for Scatter {
+    type Output = Self;
+
+    fn add(self, other: Self) -> Self {
         Self {
             count: self.count + other.count,
             squares: self.squares + other.squares,
@@ -304,23 +320,24 @@ pub struct ShapeOfSums<'a> {
 /// knew the null's σ to about ±11 % only, and read the entries five times.
 pub fn flip_test(entries: &(impl Entries + ?Sized), poses: usize, shape: ShapeOfSums) -> FlipTest {
     flip_test_over(
-        || {
+        |cells| {
             entries
-                .each()
-                .map(|e| Some((e.cell, e.pose, e.n * e.about_plane)))
+                .each_indexed_among(cells)
+                .map(|(_, e)| Some((e.cell, e.pose, e.n * e.about_plane)))
         },
         poses,
         shape,
     )
 }
 
-/// [`flip_test`] of the entries `entries()` reads in place, in order, each
-/// as its key (a cell, or a bin of the ground: below `shape.weights.len()`),
-/// its pose and its `n·m`, or `None` to leave it out: a test of the entries
+/// [`flip_test`] of the entries `entries(keys)` reads in place, each as its
+/// key (a cell, or a bin of the ground: below `shape.weights.len()`), its
+/// pose and its `n·m`, or `None` to leave it out: a test of the entries
 /// binned another way, or less something, where a copy of a calibration's
-/// entries was 6 MB at the peak.
+/// entries was 6 MB at the peak. `entries(keys)` gives every entry whose key
+/// lies in `keys`, and may give others (they are skipped).
 pub fn flip_test_over<I: Iterator<Item = FlipEntry>>(
-    entries: impl Fn() -> I + Sync,
+    entries: impl Fn(std::ops::Range<u32>) -> I + Sync,
     poses: usize,
     shape: ShapeOfSums,
 ) -> FlipTest {
@@ -365,7 +382,7 @@ const KEY_LANES: usize = 4;
 /// the blocks' order: the same numbers for any count of threads, and on
 /// any processor (each element's products and sums in the same order).
 fn size_gram<I: Iterator<Item = FlipEntry>>(
-    entries: impl Fn() -> I + Sync,
+    entries: impl Fn(std::ops::Range<u32>) -> I + Sync,
     poses: usize,
     shape: ShapeOfSums,
 ) -> Vec<f64> {
@@ -379,7 +396,7 @@ fn size_gram<I: Iterator<Item = FlipEntry>>(
             let end = (first + block).min(keys);
             // Key by key, its sums over the poses.
             let mut sums = vec![0.0; (end - first) * poses];
-            for (key, pose, value) in entries().flatten() {
+            for (key, pose, value) in entries(first as u32..end as u32).flatten() {
                 let (key, pose) = (key as usize, pose as usize);
                 if (first..end).contains(&key) && pose < poses {
                     sums[(key - first) * poses + pose] += value;
@@ -639,7 +656,7 @@ mod tests {
         let mean = sizes.iter().sum::<f64>() / count;
         let sigma = (sizes.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / count).sqrt();
         let found = flip_test_over(
-            || (0..entries.len()).map(entry),
+            |_| (0..entries.len()).map(entry),
             poses,
             ShapeOfSums {
                 weights: &weights,

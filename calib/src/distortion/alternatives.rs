@@ -250,7 +250,8 @@ pub(super) fn ground_fixed(
         }
     }
     flip_test_over(
-        || {
+        // Keyed by bin: every entry, each time.
+        |_| {
             entries
                 .each()
                 .zip(bin_of)
@@ -464,10 +465,10 @@ pub(super) fn shape_beside_relief(
             e.about_plane - relief_of(bin)
         }));
     }
-    let beside = || {
-        entries.each().zip(bin_of).map(|(e, bin)| {
-            let about_plane = e.about_plane - bin.number().map_or(0.0, |b| relief[b as usize]);
-            Some((e.cell, e.pose, e.n * about_plane))
+    let beside = |cells| {
+        entries.each_indexed_among(cells).map(|(index, e)| {
+            let relief = bin_of[index].number().map_or(0.0, |b| relief[b as usize]);
+            Some((e.cell, e.pose, e.n * (e.about_plane - relief)))
         })
     };
     let size = |s: &[f64]| s.iter().zip(weights).map(|(v, w)| w * v * v).sum::<f64>();

@@ -777,6 +777,37 @@ impl Entries for KeptEntries<'_> {
             index: 0,
         }
     }
+
+    /// Pose by pose, the entries of the cells in `cells` only: a pose's
+    /// cells ascend, so each pose's are found by bisection.
+    fn each_indexed_among(
+        &self,
+        cells: std::ops::Range<u32>,
+    ) -> impl Iterator<Item = (usize, Entry)> + '_ {
+        (0..self.pose_ends.len()).flat_map(move |pose| {
+            let start = pose.checked_sub(1).map_or(0, |p| self.pose_ends[p]);
+            let of_pose = &self.each[start..self.pose_ends[pose]];
+            let from = start + of_pose.partition_point(|(cell, _)| *cell < cells.start);
+            let to = start + of_pose.partition_point(|(cell, _)| *cell < cells.end);
+            (from..to).map(move |index| (index, self.entry(pose, index)))
+        })
+    }
+}
+
+impl KeptEntries<'_> {
+    /// Entry `index`, of pose `pose`.
+    #[inline]
+    fn entry(&self, pose: usize, index: usize) -> Entry {
+        let (cell, about_plane) = self.each[index];
+        let about_plane = f64::from(about_plane);
+        Entry {
+            pose: pose as u32,
+            cell,
+            n: self.poses[pose].readings(cell as usize),
+            residual: about_plane - self.shape[cell as usize],
+            about_plane,
+        }
+    }
 }
 
 /// [`KeptEntries::each`]: the entry the walk is at, and its pose's end.
@@ -793,21 +824,16 @@ impl Iterator for EachKeptEntry<'_> {
     #[inline]
     fn next(&mut self) -> Option<Entry> {
         let entries = self.entries;
-        let (cell, about_plane) = *entries.each.get(self.index)?;
+        if self.index >= entries.each.len() {
+            return None;
+        }
         // Past its pose's end (a pose may take no cell): the next pose.
         while self.index == self.pose_end {
             self.pose += 1;
             self.pose_end = entries.pose_ends[self.pose];
         }
         self.index += 1;
-        let about_plane = f64::from(about_plane);
-        Some(Entry {
-            pose: self.pose as u32,
-            cell,
-            n: entries.poses[self.pose].readings(cell as usize),
-            residual: about_plane - entries.shape[cell as usize],
-            about_plane,
-        })
+        Some(entries.entry(self.pose, self.index - 1))
     }
 
     fn size_hint(&self) -> (usize, Option<usize>) {
@@ -868,7 +894,7 @@ pub(super) fn estimate_noise(
             )
         })
         .collect();
-    let scatter = by_pose.into_iter().fold(Scatter::default(), Scatter::add);
+    let scatter = by_pose.into_iter().fold(Scatter::default(), |a, b| a + b);
     CellNoise::from_scatter(within, scatter, observed + 3.0 * poses.len() as f64)
 }
 
