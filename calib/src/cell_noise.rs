@@ -225,7 +225,6 @@ impl Scatter {
         }
         scatter
     }
-
 }
 
 /// Both parts' entries.

@@ -196,19 +196,14 @@ pub(super) fn without_depth_dependence(
 /// entries' poses and cells only, so it is made beside the other tests.
 pub(super) fn ground_bins(
     poses: &[&GroundResiduals],
-    entries: &impl Entries,
+    entries: &KeptEntries,
     ground_from_sensor: &[crate::geometry::Transform],
 ) -> (usize, Vec<Bin>) {
     let first = poses[0];
     let k = first.intrinsics;
     let sensor_from_optical = crate::geometry::sensor_from_optical();
     // Each cell's ray in the sensor's frame, once: the same at every pose.
-    let cells = entries
-        .each()
-        .map(|e| e.cell as usize + 1)
-        .max()
-        .unwrap_or(0);
-    let rays: Vec<Vector3<f64>> = (0..cells)
+    let rays: Vec<Vector3<f64>> = (0..first.cell_count())
         .map(|cell| {
             let (du, dv) = cell_centre(cell, first.columns, &k);
             sensor_from_optical * Vector3::new(du / k.fx, dv / k.fy, 1.0)
@@ -228,8 +223,30 @@ pub(super) fn ground_bins(
             (z / GROUND_BIN_M).floor() as i64,
         ))
     };
-    number_in_order_met(entries.each().map(|e| bin_key(&e)))
+    // The keys a few poses at a time on every core, numbered in order
+    // after them (one after the other, the keys were most of the ground's
+    // test's time, before the test itself could start).
+    let mut numbers = BinNumbers::default();
+    let mut numbered = Vec::with_capacity(entries.count());
+    let pose_count = poses.len().min(ground_from_sensor.len());
+    for chunk_start in (0..pose_count).step_by(POSES_KEYED_AT_ONCE) {
+        let chunk_end = (chunk_start + POSES_KEYED_AT_ONCE).min(pose_count);
+        let keys: Vec<Vec<Option<(i64, i64)>>> = (chunk_start..chunk_end)
+            .into_par_iter()
+            .map(|pose| entries.each_of_pose(pose).map(|e| bin_key(&e)).collect())
+            .collect();
+        numbered.extend(
+            keys.into_iter()
+                .flatten()
+                .map(|key| key.map_or(Bin::NONE, |key| Bin::numbered(numbers.of(key)))),
+        );
+    }
+    (numbers.count as usize, numbered)
 }
+
+/// Poses whose entries' bins are found at once (the keys of eight poses of
+/// a calibration's: 0.6 MB).
+const POSES_KEYED_AT_ONCE: usize = 8;
 
 /// Whether the residuals left by pattern and planes stay with the ground:
 /// the entries' means in the bins of the ground ([`ground_bins`]: `bins`
@@ -285,13 +302,9 @@ impl Bin {
     }
 }
 
-/// Numbers the keys in the order they are first met (the bins' numbers,
-/// and so the order of every sum over them, as a map filled in that order
-/// gives them): the count of bins and each key's number. Over a grid that
-/// grows to the keys' span while they are read, up to a few million bins
-/// (a calibration's ground: a few thousand), a map beyond: with std's map
-/// the estimate's benchmark took 28.3–31.1 ms, with a grid 26.0–27.5
-/// (three runs of each in turn). One pass: each key is made once.
+/// The keys numbered in the order first met, as [`ground_bins`] numbers
+/// them: the count of bins and each key's number.
+#[cfg(test)]
 fn number_in_order_met(keys: impl Iterator<Item = Option<(i64, i64)>>) -> (usize, Vec<Bin>) {
     let mut numbers = BinNumbers::default();
     let numbered = keys
@@ -300,8 +313,12 @@ fn number_in_order_met(keys: impl Iterator<Item = Option<(i64, i64)>>) -> (usize
     (numbers.count as usize, numbered)
 }
 
-/// The bins' numbers so far: over a grid while the keys' span is small,
-/// then over a map.
+/// The bins' numbers so far, each key's the next when it is first met (the
+/// bins' numbers, and so the order of every sum over them, as a map filled
+/// in that order gives them): over a grid that grows to the keys' span
+/// while they are read, up to a few million bins (a calibration's ground: a
+/// few thousand), then over a map. With std's map the estimate's benchmark
+/// took 28.3–31.1 ms, with a grid 26.0–27.5 (three runs of each in turn).
 #[derive(Default)]
 struct BinNumbers {
     count: u32,

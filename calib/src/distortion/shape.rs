@@ -795,6 +795,12 @@ impl Entries for KeptEntries<'_> {
 }
 
 impl KeptEntries<'_> {
+    /// The entries of pose `pose`, in order.
+    pub(super) fn each_of_pose(&self, pose: usize) -> impl Iterator<Item = Entry> + '_ {
+        let start = pose.checked_sub(1).map_or(0, |p| self.pose_ends[p]);
+        (start..self.pose_ends[pose]).map(move |index| self.entry(pose, index))
+    }
+
     /// Entry `index`, of pose `pose`.
     #[inline]
     fn entry(&self, pose: usize, index: usize) -> Entry {
