@@ -38,6 +38,7 @@ impl FitValue for u16 {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[inline]
     #[allow(unsafe_code)]
     unsafe fn load8_avx2(values: &[u16]) -> std::arch::x86_64::__m256 {
         use std::arch::x86_64::*;
@@ -77,6 +78,7 @@ impl FitValue for f32 {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
+    #[inline]
     #[allow(unsafe_code)]
     unsafe fn load8_avx2(values: &[f32]) -> std::arch::x86_64::__m256 {
         use std::arch::x86_64::*;
@@ -391,6 +393,7 @@ const HALF: usize = LANES / 2;
 /// The processor must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[inline]
 #[allow(unsafe_code)]
 pub(super) unsafe fn lane_sums_avx2<T: FitValue, const GUARDED: bool>(
     row: RowPixels<'_, T>,
@@ -423,8 +426,8 @@ pub(super) unsafe fn lane_sums_avx2<T: FitValue, const GUARDED: bool>(
     let n = row.values.len() / LANES * LANES;
     // One vector of eight lanes at a time over the whole row, then the
     // other (as the reference's halves): its six sums stay in registers.
-    let by_vector: [[__m256; 6]; VECTORS] = std::array::from_fn(|q| {
-        let mut sums = [zero; 6];
+    let mut by_vector = [[zero; 6]; VECTORS];
+    for (q, sums) in by_vector.iter_mut().enumerate() {
         for start in (8 * q..n).step_by(LANES) {
             // SAFETY: each load reads eight values of a slice that holds
             // them (`start + 8 <= n`; `du`, `du2` are as long as `values`),
@@ -462,8 +465,7 @@ pub(super) unsafe fn lane_sums_avx2<T: FitValue, const GUARDED: bool>(
             sums[4] = _mm256_add_ps(sums[4], _mm256_mul_ps(kept, d));
             sums[5] = _mm256_add_ps(sums[5], _mm256_mul_ps(kept, kept));
         }
-        sums
-    });
+    }
     let mut out: LaneSums = [[0f32; LANES]; 6];
     for (q, vector_sums) in by_vector.iter().enumerate() {
         for (lanes, sum) in out.iter_mut().zip(vector_sums) {
