@@ -257,8 +257,10 @@ fn solve_52(c: &mut Criterion) {
 /// the null over every choice of the poses' signs, from the poses' Gram
 /// matrix of the shape's size. Sized as a 52-pose calibration's: 80 × 60
 /// cells, 3,000 of them with ground at each pose, the shape's plane part
-/// removed. It runs three times in a pattern's estimate, and again when the
-/// ground is fitted about the pattern (docs/performance.md).
+/// removed. It runs up to three times in a pattern's estimate, and again
+/// when the ground is fitted about the pattern (docs/performance.md). The
+/// entries here are a slice, read whole for each block of cells (the
+/// estimate's own skip to each block's cells).
 fn pattern_flip_test(c: &mut Criterion) {
     use groundcal_calib::cell_noise::{flip_test, Entry, ShapeOfSums};
     let (cells, poses) = (80 * 60, 52);

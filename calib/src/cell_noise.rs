@@ -50,10 +50,11 @@ pub trait Entries: Sync {
     fn count(&self) -> usize;
     /// Every entry, in order.
     fn each(&self) -> impl Iterator<Item = Entry> + '_;
-    /// Every entry with its index in [`Entries::each`]'s order, or only
-    /// those whose cell lies in `cells` and others besides: a source whose
-    /// cells ascend within each pose skips to them (a flip test reads the
-    /// cells a block at a time).
+    /// Every entry whose cell lies in `cells`, with its index in
+    /// [`Entries::each`]'s order; it may give the others too (by default it
+    /// gives every entry). A source whose cells ascend within each pose
+    /// skips to those in `cells`: a flip test reads the cells a block at a
+    /// time.
     fn each_indexed_among(
         &self,
         cells: std::ops::Range<u32>,
@@ -316,7 +317,9 @@ pub struct ShapeOfSums<'a> {
 /// so over every choice of signs (each ±1 alike) its mean is `tr G` and its variance
 /// `2·Σ_{p≠q} G_pq²`, and the shape found is the one of all signs `+1`,
 /// `1ᵀ·G·1` ([`size_gram`]). Forty draws, as the test was first made,
-/// knew the null's σ to about ±11 % only, and read the entries five times.
+/// knew the null's σ to ±11 % at best (for normal sizes; a quadratic form
+/// that a few poses dominate has heavier tails), and read the entries five
+/// times.
 pub fn flip_test(entries: &(impl Entries + ?Sized), poses: usize, shape: ShapeOfSums) -> FlipTest {
     flip_test_over(
         |cells| {
@@ -387,6 +390,9 @@ fn size_gram<I: Iterator<Item = FlipEntry>>(
 ) -> Vec<f64> {
     use rayon::prelude::*;
     let keys = shape.weights.len();
+    if poses == 0 {
+        return Vec::new();
+    }
     let block = (GRAM_BLOCK_VALUES / poses.max(1)).max(KEY_LANES) / KEY_LANES * KEY_LANES;
     let blocks: Vec<(Vec<f64>, Vec<Vector3<f64>>)> = (0..keys.div_ceil(block))
         .into_par_iter()
@@ -397,6 +403,7 @@ fn size_gram<I: Iterator<Item = FlipEntry>>(
             let mut sums = vec![0.0; (end - first) * poses];
             for (key, pose, value) in entries(first as u32..end as u32).flatten() {
                 let (key, pose) = (key as usize, pose as usize);
+                debug_assert!(pose < poses && key < keys, "key {key} of pose {pose}");
                 if (first..end).contains(&key) && pose < poses {
                     sums[(key - first) * poses + pose] += value;
                 }

@@ -302,7 +302,7 @@ pub enum WarpCause {
     ChangesWithDepth { per_m: f64, sigma: f64 },
     /// The residuals stay with the ground as the poses move: the ground is
     /// not flat (`sigmas` of noise's σ above what the poses make with
-    /// random signs).
+    /// their signs flipped).
     GroundNotFlat { sigmas: f64 },
     /// Most cells' residuals change from pose to pose (obstacles' feet,
     /// bumps): `left_out` of the readings were left out.

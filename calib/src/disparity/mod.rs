@@ -498,12 +498,12 @@ fn erf(x: f64) -> f64 {
 mod tests {
     use super::*;
 
-    /// Random rows for the lane loops: raw readings around a plane (some far
-    /// off, some untrusted), of a length that leaves a remainder.
     /// A row's readings, the readings above them, `du`, and its test.
     #[cfg(any(target_arch = "aarch64", target_arch = "x86_64"))]
     type RandomRow = (Vec<u16>, Vec<u16>, Vec<f32>, RowTest);
 
+    /// Random rows for the lane loops: raw readings around a plane (some far
+    /// off, some untrusted), of a length that leaves a remainder.
     #[cfg(any(target_arch = "aarch64", target_arch = "x86_64"))]
     fn random_rows(seed: u64) -> Vec<RandomRow> {
         use rand::{Rng, SeedableRng};
@@ -563,6 +563,7 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if !std::is_x86_feature_detected!("avx2") {
             // Without AVX2 the reference loop is the one that runs.
+            eprintln!("this processor has no AVX2: the reference loop is the one that runs");
             return;
         }
         fn same<T: FitValue>(pixels: RowPixels<'_, T>, test: &RowTest) {

@@ -6,7 +6,8 @@
 use super::*;
 
 /// A value of a frame the fit reads: a raw Kinect value, or an inverse depth.
-pub trait FitValue: Copy + Send + Sync {
+/// Sealed: the fit's vector loops read these two types only.
+pub trait FitValue: Copy + Send + Sync + sealed::Sealed {
     /// The step between two values the sensor can give (a whole raw unit),
     /// or 0 where the steps are not even (inverse depth converted from
     /// millimetres): rounding to it is noise of `QUANTUM/√12` at least.
@@ -26,6 +27,13 @@ pub trait FitValue: Copy + Send + Sync {
     #[cfg(target_arch = "x86_64")]
     #[allow(unsafe_code)]
     unsafe fn load8_avx2(values: &[Self]) -> std::arch::x86_64::__m256;
+}
+
+/// [`FitValue`]'s seal.
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for u16 {}
+    impl Sealed for f32 {}
 }
 
 impl FitValue for u16 {
@@ -264,7 +272,8 @@ pub(super) type LaneSums = [[f32; LANES]; 6];
 /// `guard.1..=guard.2`.
 ///
 /// The whole chunks of [`LANES`] pixels go through [`lane_sums`] (NEON on
-/// arm64), the rest one by one in f64.
+/// arm64, AVX2 where an x86-64 processor has it), the rest one by one in
+/// f64.
 #[inline(always)]
 pub(super) fn row_sums<T: FitValue, const GUARDED: bool>(
     row: RowPixels<'_, T>,
@@ -429,8 +438,9 @@ pub(super) unsafe fn lane_sums_avx2<T: FitValue, const GUARDED: bool>(
     let mut by_vector = [[zero; 6]; VECTORS];
     for (q, sums) in by_vector.iter_mut().enumerate() {
         for start in (8 * q..n).step_by(LANES) {
-            // SAFETY: each load reads eight values of a slice that holds
-            // them (`start + 8 <= n`; `du`, `du2` are as long as `values`),
+            // SAFETY: each load reads the eight values of a slice of eight
+            // (the slicing checks the bounds: a row whose `du` or `du2` were
+            // shorter than its values would panic, never read past them),
             // on a processor with AVX2 (this function's own condition).
             let (d, d2, v) = unsafe {
                 (
@@ -442,8 +452,7 @@ pub(super) unsafe fn lane_sums_avx2<T: FitValue, const GUARDED: bool>(
             let r = _mm256_sub_ps(v, _mm256_add_ps(base, _mm256_mul_ps(cu, d)));
             let mut inside = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(r, magnitude), band);
             if GUARDED {
-                // SAFETY: as above, of `above` (as long as `values` when
-                // guarded).
+                // SAFETY: as above, of `above`.
                 let a = unsafe { T::load8_avx2(&row.above[start..start + 8]) };
                 let off = _mm256_sub_ps(a, _mm256_add_ps(base_above, _mm256_mul_ps(cu, d)));
                 let clear = _mm256_or_ps(

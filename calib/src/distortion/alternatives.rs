@@ -228,6 +228,9 @@ pub(super) fn ground_bins(
     // test's time, before the test itself could start).
     let mut numbers = BinNumbers::default();
     let mut numbered = Vec::with_capacity(entries.count());
+    // The caller gives each pose's place (the estimate passes them only
+    // when there is one for every pose).
+    debug_assert_eq!(poses.len(), ground_from_sensor.len());
     let pose_count = poses.len().min(ground_from_sensor.len());
     for chunk_start in (0..pose_count).step_by(POSES_KEYED_AT_ONCE) {
         let chunk_end = (chunk_start + POSES_KEYED_AT_ONCE).min(pose_count);
@@ -235,11 +238,7 @@ pub(super) fn ground_bins(
             .into_par_iter()
             .map(|pose| entries.each_of_pose(pose).map(|e| bin_key(&e)).collect())
             .collect();
-        numbered.extend(
-            keys.into_iter()
-                .flatten()
-                .map(|key| key.map_or(Bin::NONE, |key| Bin::numbered(numbers.of(key)))),
-        );
+        numbered.extend(keys.into_iter().flatten().map(|key| numbers.bin(key)));
     }
     (numbers.count as usize, numbered)
 }
@@ -251,8 +250,9 @@ const POSES_KEYED_AT_ONCE: usize = 8;
 /// Whether the residuals left by pattern and planes stay with the ground:
 /// the entries' means in the bins of the ground ([`ground_bins`]: `bins`
 /// of them, `bin_of` each entry's) over the poses, compared with those the
-/// poses make with their signs flipped ([`flip_test_over`]). `entries` are those binned, or the same
-/// less what a pattern changing with depth accounts for.
+/// poses make with their signs flipped ([`flip_test_over`]). `entries` are
+/// those binned, or the same less what a pattern changing with depth
+/// accounts for.
 pub(super) fn ground_fixed(
     poses: usize,
     entries: &(impl Entries + ?Sized),
@@ -307,9 +307,7 @@ impl Bin {
 #[cfg(test)]
 fn number_in_order_met(keys: impl Iterator<Item = Option<(i64, i64)>>) -> (usize, Vec<Bin>) {
     let mut numbers = BinNumbers::default();
-    let numbered = keys
-        .map(|key| key.map_or(Bin::NONE, |key| Bin::numbered(numbers.of(key))))
-        .collect();
+    let numbered = keys.map(|key| numbers.bin(key)).collect();
     (numbers.count as usize, numbered)
 }
 
@@ -389,6 +387,11 @@ impl BinGrid {
 }
 
 impl BinNumbers {
+    /// An entry's bin: its key's number, or none without a key.
+    fn bin(&mut self, key: Option<(i64, i64)>) -> Bin {
+        key.map_or(Bin::NONE, |key| Bin::numbered(self.of(key)))
+    }
+
     /// `key`'s number: its own, or the next when it is met first.
     fn of(&mut self, key: (i64, i64)) -> u32 {
         if let Some(map) = &mut self.map {

@@ -69,8 +69,8 @@ const MIN_CELL_READINGS: f64 = 48.0;
 pub const MIN_PATTERN_POSES: usize = 10;
 
 /// A shape is taken as real when its size stands this many of noise's σ
-/// above the sizes of shapes made of the same poses with random signs
-/// ([`crate::cell_noise::flip_test`]) and its RMS reaches
+/// above the sizes of shapes made of the same poses with their signs
+/// flipped ([`crate::cell_noise::flip_test`]) and its RMS reaches
 /// [`MIN_SHAPE_RMS_RAW`].
 const SHAPE_SIGNIFICANCE: f64 = 8.0;
 
@@ -459,6 +459,74 @@ mod tests {
         }
         let poses_met: std::collections::BTreeSet<u32> = walked.each().map(|e| e.pose).collect();
         assert_eq!(poses_met, [0, 2, 3, 5, 6, 7].into_iter().collect());
+        // A block of cells, found by bisection, is the walk's own entries
+        // of those cells, with their places in the walk; a pose's are its.
+        let every: Vec<(usize, Entry)> = walked.each().enumerate().collect();
+        let cells = refs[0].cell_count() as u32;
+        for block in [
+            0..cells,
+            0..1,
+            100..1_337,
+            2_000..2_001,
+            cells - 5..cells + 9,
+            7..7,
+        ] {
+            let among: Vec<(usize, Entry)> = walked.each_indexed_among(block.clone()).collect();
+            let expected: Vec<(usize, Entry)> = every
+                .iter()
+                .filter(|(_, e)| block.contains(&e.cell))
+                .copied()
+                .collect();
+            assert_eq!(among, expected, "cells {block:?}");
+        }
+        for pose in 0..refs.len() {
+            let of_pose: Vec<Entry> = walked.each_of_pose(pose).collect();
+            let expected: Vec<Entry> = walked.each().filter(|e| e.pose as usize == pose).collect();
+            assert_eq!(of_pose, expected, "pose {pose}");
+        }
+    }
+
+    /// The flip test sizes the shape the estimate makes of the entries (their
+    /// sums over the readings, less the plane the estimate's remover fits):
+    /// its observed size is that shape's.
+    #[test]
+    fn the_flip_test_sizes_the_shape_the_estimate_makes() {
+        let bowl = |du: f64, dv: f64| 1e-3 * ((du / 320.0).powi(2) + (dv / 240.0).powi(2));
+        let poses = synthetic_changed(bowl, 12, |_, _| {});
+        let refs: Vec<&GroundResiduals> = poses.iter().collect();
+        let kept = Kept::all(&refs);
+        let fitted = alternate(&refs, &kept, None);
+        let walked = entries(&refs, &kept, &fitted);
+        let weights: Vec<f64> = (0..kept.seen.len())
+            .map(|k| if kept.seen[k] { kept.readings[k] } else { 0.0 })
+            .collect();
+        let remover = PlanePartRemover::new(&kept.readings, &kept.seen, &kept.centres);
+        let mut plain = vec![0.0; weights.len()];
+        for e in walked.each() {
+            plain[e.cell as usize] += e.n * e.about_plane;
+        }
+        let mut shape: Vec<f64> = plain
+            .iter()
+            .zip(&weights)
+            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+            .collect();
+        remover.remove(&mut shape);
+        let size: f64 = shape.iter().zip(&weights).map(|(s, w)| w * s * s).sum();
+        let test = flip_test(
+            &walked,
+            refs.len(),
+            ShapeOfSums {
+                weights: &weights,
+                plane_rows: remover.rows(),
+            },
+        );
+        assert!(remover.rows().is_some());
+        assert!(
+            (test.observed - size).abs() <= 1e-9 * size,
+            "{} against {size}",
+            test.observed
+        );
+        assert!(test.sigmas() > 8.0, "the bowl stands out: {test:?}");
     }
 
     /// A cell only one pose saw holds no estimate of the pattern, so its

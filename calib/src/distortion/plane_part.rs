@@ -157,9 +157,10 @@ impl PlanePartSolve<'_> {
 
     /// The whitened residuals of the pattern's poses at `part`, with the
     /// solve's estimate there ([`solve::solve_estimate`]: the derivatives
-    /// read the mount and the scale, not their σ). The poses the first solve set aside stay aside, and no
-    /// more are looked for: the derivatives must not jump with that choice,
-    /// and the search is most of a solve's time.
+    /// read the mount and the scale, not their σ). The poses the first
+    /// solve set aside stay aside, and no more are looked for: the
+    /// derivatives must not jump with that choice, and the search is most
+    /// of a solve's time.
     fn residuals(&self, part: &PlanePart) -> Option<(DVector<f64>, Solution)> {
         let mut corrected = self.corrected(part);
         for (k, observation) in corrected.iter_mut().enumerate() {

@@ -952,8 +952,8 @@ pub(super) fn weighted_rms(values: &[f64], readings: &[f64], seen: &[bool]) -> f
 /// Subtracts from a shape the plane `A + B·u' + C·v'` that fits the cells
 /// seen, weighted by their readings. Made once for shapes over the same
 /// cells and readings: the plane's normal equations are the same for all
-/// (the flip tests' draws, when there were forty, and the pattern's steps made them for every
-/// shape, a quarter of a millisecond each).
+/// (the flip tests' draws, when there were forty, and the pattern's steps
+/// made them for every shape, a quarter of a millisecond each).
 pub(super) struct PlanePartRemover<'a> {
     seen: &'a [bool],
     /// `(1, u', v')` of each cell.
