@@ -505,12 +505,7 @@ mod tests {
         for e in walked.each() {
             plain[e.cell as usize] += e.n * e.about_plane;
         }
-        let mut shape: Vec<f64> = plain
-            .iter()
-            .zip(&weights)
-            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
-            .collect();
-        remover.remove(&mut shape);
+        let shape = shape_from_sums(&plain, &weights, &remover);
         let size: f64 = shape.iter().zip(&weights).map(|(s, w)| w * s * s).sum();
         let test = flip_test(
             &walked,

@@ -302,15 +302,7 @@ pub fn estimate_shape_seen_from(
         .map(|k| if seen[k] { kept.readings[k] } else { 0.0 })
         .collect();
     let plane_part = PlanePartRemover::new(&kept.readings, &seen, &kept.centres);
-    let shape_of = |per_cell: &[f64]| -> Vec<f64> {
-        let mut shape: Vec<f64> = per_cell
-            .iter()
-            .zip(&weights)
-            .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
-            .collect();
-        plane_part.remove(&mut shape);
-        shape
-    };
+    let shape_of = |per_cell: &[f64]| shape_from_sums(per_cell, &weights, &plane_part);
     let shape_of_sums = ShapeOfSums {
         weights: &weights,
         plane_rows: plane_part.rows(),
@@ -947,6 +939,23 @@ pub(super) fn weighted_rms(values: &[f64], readings: &[f64], seen: &[bool]) -> f
     } else {
         0.0
     }
+}
+
+/// The shape of per-cell sums `Σ n·m`: each over its cell's weight (its
+/// readings; 0 where it has none), less the plane `plane_part` fits. What a
+/// flip test sizes, as [`ShapeOfSums`] describes it.
+pub(super) fn shape_from_sums(
+    per_cell: &[f64],
+    weights: &[f64],
+    plane_part: &PlanePartRemover,
+) -> Vec<f64> {
+    let mut shape: Vec<f64> = per_cell
+        .iter()
+        .zip(weights)
+        .map(|(s, w)| if *w > 0.0 { s / w } else { 0.0 })
+        .collect();
+    plane_part.remove(&mut shape);
+    shape
 }
 
 /// Subtracts from a shape the plane `A + B·u' + C·v'` that fits the cells
