@@ -262,7 +262,7 @@ fn solve_52(c: &mut Criterion) {
 /// entries here are a slice, read whole for each block of cells (the
 /// estimate's own skip to each block's cells).
 fn pattern_flip_test(c: &mut Criterion) {
-    use groundcal_calib::cell_noise::{flip_test, Entry, ShapeOfSums};
+    use groundcal_calib::cell_noise::{flip_test, Entry, PlaneRemoved, ShapeOfSums};
     let (cells, poses) = (80 * 60, 52);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(41);
     let entries: Vec<Entry> = (0..poses)
@@ -288,9 +288,16 @@ fn pattern_flip_test(c: &mut Criterion) {
             )
         })
         .collect();
+    let mut normal = nalgebra::Matrix3::zeros();
+    for (row, w) in rows.iter().zip(&weights) {
+        normal += row * row.transpose() * *w;
+    }
     let shape = ShapeOfSums {
         weights: &weights,
-        plane_rows: Some(&rows),
+        plane: Some(PlaneRemoved {
+            rows: &rows,
+            inverse_normal: normal.try_inverse().expect("the cells carry a plane"),
+        }),
     };
     c.bench_function(
         "the pattern's flip test, 52 poses x 3000 cells, every choice of signs",

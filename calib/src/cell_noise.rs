@@ -301,13 +301,22 @@ impl FlipTest {
 /// How a test turns per-key sums `Σ n·m` (a key: a cell, or a bin of the
 /// ground) into the shape whose size it takes: each key's sum over its
 /// weight (its readings; a weight of 0 leaves the key out), less, where
-/// `plane_rows` is given, the plane `A + B·u' + C·v'` that fits the shape
-/// over the keys weighted alike (each key's row `(1, u', v')`), as the
-/// pattern's estimate makes a shape. Its size is `Σ weight·shape²`.
+/// `plane` is given, the plane `A + B·u' + C·v'` that fits the shape over
+/// the keys weighted alike, as the pattern's estimate makes a shape. Its
+/// size is `Σ weight·shape²`.
 #[derive(Debug, Clone, Copy)]
 pub struct ShapeOfSums<'a> {
     pub weights: &'a [f64],
-    pub plane_rows: Option<&'a [Vector3<f64>]>,
+    pub plane: Option<PlaneRemoved<'a>>,
+}
+
+/// The plane a shape is taken less of: each key's row `(1, u', v')`, and
+/// the inverse of the normal equations `Σ weight·row·rowᵀ` over the keys
+/// (as the estimate's plane remover holds them).
+#[derive(Debug, Clone, Copy)]
+pub struct PlaneRemoved<'a> {
+    pub rows: &'a [Vector3<f64>],
+    pub inverse_normal: Matrix3<f64>,
 }
 
 /// The shape's size against the sizes of shapes made from the same poses
@@ -379,7 +388,8 @@ const KEY_LANES: usize = 4;
 /// `X_p` pose p's per-key sums, the size of the shape of `Σ_p s_p·X_p` is
 /// `sᵀ·G·s` for any signs. The shape is linear in the sums; with `w` the
 /// weights, `R` the plane rows and `M = Σ_k w_k·R_k·R_kᵀ`,
-/// `G_pq = Σ_k X_pk·X_qk / w_k − b_pᵀ·M⁻¹·b_q`, `b_p = Σ_k R_k·X_pk`.
+/// `G_pq = Σ_k X_pk·X_qk / w_k − b_pᵀ·M⁻¹·b_q`, `b_p = Σ_k R_k·X_pk`
+/// (`M⁻¹`: [`PlaneRemoved::inverse_normal`]).
 /// The blocks of keys run on every core, and their matrices are added in
 /// the blocks' order: the same numbers for any count of threads, and on
 /// any processor (each element's products and sums in the same order).
@@ -415,9 +425,9 @@ fn size_gram<I: Iterator<Item = FlipEntry>>(
                     column.fill(0.0);
                     continue;
                 }
-                if let Some(rows) = shape.plane_rows {
+                if let Some(plane) = shape.plane {
                     for (sum, x) in plane_sums.iter_mut().zip(column.iter()) {
-                        *sum += rows[key] * *x;
+                        *sum += plane.rows[key] * *x;
                     }
                 }
                 let scale = 1.0 / weight.sqrt();
@@ -446,19 +456,11 @@ fn size_gram<I: Iterator<Item = FlipEntry>>(
             gram[p * poses + q] = gram[q * poses + p];
         }
     }
-    let Some(rows) = shape.plane_rows else {
-        return gram;
-    };
-    let mut normal = Matrix3::zeros();
-    for (row, weight) in rows.iter().zip(shape.weights) {
-        if *weight > 0.0 {
-            normal += row * row.transpose() * *weight;
-        }
-    }
-    // A plane the keys cannot carry is not removed (as the estimate's
-    // shapes keep it).
-    if let Some(inverse) = normal.try_inverse() {
-        let solved: Vec<Vector3<f64>> = plane_sums.iter().map(|b| inverse * b).collect();
+    if let Some(plane) = shape.plane {
+        let solved: Vec<Vector3<f64>> = plane_sums
+            .iter()
+            .map(|b| plane.inverse_normal * b)
+            .collect();
         for p in 0..poses {
             for q in 0..poses {
                 gram[p * poses + q] -= plane_sums[p].dot(&solved[q]);
@@ -583,7 +585,7 @@ mod tests {
             let weights = vec![10.0 * poses as f64; cells];
             let shape = ShapeOfSums {
                 weights: &weights,
-                plane_rows: None,
+                plane: None,
             };
             flip_test(&entries, poses, shape)
         };
@@ -627,6 +629,13 @@ mod tests {
         let rows: Vec<Vector3<f64>> = (0..keys)
             .map(|k| Vector3::new(1.0, (k % 97) as f64 - 48.0, (k / 97) as f64 - 46.0))
             .collect();
+        let normal_of = |rows: &[Vector3<f64>]| -> Matrix3<f64> {
+            let mut normal = Matrix3::zeros();
+            for (row, w) in rows.iter().zip(&weights) {
+                normal += row * row.transpose() * *w;
+            }
+            normal
+        };
         // The shape as the estimate makes it: over the weights, less the
         // weighted plane.
         let size_of_sums = |sums: &[f64]| -> f64 {
@@ -666,7 +675,10 @@ mod tests {
             poses,
             ShapeOfSums {
                 weights: &weights,
-                plane_rows: Some(&rows),
+                plane: Some(PlaneRemoved {
+                    rows: &rows,
+                    inverse_normal: normal_of(&rows).try_inverse().unwrap(),
+                }),
             },
         );
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs();

@@ -277,7 +277,7 @@ pub(super) fn ground_fixed(
         poses,
         ShapeOfSums {
             weights: &weights,
-            plane_rows: None,
+            plane: None,
         },
     )
 }

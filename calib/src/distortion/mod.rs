@@ -41,8 +41,8 @@ mod plane_part;
 mod shape;
 
 use crate::cell_noise::{
-    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, Scatter, ShapeOfSums,
-    WithResiduals,
+    flip_test, flip_test_over, CellNoise, Entries, Entry, FlipTest, PlaneRemoved, Scatter,
+    ShapeOfSums, WithResiduals,
 };
 use crate::depth::Intrinsics;
 use crate::disparity::PixelPlane;
@@ -512,10 +512,10 @@ mod tests {
             refs.len(),
             ShapeOfSums {
                 weights: &weights,
-                plane_rows: remover.rows(),
+                plane: remover.plane_removed(),
             },
         );
-        assert!(remover.rows().is_some());
+        assert!(remover.plane_removed().is_some());
         assert!(
             (test.observed - size).abs() <= 1e-9 * size,
             "{} against {size}",

@@ -305,7 +305,7 @@ pub fn estimate_shape_seen_from(
     let shape_of = |per_cell: &[f64]| shape_from_sums(per_cell, &weights, &plane_part);
     let shape_of_sums = ShapeOfSums {
         weights: &weights,
-        plane_rows: plane_part.rows(),
+        plane: plane_part.plane_removed(),
     };
     // The test that there is a shape beside the tests of its alternatives
     // (the pattern's change with depth, and residuals that stay with the
@@ -994,10 +994,14 @@ impl<'a> PlanePartRemover<'a> {
         }
     }
 
-    /// Each cell's row `(1, u', v')` of the plane it removes, as a flip
-    /// test sizes shapes ([`ShapeOfSums`]); none when it removes nothing.
-    pub(super) fn rows(&self) -> Option<&[Vector3<f64>]> {
-        self.inverse.map(|_| self.centres.as_slice())
+    /// The plane it removes, as a flip test sizes shapes ([`ShapeOfSums`]):
+    /// each cell's row `(1, u', v')` and the normal equations' inverse;
+    /// none when it removes nothing.
+    pub(super) fn plane_removed(&self) -> Option<PlaneRemoved<'_>> {
+        self.inverse.map(|inverse_normal| PlaneRemoved {
+            rows: &self.centres,
+            inverse_normal,
+        })
     }
 
     pub(super) fn remove(&self, shape: &mut [f64]) {
