@@ -226,36 +226,64 @@ struct Sums {
 /// lanes that the compiler turns into vector instructions and keeps in
 /// registers while the band's rows of the cell are read. Every lane sums
 /// at most a few dozen readings, where f32 loses nothing that matters
-/// (residuals of a few hundredths; `dv²` below 2²⁴). Lane k's `Σk` and
-/// `Σk²` are k and k² times its count, exactly (whole numbers far below
-/// 2²⁴), so they are not summed pixel by pixel ([`CellLanes::times_k`]).
+/// (residuals of a few hundredths; `dv²` below 2²⁴). What lane k sums times
+/// k is k times the lane's sum, so it is not summed pixel by pixel
+/// ([`times_k`]): `Σk` and `Σk²` are k and k² times the count, exactly
+/// (whole numbers far below 2²⁴); `Σk·r` and `Σk·dv` are k times `Σr` and
+/// `Σdv`, within f32's rounding (two sums fewer a pixel, 16 % of the
+/// pass).
 #[derive(Clone, Copy, Default)]
 struct CellLanes {
     n: [f32; CELL_PX],
     r: [f32; CELL_PX],
     rr: [f32; CELL_PX],
-    kr: [f32; CELL_PX],
     n_dv: [f32; CELL_PX],
-    k_dv: [f32; CELL_PX],
     n_dv2: [f32; CELL_PX],
     r_dv: [f32; CELL_PX],
 }
 
+/// Each lane of `lane` times `k^power` (k the lane).
+fn times_k(lane: &[f32; CELL_PX], power: i32) -> [f32; CELL_PX] {
+    std::array::from_fn(|l| (l as f32).powi(power) * lane[l])
+}
+
 /// One row of a band as the pass reads it: its pixels, the row
-/// [`EdgeGuard::rows`] above it where the fit guarded it, and both rows'
-/// `v − cy`.
+/// [`EdgeGuard::rows`] above it where the fit guarded it, the row's
+/// `v − cy` and its square in f32, and the plane's value at `u − cx = 0`
+/// on both rows (f64, `c0 + cv·dv`): what every cell of the row shares,
+/// worked out once a row.
 struct BandRow<'a, T> {
     pixels: &'a [T],
     above: Option<&'a [T]>,
-    dv: f64,
-    dv_above: f64,
+    dv: f32,
+    dv2: f32,
+    plane_at: f64,
+    plane_above_at: f64,
 }
 
 impl CellLanes {
-    /// Each lane's count times `k^power` (k the lane): what summing `kᵖ·n`
-    /// pixel by pixel gives, bit for bit.
-    fn times_k(&self, power: i32) -> [f32; CELL_PX] {
-        std::array::from_fn(|l| (l as f32).powi(power) * self.n[l])
+    /// The reference loop over a band's `rows` of the cell of `pixels`
+    /// (its first pixel's `u − cx` is `first`), which [`cell_lanes_avx2`]
+    /// matches bit for bit.
+    #[inline(always)]
+    fn of_rows<T: FitValue>(
+        rows: &[BandRow<'_, T>],
+        pixels: std::ops::Range<usize>,
+        first: f64,
+        pass: &Pass,
+    ) -> Self {
+        let mut lanes = Self::default();
+        for row in rows {
+            let x = cell_values(&row.pixels[pixels.clone()]);
+            match row.above {
+                Some(above) => {
+                    let x_above = cell_values(&above[pixels.clone()]);
+                    lanes.add_row::<true, T>((x, x_above), row, first, pass);
+                }
+                None => lanes.add_row::<false, T>((x, x), row, first, pass),
+            }
+        }
+        lanes
     }
 
     /// Adds one row's readings of the cell whose first pixel is `first`
@@ -266,10 +294,10 @@ impl CellLanes {
     /// narrower than [`CELL_PX`] is padded with NaN, which no comparison
     /// takes.
     #[inline(always)]
-    fn add_row<const GUARDED: bool>(
+    fn add_row<const GUARDED: bool, T>(
         &mut self,
         (x, x_above): ([f32; CELL_PX], [f32; CELL_PX]),
-        (dv, dv_above): (f64, f64),
+        row: &BandRow<'_, T>,
         first: f64,
         pass: &Pass,
     ) {
@@ -281,10 +309,10 @@ impl CellLanes {
             ..
         } = *pass;
         let cu = plane.cu as f32;
-        let (dv1, dv2) = (dv as f32, (dv * dv) as f32);
+        let (dv1, dv2) = (row.dv, row.dv2);
         // The plane at the cell's first pixel, then a step a pixel.
-        let start = (plane.c0 + plane.cv * dv + plane.cu * first) as f32;
-        let start_above = (plane.c0 + plane.cv * dv_above + plane.cu * first) as f32;
+        let start = (row.plane_at + plane.cu * first) as f32;
+        let start_above = (row.plane_above_at + plane.cu * first) as f32;
         // Lane l of every sum at once: one vector instruction a sum.
         #[allow(clippy::needless_range_loop)]
         for l in 0..CELL_PX {
@@ -293,15 +321,12 @@ impl CellLanes {
             let r = x[l] - on_plane;
             let clear = !GUARDED || clear_above(x_above[l], start_above + cu * k, guard);
             let keep = r.abs() <= band && on_plane >= region.0 && on_plane <= region.1 && clear;
-            let n = if keep { 1.0 } else { 0.0 };
             let r = if keep { r } else { 0.0 };
-            self.n[l] += n;
+            self.n[l] += if keep { 1.0 } else { 0.0 };
             self.r[l] += r;
             self.rr[l] += r * r;
-            self.kr[l] += k * r;
-            self.n_dv[l] += n * dv1;
-            self.k_dv[l] += k * n * dv1;
-            self.n_dv2[l] += n * dv2;
+            self.n_dv[l] += if keep { dv1 } else { 0.0 };
+            self.n_dv2[l] += if keep { dv2 } else { 0.0 };
             self.r_dv[l] += r * dv1;
         }
     }
@@ -327,9 +352,10 @@ impl Sums {
             return;
         }
         let (sr, srr) = (sum(lanes.r) * scale, sum(lanes.rr) * scale * scale);
-        let (sk, skk) = (sum(lanes.times_k(1)), sum(lanes.times_k(2)));
-        let skr = sum(lanes.kr) * scale;
-        let (n_dv, k_dv, n_dv2) = (sum(lanes.n_dv), sum(lanes.k_dv), sum(lanes.n_dv2));
+        let (sk, skk) = (sum(times_k(&lanes.n, 1)), sum(times_k(&lanes.n, 2)));
+        let skr = sum(times_k(&lanes.r, 1)) * scale;
+        let (n_dv, k_dv) = (sum(lanes.n_dv), sum(times_k(&lanes.n_dv, 1)));
+        let n_dv2 = sum(lanes.n_dv2);
         let r_dv = sum(lanes.r_dv) * scale;
         // Offsets within the cell (k) back to u' = first + k.
         let sum_u = first * n + sk;
@@ -352,9 +378,9 @@ impl Sums {
 
     /// Every [`ROW_STEP`]th row of each of `frames` (all of the same
     /// size), band by band of [`CELL_PX`] rows, the frames' rows of a band
-    /// reduced together. Where the processor has AVX2, the same loop runs
-    /// eight lanes at a time (the same numbers in the same order: the sums
-    /// do not depend on the processor).
+    /// reduced together. Where the processor has AVX2, each whole cell's
+    /// rows go through [`cell_lanes_avx2`] (the same numbers in the same
+    /// order: the sums do not depend on the processor).
     fn add_frames<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
@@ -365,27 +391,45 @@ impl Sums {
             };
             return;
         }
-        self.add_frames_lanes(frames, pass);
+        self.add_frames_with(frames, pass, CellLanes::of_rows);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn add_frames_avx2<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
-        self.add_frames_lanes(frames, pass);
+        self.add_frames_with(frames, pass, |rows, pixels, first, pass| {
+            if pixels.len() == CELL_PX {
+                // SAFETY: called only on a processor with AVX2 (this
+                // function's own condition), for a cell of eight pixels.
+                #[allow(unsafe_code)]
+                unsafe {
+                    cell_lanes_avx2(rows, pixels, first, pass)
+                }
+            } else {
+                CellLanes::of_rows(rows, pixels, first, pass)
+            }
+        });
     }
 
-    /// Cell by cell of a band, its rows in the frames' order: a cell's
-    /// lanes stay in registers through the band (stored and loaded a row at
-    /// a time, they were most of the pass's time), and each lane adds the
-    /// same numbers in the same order as row by row across the band.
+    /// Cell by cell of a band, its rows in the frames' order, through
+    /// `cell_lanes` (the reference [`CellLanes::of_rows`] or its AVX2
+    /// twin): a cell's lanes stay in registers through the band (stored and
+    /// loaded a row at a time, they were most of the pass's time), and each
+    /// lane adds the same numbers in the same order as row by row across
+    /// the band.
     #[inline(always)]
-    fn add_frames_lanes<T: FitValue>(&mut self, frames: &[&[T]], pass: &Pass) {
+    fn add_frames_with<'a, T: FitValue>(
+        &mut self,
+        frames: &[&'a [T]],
+        pass: &Pass,
+        cell_lanes: impl Fn(&[BandRow<'a, T>], std::ops::Range<usize>, f64, &Pass) -> CellLanes,
+    ) {
         let (width, cx, cy) = (pass.width, pass.intrinsics.cx, pass.intrinsics.cy);
         let columns = width.div_ceil(CELL_PX);
         let band_px = width * CELL_PX;
         let bands = frames.first().map_or(0, |f| f.len().div_ceil(band_px));
         let guard_rows = pass.guard_rows;
-        let mut rows: Vec<BandRow<'_, T>> = Vec::with_capacity(frames.len() * CELL_PX);
+        let mut rows: Vec<BandRow<'a, T>> = Vec::with_capacity(frames.len() * CELL_PX);
         for band_row in 0..bands {
             rows.clear();
             for frame in frames {
@@ -394,29 +438,22 @@ impl Sums {
                 for v in (first..height.min(first + CELL_PX)).step_by(ROW_STEP) {
                     // The fit guards the rows with a row that far above them.
                     let up = v.checked_sub(guard_rows).filter(|_| guard_rows > 0);
+                    let dv = v as f64 - cy;
+                    let dv_above = up.map_or(v as f64, |up| up as f64) - cy;
                     rows.push(BandRow {
                         pixels: &frame[v * width..(v + 1) * width],
                         above: up.map(|up| &frame[up * width..(up + 1) * width]),
-                        dv: v as f64 - cy,
-                        dv_above: up.map_or(v as f64, |up| up as f64) - cy,
+                        dv: dv as f32,
+                        dv2: (dv * dv) as f32,
+                        plane_at: pass.plane.c0 + pass.plane.cv * dv,
+                        plane_above_at: pass.plane.c0 + pass.plane.cv * dv_above,
                     });
                 }
             }
             for column in 0..columns {
                 let pixels = column * CELL_PX..((column + 1) * CELL_PX).min(width);
                 let first = (column * CELL_PX) as f64 - cx;
-                let mut lanes = CellLanes::default();
-                for row in &rows {
-                    let x = cell_values(&row.pixels[pixels.clone()]);
-                    let dv = (row.dv, row.dv_above);
-                    match row.above {
-                        Some(above) => {
-                            let x_above = cell_values(&above[pixels.clone()]);
-                            lanes.add_row::<true>((x, x_above), dv, first, pass);
-                        }
-                        None => lanes.add_row::<false>((x, x), dv, first, pass),
-                    }
-                }
+                let lanes = cell_lanes(&rows, pixels, first, pass);
                 self.add_cell(
                     band_row * columns + column,
                     first,
@@ -426,6 +463,116 @@ impl Sums {
             }
         }
     }
+}
+
+/// [`CellLanes::of_rows`] in AVX2, for a cell of [`CELL_PX`] pixels: the
+/// same operations in the same order (a multiply then an add, never fused;
+/// ordered comparisons, false with NaN as Rust's are), so the sums are the
+/// reference's bit for bit. Written out because the reference's vectors are
+/// the compiler's choice, as the fit's loop once showed
+/// ([`crate::disparity`]'s `lane_sums_avx2`).
+///
+/// # Safety
+/// The processor must have AVX2, and `pixels` span eight pixels.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+#[allow(unsafe_code)]
+unsafe fn cell_lanes_avx2<T: FitValue>(
+    rows: &[BandRow<'_, T>],
+    pixels: std::ops::Range<usize>,
+    first: f64,
+    pass: &Pass,
+) -> CellLanes {
+    use std::arch::x86_64::*;
+    debug_assert_eq!(pixels.len(), CELL_PX);
+    let Pass {
+        plane,
+        band,
+        region,
+        guard: (limit, lo, hi),
+        ..
+    } = *pass;
+    let one = _mm256_set1_ps(1.0);
+    // |x|: the sign bit cleared, as f32::abs does.
+    let magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let cu = plane.cu as f32;
+    // The plane's change to the cell's first pixel, and its step a pixel
+    // from there, `cu·k`, lane by lane as the reference.
+    let along = plane.cu * first;
+    let step = _mm256_setr_ps(
+        cu * 0.0,
+        cu * 1.0,
+        cu * 2.0,
+        cu * 3.0,
+        cu * 4.0,
+        cu * 5.0,
+        cu * 6.0,
+        cu * 7.0,
+    );
+    let (band, below, above_region) = (
+        _mm256_set1_ps(band),
+        _mm256_set1_ps(region.0),
+        _mm256_set1_ps(region.1),
+    );
+    let (limit, lo, hi) = (
+        _mm256_set1_ps(limit),
+        _mm256_set1_ps(lo),
+        _mm256_set1_ps(hi),
+    );
+    let [mut n, mut r_sum, mut rr, mut n_dv, mut n_dv2, mut r_dv] = [_mm256_setzero_ps(); 6];
+    for row in rows {
+        let (dv1, dv2) = (_mm256_set1_ps(row.dv), _mm256_set1_ps(row.dv2));
+        let start = (row.plane_at + along) as f32;
+        let on_plane = _mm256_add_ps(_mm256_set1_ps(start), step);
+        // SAFETY: eight values (the caller's word on `pixels`; the slicing
+        // checks the bounds), on a processor with AVX2.
+        let x = unsafe { T::load8_avx2(&row.pixels[pixels.clone()]) };
+        let r = _mm256_sub_ps(x, on_plane);
+        let mut keep = _mm256_and_ps(
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_LE_OQ>(_mm256_and_ps(r, magnitude), band),
+                _mm256_cmp_ps::<_CMP_GE_OQ>(on_plane, below),
+            ),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(on_plane, above_region),
+        );
+        if let Some(above) = row.above {
+            let start_above = (row.plane_above_at + along) as f32;
+            let expected = _mm256_add_ps(_mm256_set1_ps(start_above), step);
+            // SAFETY: as above, of the row above.
+            let a = unsafe { T::load8_avx2(&above[pixels.clone()]) };
+            let off = _mm256_sub_ps(a, expected);
+            let clear = _mm256_or_ps(
+                _mm256_or_ps(
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(off, magnitude), limit),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(a, lo),
+                ),
+                _mm256_cmp_ps::<_CMP_GT_OQ>(a, hi),
+            );
+            keep = _mm256_and_ps(keep, clear);
+        }
+        // 1, r, dv, dv² or +0: what the reference's `if` picks.
+        let kept = _mm256_and_ps(keep, r);
+        n = _mm256_add_ps(n, _mm256_and_ps(keep, one));
+        r_sum = _mm256_add_ps(r_sum, kept);
+        rr = _mm256_add_ps(rr, _mm256_mul_ps(kept, kept));
+        n_dv = _mm256_add_ps(n_dv, _mm256_and_ps(keep, dv1));
+        n_dv2 = _mm256_add_ps(n_dv2, _mm256_and_ps(keep, dv2));
+        r_dv = _mm256_add_ps(r_dv, _mm256_mul_ps(kept, dv1));
+    }
+    let mut lanes = CellLanes::default();
+    for (out, sum) in [
+        (&mut lanes.n, n),
+        (&mut lanes.r, r_sum),
+        (&mut lanes.rr, rr),
+        (&mut lanes.n_dv, n_dv),
+        (&mut lanes.n_dv2, n_dv2),
+        (&mut lanes.r_dv, r_dv),
+    ] {
+        // SAFETY: eight f32 into an array of eight.
+        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), sum) };
+    }
+    lanes
 }
 
 /// A cell's values as f32, padded with NaN past the row's end.
@@ -749,6 +896,228 @@ fn fit_region(domain: &ValueDomain, band: f64) -> (f32, f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two frames 76 × 37 pixels (a last cell four pixels wide, a last
+    /// band of five rows) of a plane's raw values with noise, outliers and
+    /// dropouts, and a pass over them whose region leaves out part of the
+    /// plane, guarded (`guard_rows` up) or not.
+    fn random_frames(seed: u64, guard_rows: usize) -> (Vec<Vec<u16>>, Pass) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let intrinsics = Intrinsics {
+            fx: 580.0,
+            fy: 580.0,
+            cx: 37.3,
+            cy: 18.6,
+            width: 76,
+            height: 37,
+        };
+        // One plane in three level and on a whole value: residuals on the
+        // band's edge.
+        let plane = match seed % 3 {
+            0 => PixelPlane {
+                c0: 700.0,
+                cu: 0.0,
+                cv: 0.0,
+            },
+            _ => PixelPlane {
+                c0: rng.gen_range(690.0..710.0),
+                cu: rng.gen_range(-0.5..0.5),
+                cv: rng.gen_range(-1.5..1.5),
+            },
+        };
+        let frames = (0..2)
+            .map(|_| {
+                let mut frame = Vec::with_capacity(76 * 37);
+                for v in 0..37 {
+                    for u in 0..76 {
+                        let du = u as f64 - intrinsics.cx;
+                        let dv = v as f64 - intrinsics.cy;
+                        let value = match rng.gen_range(0..20) {
+                            0 => 2047.0,
+                            1 => plane.c0 + plane.cu * du + plane.cv * dv - 40.0,
+                            _ => {
+                                plane.c0 + plane.cu * du + plane.cv * dv + rng.gen_range(-4.0..4.0)
+                            }
+                        };
+                        frame.push(value.round().clamp(0.0, 2047.0) as u16);
+                    }
+                }
+                frame
+            })
+            .collect();
+        let pass = Pass {
+            width: 76,
+            intrinsics,
+            plane,
+            band: 3.0,
+            region: (690.0, 725.0),
+            to_inverse_depth: -0.0028,
+            guard_rows,
+            guard: (6.0, 400.0, 1000.0),
+        };
+        (frames, pass)
+    }
+
+    /// Every f64 of the sums, as bits.
+    fn bits_of(sums: &Sums) -> Vec<u64> {
+        let cells = sums.cells.iter().flat_map(|c| [c.n, c.r, c.rr, c.u, c.v]);
+        cells
+            .chain(sums.moments.iter().copied())
+            .chain(sums.rhs.iter().copied())
+            .map(f64::to_bits)
+            .collect()
+    }
+
+    /// The pass's AVX2 loop (where the processor has it) gives the
+    /// reference loop's sums bit for bit, guarded and not, on raw frames
+    /// and on metric ones with infinities and NaN: a replay's sums do not
+    /// depend on the processor.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_cells_vector_loop_matches_the_reference_bit_for_bit() {
+        if !std::is_x86_feature_detected!("avx2") {
+            eprintln!("this processor has no AVX2: the reference loop is the one that runs");
+            return;
+        }
+        fn same<T: FitValue>(frames: &[&[T]], pass: &Pass) {
+            let (columns, rows) = (pass.width.div_ceil(CELL_PX), 37usize.div_ceil(CELL_PX));
+            let mut reference = Sums::new(columns, rows);
+            reference.add_frames_with(frames, pass, CellLanes::of_rows);
+            let mut vector = Sums::new(columns, rows);
+            // SAFETY: the processor has AVX2, checked above.
+            #[allow(unsafe_code)]
+            unsafe {
+                vector.add_frames_avx2(frames, pass)
+            };
+            assert!(reference.moments[(0, 0)] > 300.0, "{}", reference.moments);
+            assert_eq!(bits_of(&reference), bits_of(&vector));
+        }
+        for seed in 0..12 {
+            let (frames, pass) = random_frames(seed, [0, 2][seed as usize % 2]);
+            let raw: Vec<&[u16]> = frames.iter().map(|f| &f[..]).collect();
+            same(&raw, &pass);
+            // The same readings as metric values, the dropouts infinite and
+            // one in seven NaN.
+            let metric: Vec<Vec<f32>> = frames
+                .iter()
+                .map(|f| {
+                    f.iter()
+                        .enumerate()
+                        .map(|(k, &r)| match (r, k % 7) {
+                            (2047, _) => f32::INFINITY,
+                            (_, 3) => f32::NAN,
+                            (r, _) => f32::from(r) * 1e-3,
+                        })
+                        .collect()
+                })
+                .collect();
+            let metric: Vec<&[f32]> = metric.iter().map(|f| &f[..]).collect();
+            let scaled = Pass {
+                plane: PixelPlane {
+                    c0: pass.plane.c0 * 1e-3,
+                    cu: pass.plane.cu * 1e-3,
+                    cv: pass.plane.cv * 1e-3,
+                },
+                band: pass.band * 1e-3,
+                region: (pass.region.0 * 1e-3, pass.region.1 * 1e-3),
+                guard: (pass.guard.0 * 1e-3, 0.4, 1.0),
+                ..pass
+            };
+            same(&metric, &scaled);
+        }
+    }
+
+    /// The pass's sums are those of its readings added one by one in f64:
+    /// every reading within the band of the plane, on every
+    /// [`ROW_STEP`]th row, where the plane is within its region and the
+    /// reading above clears the guard; its residual scaled to 1/m. Within
+    /// f32's rounding (the lanes), whichever loop runs.
+    #[test]
+    fn the_pass_sums_its_readings() {
+        for seed in 0..6 {
+            let (frames, pass) = random_frames(100 + seed, [0, 2][seed as usize % 2]);
+            let frames: Vec<&[u16]> = frames.iter().map(|f| &f[..]).collect();
+            let (columns, rows) = (76usize.div_ceil(CELL_PX), 37usize.div_ceil(CELL_PX));
+            let mut sums = Sums::new(columns, rows);
+            sums.add_frames(&frames, &pass);
+            let mut cells = vec![[0.0f64; 5]; columns * rows];
+            let mut size = vec![[0.0f64; 5]; columns * rows];
+            let (mut moments, mut rhs) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+            let (mut moments_size, mut rhs_size) =
+                (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+            let (plane, scale) = (pass.plane, pass.to_inverse_depth);
+            let kept = |frame: &[u16], u: usize, v: usize| -> Option<f64> {
+                let first = (u / CELL_PX * CELL_PX) as f64 - pass.intrinsics.cx;
+                let k = (u % CELL_PX) as f32;
+                let on = |v: usize| {
+                    let dv = v as f64 - pass.intrinsics.cy;
+                    ((plane.c0 + plane.cv * dv) + plane.cu * first) as f32 + plane.cu as f32 * k
+                };
+                let r = f32::from(frame[v * 76 + u]) - on(v);
+                let clear = match v
+                    .checked_sub(pass.guard_rows)
+                    .filter(|_| pass.guard_rows > 0)
+                {
+                    Some(up) => clear_above(f32::from(frame[up * 76 + u]), on(up), pass.guard),
+                    None => true,
+                };
+                let inside = on(v) >= pass.region.0 && on(v) <= pass.region.1;
+                (r.abs() <= pass.band && inside && clear).then_some(f64::from(r) * scale)
+            };
+            for frame in &frames {
+                for v in (0..37).step_by(ROW_STEP) {
+                    for u in 0..76 {
+                        let Some(r) = kept(frame, u, v) else {
+                            continue;
+                        };
+                        let du = u as f64 - pass.intrinsics.cx;
+                        let dv = v as f64 - pass.intrinsics.cy;
+                        let cell = v / CELL_PX * columns + u / CELL_PX;
+                        let terms = [1.0, r, r * r, du, dv];
+                        for (k, t) in terms.iter().enumerate() {
+                            cells[cell][k] += t;
+                            size[cell][k] += t.abs();
+                        }
+                        let phi = Vector3::new(1.0, du, dv);
+                        moments += phi * phi.transpose();
+                        moments_size += (phi * phi.transpose()).abs();
+                        rhs += r * phi;
+                        rhs_size += (r * phi).abs();
+                    }
+                }
+            }
+            let close = |got: f64, want: f64, size: f64| (got - want).abs() <= 1e-5 * size + 1e-12;
+            for (k, cell) in sums.cells.iter().enumerate() {
+                let got = [cell.n, cell.r, cell.rr, cell.u, cell.v];
+                for q in 0..5 {
+                    assert!(
+                        close(got[q], cells[k][q], size[k][q]),
+                        "seed {seed}, cell {k}, sum {q}: {} against {}",
+                        got[q],
+                        cells[k][q]
+                    );
+                }
+            }
+            assert!(moments[(0, 0)] > 300.0);
+            for i in 0..3 {
+                for j in i..3 {
+                    assert!(
+                        close(sums.moments[(i, j)], moments[(i, j)], moments_size[(i, j)]),
+                        "seed {seed}, moment ({i}, {j}): {} against {}",
+                        sums.moments[(i, j)],
+                        moments[(i, j)]
+                    );
+                }
+                assert!(
+                    close(sums.rhs[i], rhs[i], rhs_size[i]),
+                    "seed {seed}, Σr·φ {i}: {} against {}",
+                    sums.rhs[i],
+                    rhs[i]
+                );
+            }
+        }
+    }
 
     /// A kept cell gives its sums back, the readings' centre within
     /// 6.1·10⁻⁵ pixels anywhere in the cell, and an empty cell as empty.
