@@ -62,6 +62,20 @@ pub trait Entries: Sync {
         let _ = cells;
         self.each().enumerate()
     }
+    /// The entries at `indices` (ascending, below [`Entries::count`]), with
+    /// their indices: a test keyed another way than by cell reads only the
+    /// entries of its block of keys, not every entry for every block (a
+    /// ground test's walks, block by block, were most of its time).
+    fn each_at<'s>(
+        &'s self,
+        indices: impl Iterator<Item = usize> + 's,
+    ) -> impl Iterator<Item = (usize, Entry)> + 's {
+        let mut indices = indices.peekable();
+        self.each().enumerate().filter(move |(index, _)| {
+            while indices.next_if(|at| at < index).is_some() {}
+            indices.next_if_eq(index).is_some()
+        })
+    }
 }
 
 impl Entries for [Entry] {
@@ -72,6 +86,13 @@ impl Entries for [Entry] {
     fn each(&self) -> impl Iterator<Item = Entry> + '_ {
         self.iter().copied()
     }
+
+    fn each_at<'s>(
+        &'s self,
+        indices: impl Iterator<Item = usize> + 's,
+    ) -> impl Iterator<Item = (usize, Entry)> + 's {
+        indices.filter_map(|index| self.get(index).map(|e| (index, *e)))
+    }
 }
 
 impl Entries for Vec<Entry> {
@@ -81,6 +102,13 @@ impl Entries for Vec<Entry> {
 
     fn each(&self) -> impl Iterator<Item = Entry> + '_ {
         self.as_slice().each()
+    }
+
+    fn each_at<'s>(
+        &'s self,
+        indices: impl Iterator<Item = usize> + 's,
+    ) -> impl Iterator<Item = (usize, Entry)> + 's {
+        self.as_slice().each_at(indices)
     }
 }
 
@@ -107,6 +135,16 @@ impl<E: Entries + ?Sized> Entries for WithResiduals<'_, E> {
                 residual: f64::from(*residual),
                 ..e
             })
+    }
+
+    fn each_at<'s>(
+        &'s self,
+        indices: impl Iterator<Item = usize> + 's,
+    ) -> impl Iterator<Item = (usize, Entry)> + 's {
+        self.entries.each_at(indices).filter_map(|(index, e)| {
+            let residual = f64::from(*self.residuals.get(index)?);
+            Some((index, Entry { residual, ..e }))
+        })
     }
 }
 

@@ -484,6 +484,56 @@ mod tests {
             let expected: Vec<Entry> = walked.each().filter(|e| e.pose as usize == pose).collect();
             assert_eq!(of_pose, expected, "pose {pose}");
         }
+        // The entries at given places are the walk's there, from the walk,
+        // a slice of them and the same with other residuals; places past
+        // the end are none.
+        let whole_walked: Vec<Entry> = every.iter().map(|(_, e)| *e).collect();
+        let replaced = WithResiduals {
+            entries: &walked,
+            residuals: (0..every.len()).map(|k| k as f32).collect(),
+        };
+        for step in [1, 7, 1_000] {
+            let at: Vec<usize> = (3..every.len() + 20).step_by(step).collect();
+            let expected: Vec<(usize, Entry)> =
+                at.iter().filter_map(|&k| every.get(k).copied()).collect();
+            assert!(expected.len() > 10, "{}", expected.len());
+            let places = || at.iter().copied();
+            assert_eq!(walked.each_at(places()).collect::<Vec<_>>(), expected);
+            assert_eq!(whole_walked.each_at(places()).collect::<Vec<_>>(), expected);
+            let with: Vec<(usize, Entry)> = expected
+                .iter()
+                .map(|&(k, e)| {
+                    (
+                        k,
+                        Entry {
+                            residual: k as f64,
+                            ..e
+                        },
+                    )
+                })
+                .collect();
+            assert_eq!(replaced.each_at(places()).collect::<Vec<_>>(), with);
+            // The default walk, through a source that keeps it.
+            assert_eq!(
+                DefaultWalk(&whole_walked)
+                    .each_at(places())
+                    .collect::<Vec<_>>(),
+                expected
+            );
+        }
+    }
+
+    /// Entries that keep [`Entries`]' default walks.
+    struct DefaultWalk<'a>(&'a [Entry]);
+
+    impl Entries for DefaultWalk<'_> {
+        fn count(&self) -> usize {
+            self.0.len()
+        }
+
+        fn each(&self) -> impl Iterator<Item = Entry> + '_ {
+            self.0.iter().copied()
+        }
     }
 
     /// The flip test sizes the shape the estimate makes of the entries (their

@@ -784,6 +784,25 @@ impl Entries for KeptEntries<'_> {
             (from..to).map(move |index| (index, self.entry(pose, index)))
         })
     }
+
+    /// The poses walked alongside the indices: an index's pose is the one
+    /// whose entries end past it.
+    fn each_at<'s>(
+        &'s self,
+        indices: impl Iterator<Item = usize> + 's,
+    ) -> impl Iterator<Item = (usize, Entry)> + 's {
+        let mut pose = 0;
+        indices
+            .take_while(|&index| index < self.each.len())
+            .map(move |index| {
+                // Ascending: the pose only moves on, and the last pose's
+                // end is the count, past every index taken.
+                while index >= self.pose_ends[pose] {
+                    pose += 1;
+                }
+                (index, self.entry(pose, index))
+            })
+    }
 }
 
 impl KeptEntries<'_> {
