@@ -499,6 +499,10 @@ impl Kept {
         first_seen: &[bool],
     ) -> Option<Self> {
         let cells = first_seen.len();
+        // |z| > ENTRY_SIGMAS with z = (r − model)/n·√w, squared: no square
+        // root or division an entry (they were half of this pass).
+        let weights = noise.weights();
+        let limit = ENTRY_SIGMAS * ENTRY_SIGMAS;
         let out: Vec<CellSet> = poses
             .par_iter()
             .zip(&fitted.planes)
@@ -508,8 +512,8 @@ impl Kept {
                     if first_seen[k] && cell.n > 0.0 {
                         let model =
                             fitted.shape[k] * cell.n + c.x * cell.n + c.y * cell.u + c.z * cell.v;
-                        let z = (cell.r - model) / cell.n / noise.of_mean(cell.n).sqrt();
-                        if z.abs() > ENTRY_SIGMAS {
+                        let off = cell.r - model;
+                        if off * off * weights.of(cell.n) > limit * cell.n * cell.n {
                             out.insert(k);
                         }
                     }
