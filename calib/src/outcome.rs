@@ -475,6 +475,12 @@ impl DepthScale {
             loose_estimate: None,
         }
     }
+
+    /// The value taken, where it was not estimated (given, or the poses
+    /// pinned it too loosely).
+    pub fn not_estimated(&self) -> Option<f64> {
+        (!self.estimated).then_some(self.value)
+    }
 }
 
 impl Solution {

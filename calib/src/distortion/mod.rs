@@ -204,6 +204,7 @@ pub fn solve_with_pattern_taken_out(
             intrinsics,
             raw_per_inverse_depth: shape.raw_per_inverse_depth,
             noise: own_base.noise_per_pose,
+            scale_not_estimated: own_base.depth_scale.not_estimated(),
         };
         let part = plane
             .estimate()
@@ -248,6 +249,7 @@ pub fn solve_with_pattern_taken_out(
         intrinsics,
         raw_per_inverse_depth: shape.raw_per_inverse_depth,
         noise: shaped.noise_per_pose,
+        scale_not_estimated: shaped.depth_scale.not_estimated(),
     };
     let estimate = plane.estimate();
     let taken = |found: &PlanePartEstimate| {

@@ -40,6 +40,13 @@ pub(super) struct PlanePartSolve<'a> {
     pub(super) raw_per_inverse_depth: f64,
     /// σ of one pose's normal (radians) and offset (metres) to whiten by.
     pub(super) noise: (f64, f64),
+    /// The depth scale of the solve at no plane part, where it was not
+    /// estimated (the poses pin it too loosely, or it was given): the
+    /// derivatives' solves keep it, as they keep the poses that solve set
+    /// aside. Decided afresh, each solve estimated the scale, found it too
+    /// loose and solved again at the fallback: two to seven solves for
+    /// one, most of the plane part's time.
+    pub(super) scale_not_estimated: Option<f64>,
 }
 
 /// Parameters fitted to the plane part's residuals: the mount's six, the
@@ -85,6 +92,9 @@ pub fn plane_part_cost(
         intrinsics,
         raw_per_inverse_depth: 1.0 / b,
         noise,
+        // As the settings say: the exact planes of a plan pin the scale
+        // as the schedule does.
+        scale_not_estimated: None,
     };
     let linearised = problem.linearise(&PlanePart::zeros())?;
     let covariance = linearised.information.try_inverse()?;
@@ -170,6 +180,9 @@ impl PlanePartSolve<'_> {
         }
         let settings = SolveSettings {
             max_outlier_fraction: 0.0,
+            depth_scale: self
+                .scale_not_estimated
+                .map_or(self.settings.depth_scale, solve::DepthScaleSetting::Fixed),
             ..*self.settings
         };
         let solution = solve::solve_estimate(&corrected, &settings).ok()?;
