@@ -492,5 +492,34 @@ impl Solution {
 
 /// One σ of each parameter from a covariance (its diagonal's roots).
 pub(crate) fn sigma_of(covariance: &Matrix6<f64>) -> Vector6<f64> {
-    Vector6::from_fn(|i, _| covariance[(i, i)].max(0.0).sqrt())
+    Vector6::from_fn(|i, _| sigma_of_variance(covariance[(i, i)]))
+}
+
+/// The σ of a variance: a rounding below zero is 0, and NaN (a covariance
+/// that could not be computed) stays NaN, which no gate passes. `max(0.0)`
+/// alone made NaN a σ of 0: certainty where nothing is known.
+pub(crate) fn sigma_of_variance(variance: f64) -> f64 {
+    if variance.is_nan() {
+        f64::NAN
+    } else {
+        variance.max(0.0).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A variance that could not be computed is no σ of 0: NaN stays NaN,
+    /// which no σ gate passes; a rounding below zero is 0.
+    #[test]
+    fn an_unknown_variance_is_no_certainty() {
+        let mut covariance = Matrix6::identity() * 4e-6;
+        covariance[(4, 4)] = f64::NAN;
+        covariance[(5, 5)] = -1e-30;
+        let sigma = sigma_of(&covariance);
+        assert!(sigma[4].is_nan(), "{sigma}");
+        assert_eq!(sigma[5], 0.0);
+        assert_eq!(sigma[0], 2e-3);
+    }
 }

@@ -222,9 +222,10 @@ struct Sums {
 }
 
 /// One cell's sums over a band of rows, in eight f32 lanes (k is the pixel
-/// in the cell, 0–7; `dv` the row's `v − cy`), written as independent
-/// lanes that the compiler turns into vector instructions and keeps in
-/// registers while the band's rows of the cell are read. Every lane sums
+/// in the cell, 0–7; `dv` the row's `v − cy`), kept in registers while the
+/// band's rows of the cell are read: one AVX2 vector a sum
+/// ([`cell_lanes_avx2`]), or independent lanes that the compiler may turn
+/// into vectors (the reference, [`CellLanes::of_rows`]). Every lane sums
 /// at most a few dozen readings, where f32 loses nothing that matters
 /// (residuals of a few hundredths; `dv²` below 2²⁴). What lane k sums times
 /// k is k times the lane's sum, so it is not summed pixel by pixel

@@ -469,6 +469,10 @@ fn not_below_the_fits<const N: usize>(
     jackknife::at_least(by_poses, &(formula * (fit_share / factor).min(1.0)))
 }
 
+/// Why a scale the poses found is not taken when their joint fit gave no
+/// covariance to judge it by.
+const SCALE_COVARIANCE_FAILED: &str = "not estimated: the joint fit of the scale with the position gave no covariance (a numerical failure), so how well these poses pin the scale is unknown; giving a known scale avoids it";
+
 /// The six parameters and the depth scale (the position's covariance by
 /// the formula).
 fn solve_with_scale(
@@ -541,7 +545,15 @@ fn solve_with_scale(
             // s = scale/q with q ≈ 1 here: σ_s = scale·σ_q. Judged here, at
             // the settled scale: before, the residuals still hold the scale's
             // own error and overstate the noise.
-            let sigma = scale * joint_covariance[(3, 3)].max(0.0).sqrt();
+            let sigma = scale * crate::outcome::sigma_of_variance(joint_covariance[(3, 3)]);
+            if sigma.is_nan() {
+                // Nothing known of how well the poses pin it: not estimated,
+                // and no σ claimed.
+                let fallback = solve_fallback(settings);
+                let mut fallen = solve_at_scale(observations, settings, fallback)?;
+                fallen.depth_scale = DepthScale::fixed(fallback, SCALE_COVARIANCE_FAILED.into());
+                return Ok(fallen);
+            }
             if sigma > MAX_SCALE_SIGMA {
                 let fallback = solve_fallback(settings);
                 let mut fallen = solve_at_scale(observations, settings, fallback)?;
@@ -557,9 +569,9 @@ fn solve_with_scale(
                 return Ok(fallen);
             }
             let translation_sigma: Vec<f64> = (0..3)
-                .map(|i| joint_covariance[(i, i)].max(0.0).sqrt())
+                .map(|i| crate::outcome::sigma_of_variance(joint_covariance[(i, i)]))
                 .collect();
-            let q_sigma = joint_covariance[(3, 3)].max(0.0).sqrt();
+            let q_sigma = crate::outcome::sigma_of_variance(joint_covariance[(3, 3)]);
             // Correlation of s with each parameter (q and s anticorrelate).
             let mut correlations = [0.0; 6];
             for i in 0..3 {
