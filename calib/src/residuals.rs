@@ -485,6 +485,7 @@ unsafe fn cell_lanes_avx2<T: FitValue>(
     first: f64,
     pass: &Pass,
 ) -> CellLanes {
+    use crate::disparity::clear_above_avx2;
     use std::arch::x86_64::*;
     debug_assert_eq!(pixels.len(), CELL_PX);
     let Pass {
@@ -542,15 +543,7 @@ unsafe fn cell_lanes_avx2<T: FitValue>(
             let expected = _mm256_add_ps(_mm256_set1_ps(start_above), step);
             // SAFETY: as above, of the row above.
             let a = unsafe { T::load8_avx2(&above[pixels.clone()]) };
-            let off = _mm256_sub_ps(a, expected);
-            let clear = _mm256_or_ps(
-                _mm256_or_ps(
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(off, magnitude), limit),
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(a, lo),
-                ),
-                _mm256_cmp_ps::<_CMP_GT_OQ>(a, hi),
-            );
-            keep = _mm256_and_ps(keep, clear);
+            keep = _mm256_and_ps(keep, clear_above_avx2(a, expected, (limit, lo, hi)));
         }
         // 1, r, dv, dv² or +0: what the reference's `if` picks.
         let kept = _mm256_and_ps(keep, r);
@@ -1002,16 +995,7 @@ mod tests {
             // one in seven NaN.
             let metric: Vec<Vec<f32>> = frames
                 .iter()
-                .map(|f| {
-                    f.iter()
-                        .enumerate()
-                        .map(|(k, &r)| match (r, k % 7) {
-                            (2047, _) => f32::INFINITY,
-                            (_, 3) => f32::NAN,
-                            (r, _) => f32::from(r) * 1e-3,
-                        })
-                        .collect()
-                })
+                .map(|f| crate::test_noise::metric_with_nan(f))
                 .collect();
             let metric: Vec<&[f32]> = metric.iter().map(|f| &f[..]).collect();
             let scaled = Pass {

@@ -598,16 +598,7 @@ mod tests {
             );
             // The same readings as metric values, untrusted ones infinite and
             // one in seven NaN.
-            let metric = |raw: &[u16]| -> Vec<f32> {
-                raw.iter()
-                    .enumerate()
-                    .map(|(k, &r)| match (r, k % 7) {
-                        (2047, _) => f32::INFINITY,
-                        (_, 3) => f32::NAN,
-                        (r, _) => f32::from(r) * 1e-3,
-                    })
-                    .collect()
-            };
+            let metric = crate::test_noise::metric_with_nan;
             let scaled = RowTest {
                 base: test.base * 1e-3,
                 base_above: test.base_above * 1e-3,

@@ -237,6 +237,34 @@ pub(crate) fn clear_above(
     ((value_above - expected).abs() < limit) | (value_above < lo) | (value_above > hi)
 }
 
+/// [`clear_above`] on eight lanes in AVX2, the same comparisons (ordered:
+/// false with NaN): the fit's loop and the residuals' cells test the pixel
+/// above alike.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn clear_above_avx2(
+    value_above: std::arch::x86_64::__m256,
+    expected: std::arch::x86_64::__m256,
+    (limit, lo, hi): (
+        std::arch::x86_64::__m256,
+        std::arch::x86_64::__m256,
+        std::arch::x86_64::__m256,
+    ),
+) -> std::arch::x86_64::__m256 {
+    use std::arch::x86_64::*;
+    // |x|: the sign bit cleared, as f32::abs does.
+    let magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+    let off = _mm256_sub_ps(value_above, expected);
+    _mm256_or_ps(
+        _mm256_or_ps(
+            _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(off, magnitude), limit),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(value_above, lo),
+        ),
+        _mm256_cmp_ps::<_CMP_GT_OQ>(value_above, hi),
+    )
+}
+
 /// One row's pixels for the per-pixel loop: the values, the values
 /// [`EdgeGuard::rows`] above (the same columns; read only when guarded), and
 /// the column offsets `du` and `du²`, all of one length.
@@ -454,15 +482,8 @@ pub(super) unsafe fn lane_sums_avx2<T: FitValue, const GUARDED: bool>(
             if GUARDED {
                 // SAFETY: as above, of `above`.
                 let a = unsafe { T::load8_avx2(&row.above[start..start + 8]) };
-                let off = _mm256_sub_ps(a, _mm256_add_ps(base_above, _mm256_mul_ps(cu, d)));
-                let clear = _mm256_or_ps(
-                    _mm256_or_ps(
-                        _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(off, magnitude), limit),
-                        _mm256_cmp_ps::<_CMP_LT_OQ>(a, lo),
-                    ),
-                    _mm256_cmp_ps::<_CMP_GT_OQ>(a, hi),
-                );
-                inside = _mm256_and_ps(inside, clear);
+                let expected = _mm256_add_ps(base_above, _mm256_mul_ps(cu, d));
+                inside = _mm256_and_ps(inside, clear_above_avx2(a, expected, (limit, lo, hi)));
             }
             // 1 or +0, r or +0: what the reference's `if` picks.
             let counted = _mm256_and_ps(inside, one);
