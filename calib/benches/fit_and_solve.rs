@@ -288,16 +288,9 @@ fn pattern_flip_test(c: &mut Criterion) {
             )
         })
         .collect();
-    let mut normal = nalgebra::Matrix3::zeros();
-    for (row, w) in rows.iter().zip(&weights) {
-        normal += row * row.transpose() * *w;
-    }
     let shape = ShapeOfSums {
         weights: &weights,
-        plane: Some(PlaneRemoved {
-            rows: &rows,
-            inverse_normal: normal.try_inverse().expect("the cells carry a plane"),
-        }),
+        plane: Some(PlaneRemoved::weighted(&rows, &weights).expect("the cells carry a plane")),
     };
     c.bench_function(
         "the pattern's flip test, 52 poses x 3000 cells, every choice of signs",

@@ -62,20 +62,15 @@ pub trait Entries: Sync {
         let _ = cells;
         self.each().enumerate()
     }
-    /// The entries at `indices` (ascending, below [`Entries::count`]), with
-    /// their indices: a test keyed another way than by cell reads only the
-    /// entries of its block of keys, not every entry for every block (a
+
+    /// The entries at `indices` (ascending; those past the end are none),
+    /// with their indices: a test keyed another way than by cell reads only
+    /// the entries of its block of keys, not every entry for every block (a
     /// ground test's walks, block by block, were most of its time).
     fn each_at<'s>(
         &'s self,
         indices: impl Iterator<Item = usize> + 's,
-    ) -> impl Iterator<Item = (usize, Entry)> + 's {
-        let mut indices = indices.peekable();
-        self.each().enumerate().filter(move |(index, _)| {
-            while indices.next_if(|at| at < index).is_some() {}
-            indices.next_if_eq(index).is_some()
-        })
-    }
+    ) -> impl Iterator<Item = (usize, Entry)> + 's;
 }
 
 impl Entries for [Entry] {
@@ -355,6 +350,22 @@ pub struct ShapeOfSums<'a> {
 pub struct PlaneRemoved<'a> {
     pub rows: &'a [Vector3<f64>],
     pub inverse_normal: Matrix3<f64>,
+}
+
+impl<'a> PlaneRemoved<'a> {
+    /// The plane over `rows` weighted by `weights` (keys of no weight left
+    /// out); none when the keys cannot carry a plane.
+    pub fn weighted(rows: &'a [Vector3<f64>], weights: &[f64]) -> Option<Self> {
+        let mut normal = Matrix3::zeros();
+        for (row, weight) in rows.iter().zip(weights).filter(|(_, w)| **w > 0.0) {
+            normal += row * row.transpose() * *weight;
+        }
+        let inverse_normal = normal.try_inverse()?;
+        Some(Self {
+            rows,
+            inverse_normal,
+        })
+    }
 }
 
 /// The shape's size against the sizes of shapes made from the same poses
@@ -667,13 +678,6 @@ mod tests {
         let rows: Vec<Vector3<f64>> = (0..keys)
             .map(|k| Vector3::new(1.0, (k % 97) as f64 - 48.0, (k / 97) as f64 - 46.0))
             .collect();
-        let normal_of = |rows: &[Vector3<f64>]| -> Matrix3<f64> {
-            let mut normal = Matrix3::zeros();
-            for (row, w) in rows.iter().zip(&weights) {
-                normal += row * row.transpose() * *w;
-            }
-            normal
-        };
         // The shape as the estimate makes it: over the weights, less the
         // weighted plane.
         let size_of_sums = |sums: &[f64]| -> f64 {
@@ -713,10 +717,9 @@ mod tests {
             poses,
             ShapeOfSums {
                 weights: &weights,
-                plane: Some(PlaneRemoved {
-                    rows: &rows,
-                    inverse_normal: normal_of(&rows).try_inverse().unwrap(),
-                }),
+                plane: Some(
+                    PlaneRemoved::weighted(&rows, &weights).expect("the keys carry a plane"),
+                ),
             },
         );
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs();

@@ -541,13 +541,8 @@ mod tests {
     /// entries with no bin, of entries as they are and with other residuals.
     #[test]
     fn the_ground_test_reads_each_block_of_bins_only() {
-        let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            state >> 33
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         let (poses, bins) = (52u32, 4_000u32);
         let mut entries = Vec::new();
         let mut bin_of = Vec::new();
@@ -556,13 +551,14 @@ mod tests {
                 entries.push(Entry {
                     pose,
                     cell,
-                    n: (next() % 60 + 1) as f64,
-                    residual: (next() % 2001) as f64 * 1e-6 - 1e-3,
+                    n: rng.gen_range(1..=60) as f64,
+                    residual: rng.gen_range(-1e-3..1e-3),
                     about_plane: 0.0,
                 });
-                let bin = next() % (bins as u64 + 40);
-                bin_of.push(if bin < bins as u64 {
-                    Bin::numbered(bin as u32)
+                // One entry in a hundred with no bin.
+                let bin = rng.gen_range(0..bins + 40);
+                bin_of.push(if bin < bins {
+                    Bin::numbered(bin)
                 } else {
                     Bin::NONE
                 });

@@ -515,26 +515,6 @@ mod tests {
                 })
                 .collect();
             assert_eq!(replaced.each_at(places()).collect::<Vec<_>>(), with);
-            // The default walk, through a source that keeps it.
-            assert_eq!(
-                DefaultWalk(&whole_walked)
-                    .each_at(places())
-                    .collect::<Vec<_>>(),
-                expected
-            );
-        }
-    }
-
-    /// Entries that keep [`Entries`]' default walks.
-    struct DefaultWalk<'a>(&'a [Entry]);
-
-    impl Entries for DefaultWalk<'_> {
-        fn count(&self) -> usize {
-            self.0.len()
-        }
-
-        fn each(&self) -> impl Iterator<Item = Entry> + '_ {
-            self.0.iter().copied()
         }
     }
 
